@@ -1,0 +1,57 @@
+# Two commands for users:  `make reproduce`  (the whole study)  and  `make test`.
+# Both call `setup`, which is idempotent: a second run installs nothing.
+SHELL := /bin/bash
+VENV := .venv
+PY := $(VENV)/bin/python
+JOBS ?= 2
+SNAKEMAKE_ARGS ?=
+
+# Debian packages: dolfinx 0.5.2 (PETSc 3.18, MPI), h5py on the same HDF5, a fast BLAS for MUMPS,
+# the X/GL libraries the gmsh wheel links against, and SLURM + munge for the
+# cluster-profile test.
+APT_PACKAGES := python3-dolfinx python3-h5py libopenblas0-pthread python3-venv \
+	libglu1-mesa libxcursor1 libxft2 libxinerama1 \
+	slurm-wlm munge
+
+.PHONY: setup system-packages test reproduce lint lock clean-results
+
+setup: system-packages $(VENV)/.installed
+
+system-packages:
+	@missing=$$(for p in $(APT_PACKAGES); do \
+		dpkg-query -W -f='$${Status}\n' $$p 2>/dev/null | grep -q '^install ok installed$$' || echo $$p; \
+	done); \
+	if [ -n "$$missing" ]; then \
+		echo "setup: installing Debian packages:" $$missing; \
+		sudo=""; [ "$$(id -u)" -eq 0 ] || sudo="sudo"; \
+		$$sudo apt-get update && \
+		DEBIAN_FRONTEND=noninteractive $$sudo apt-get install -y --no-install-recommends $$missing; \
+	fi
+
+$(VENV)/.installed: requirements.lock constraints.txt pyproject.toml
+	@echo "setup: creating $(VENV) over /usr/bin/python3 and installing requirements.lock"
+	/usr/bin/python3 -m venv --system-site-packages $(VENV)
+	$(PY) -m pip install --disable-pip-version-check -q -c constraints.txt -r requirements.lock
+	$(PY) -m pip install --disable-pip-version-check -q -c constraints.txt --no-deps --no-build-isolation -e .
+	$(PY) -c "import numpy, petsc4py, dolfinx, jax, optax, gmsh, snakemake; assert numpy.__version__ == '1.24.2', numpy.__version__"
+	touch $@
+
+test: setup
+	$(PY) -m pytest -q tests
+
+reproduce: setup
+	$(VENV)/bin/snakemake -j$(JOBS) $(SNAKEMAKE_ARGS)
+
+lint: setup
+	$(VENV)/bin/snakemake --lint
+
+# Re-resolve the pins from requirements.in (needs network); review the diff.
+lock:
+	rm -rf /tmp/lock-venv && /usr/bin/python3 -m venv --system-site-packages /tmp/lock-venv
+	/tmp/lock-venv/bin/pip install -q -c constraints.txt -r requirements.in
+	{ echo "# Complete pinned set of PyPI packages installed into .venv (over Debian's python3-dolfinx)."; \
+	  echo "# Regenerate after changing requirements.in:  make lock"; \
+	  /tmp/lock-venv/bin/pip list --local --format=freeze | grep -v -E '^(pip|setuptools)=='; } > requirements.lock
+
+clean-results:
+	rm -rf results .snakemake
