@@ -1,0 +1,5 @@
+"""Breast geometries on the chest wall: parametric (gmsh/OpenCASCADE) and imported."""
+
+from meshes.tags import TISSUE, Boundary
+
+__all__ = ["Boundary", "TISSUE"]

@@ -1,0 +1,90 @@
+"""Read and write tagged meshes as XDMF (mesh + cell tags + facet tags) for dolfinx 0.5."""
+
+from __future__ import annotations
+
+import logging
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from meshes.tags import CELL_TAGS_NAME, FACET_TAGS_NAME, MESH_NAME, Boundary
+
+log = logging.getLogger(__name__)
+
+
+class MeshInputError(ValueError):
+    """A mesh file is missing, unreadable or lacks what the solver needs."""
+
+
+def write_gmsh_model(model: Any, xdmf_path: str | Path) -> None:
+    """Convert a meshed gmsh model (with physical groups) to dolfinx and write XDMF.
+
+    The pair ``<name>.xdmf`` / ``<name>.h5`` is written in a temporary folder
+    beside the target and moved into place, so a crash never leaves half a mesh.
+    """
+    from dolfinx.io import XDMFFile, gmshio
+    from mpi4py import MPI
+
+    comm = MPI.COMM_SELF
+    mesh, cell_tags, facet_tags = gmshio.model_to_mesh(model, comm, 0, gdim=3)
+    mesh.name = MESH_NAME
+    cell_tags.name = CELL_TAGS_NAME
+    facet_tags.name = FACET_TAGS_NAME
+    target = Path(xdmf_path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=target.parent, prefix=f".{target.stem}.") as tmp:
+        tmp_xdmf = Path(tmp) / target.name
+        with XDMFFile(comm, str(tmp_xdmf), "w") as xdmf:
+            xdmf.write_mesh(mesh)
+            mesh.topology.create_connectivity(2, 3)
+            xdmf.write_meshtags(cell_tags)
+            xdmf.write_meshtags(facet_tags)
+        for suffix in (".h5", ".xdmf"):  # the .xdmf last: it is what marks completion
+            shutil.move(str(tmp_xdmf.with_suffix(suffix)), str(target.with_suffix(suffix)))
+    log.info("wrote %s (%d cells)", target, mesh.topology.index_map(3).size_global)
+
+
+def read_mesh(xdmf_path: str | Path, comm: Any = None) -> tuple[Any, Any, Any]:
+    """Read a mesh written by :func:`write_gmsh_model`.
+
+    Returns:
+        ``(mesh, cell_tags, facet_tags)``.
+
+    Raises:
+        MeshInputError: if the file does not exist or holds no facet tags.
+    """
+    from dolfinx.io import XDMFFile
+    from mpi4py import MPI
+
+    path = Path(xdmf_path)
+    if not path.is_file() or not path.with_suffix(".h5").is_file():
+        raise MeshInputError(f"mesh file {path} (with its .h5) does not exist")
+    comm = MPI.COMM_WORLD if comm is None else comm
+    with XDMFFile(comm, str(path), "r") as xdmf:
+        mesh = xdmf.read_mesh(name=MESH_NAME)
+        cell_tags = xdmf.read_meshtags(mesh, name=CELL_TAGS_NAME)
+        mesh.topology.create_connectivity(2, 3)
+        try:
+            facet_tags = xdmf.read_meshtags(mesh, name=FACET_TAGS_NAME)
+        except RuntimeError as err:
+            raise MeshInputError(f"{path} has no facet tags named {FACET_TAGS_NAME!r}") from err
+    return mesh, cell_tags, facet_tags
+
+
+def boundary_facets(facet_tags: Any, boundaries: list[Boundary]) -> np.ndarray:
+    """Local indices of the facets tagged with any of ``boundaries``."""
+    values = [int(b) for b in boundaries]
+    return np.sort(facet_tags.indices[np.isin(facet_tags.values, values)]).astype(np.int32)
+
+
+def geometry_nodes(mesh: Any) -> np.ndarray:
+    """Geometry-node indices of every local cell, shape (cells, nodes per cell).
+
+    The first four columns of a tetrahedral mesh are its vertices, whatever the
+    geometric order.
+    """
+    dofmap = mesh.geometry.dofmap
+    return dofmap.array.reshape(-1, len(dofmap.links(0)))

@@ -1,0 +1,258 @@
+"""A parametric breast on the chest wall, built with gmsh's OpenCASCADE kernel.
+
+Coordinates follow the paper (its Fig. 4): ``x`` runs anterior to posterior
+(gravity along +x is the supine position, Φ = 0°; along −x prone, Φ = 180°),
+``y`` medial to lateral and ``z`` caudal to cranial. Lengths are in metres.
+
+The rib cage is an elliptic cylinder along ``z`` whose most anterior point is
+the origin::
+
+    ((x - a) / a)**2 + (y / b)**2 = 1,   a = rib_depth, b = rib_half_width.
+
+A point on it is ``R(ψ) = (a - a cos ψ, b sin ψ)``; ψ = 0 is the sternum and ψ
+grows laterally. The soft tissue is a layer over that surface (the region
+between it and the confocal-like ellipse with semi-axes ``a + t, b + t``), cut
+by the sternal plane (ψ = 0), the axilla plane (ψ = ``axilla_angle``) and the
+caudal and cranial planes ``z = z_caudal, z_cranial``, plus a breast mound: an
+ellipsoid standing on the layer along the local outward normal at
+(``mound_angle``, ``mound_z``). With ``mound_offset > 0`` the ellipsoid's
+centre lies outside the skin layer, so the mound is wider than its base: the
+pendulous shape of a breast imaged prone.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields
+from typing import Any
+
+import numpy as np
+
+
+class GeometryError(ValueError):
+    """A geometry parameter is out of range or the parameters are inconsistent."""
+
+
+@dataclass(frozen=True, slots=True)
+class BreastGeometry:
+    """Shape parameters of the parametric breast (metres, degrees).
+
+    Attributes:
+        rib_depth: semi-axis ``a`` of the rib-cage ellipse along x.
+        rib_half_width: semi-axis ``b`` of the rib-cage ellipse along y.
+        layer_thickness: soft-tissue thickness ``t`` over the rib cage.
+        axilla_angle: angular extent ψ of the patch, sternum to axilla.
+        z_caudal: caudal cut plane.
+        z_cranial: cranial cut plane.
+        mound_angle: angular position ψ of the mound's axis on the chest wall.
+        mound_z: cranio-caudal position of the mound's axis.
+        mound_tilt: extra lateral tilt of the mound axis from the local normal.
+        mound_length: semi-axis of the mound ellipsoid along its axis.
+        mound_radius_lateral: semi-axis across the axis, in the transverse plane.
+        mound_radius_cranial: semi-axis across the axis, along z.
+        mound_offset: distance of the ellipsoid centre outward from the skin
+            layer along the axis (0 gives a dome, > 0 a pendulous mound).
+    """
+
+    rib_depth: float = 0.10
+    rib_half_width: float = 0.15
+    layer_thickness: float = 0.02
+    axilla_angle: float = 80.0
+    z_caudal: float = -0.10
+    z_cranial: float = 0.12
+    mound_angle: float = 35.0
+    mound_z: float = 0.0
+    mound_tilt: float = 0.0
+    mound_length: float = 0.07
+    mound_radius_lateral: float = 0.065
+    mound_radius_cranial: float = 0.06
+    mound_offset: float = 0.03
+
+    def __post_init__(self) -> None:
+        positive = (
+            "rib_depth",
+            "rib_half_width",
+            "layer_thickness",
+            "mound_length",
+            "mound_radius_lateral",
+            "mound_radius_cranial",
+        )
+        for name in positive:
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise GeometryError(f"geometry.{name} must be a positive length, got {value!r}")
+        for f in fields(self):
+            if not math.isfinite(getattr(self, f.name)):
+                raise GeometryError(f"geometry.{f.name} must be finite")
+        if not 10.0 <= self.axilla_angle <= 150.0:
+            raise GeometryError(
+                f"geometry.axilla_angle must lie in [10, 150] degrees, got {self.axilla_angle}"
+            )
+        if not self.z_caudal < self.mound_z < self.z_cranial:
+            raise GeometryError(
+                "geometry.mound_z must lie strictly between z_caudal and z_cranial"
+            )
+        if not 0.0 < self.mound_angle < self.axilla_angle:
+            raise GeometryError(
+                "geometry.mound_angle must lie strictly between 0 (sternum) and axilla_angle"
+            )
+        if self.mound_offset < 0 or self.mound_offset >= self.mound_length:
+            raise GeometryError("geometry.mound_offset must lie in [0, mound_length)")
+        if self.layer_thickness >= min(self.rib_depth, self.rib_half_width):
+            raise GeometryError("geometry.layer_thickness must be smaller than the rib semi-axes")
+        # The mound must stand clear of the four cut planes, or it would be sliced.
+        base = self.mound_base_radii()
+        margin_z = min(self.mound_z - self.z_caudal, self.z_cranial - self.mound_z)
+        if max(self.mound_radius_cranial, base[1]) >= margin_z:
+            raise GeometryError(
+                "the mound reaches the cranial or caudal cut: reduce mound_radius_cranial or "
+                "move mound_z / the cut planes"
+            )
+        arc_to_sternum = self._arc_length(0.0, self.mound_angle)
+        arc_to_axilla = self._arc_length(self.mound_angle, self.axilla_angle)
+        if max(self.mound_radius_lateral, base[0]) >= min(arc_to_sternum, arc_to_axilla):
+            raise GeometryError(
+                "the mound reaches the sternal or axilla cut: reduce mound_radius_lateral or "
+                "move mound_angle / axilla_angle"
+            )
+
+    @classmethod
+    def from_mapping(cls, values: dict[str, Any]) -> BreastGeometry:
+        """Build from a config mapping, rejecting unknown keys by name."""
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise GeometryError(f"unknown geometry parameter(s): {', '.join(unknown)}")
+        return cls(**{k: float(v) for k, v in values.items()})
+
+    def as_dict(self) -> dict[str, float]:
+        """Parameters as a plain mapping (for JSON metadata)."""
+        return asdict(self)
+
+    # -- analytic surfaces used to build the model and to classify its faces ----------------
+    @property
+    def axis_centre(self) -> np.ndarray:
+        """Centre of the rib-cage ellipse in the transverse (x, y) plane."""
+        return np.array([self.rib_depth, 0.0])
+
+    def ellipse_point(self, psi_deg: float, offset: float = 0.0) -> np.ndarray:
+        """Point ``(x, y)`` at angle ψ on the rib ellipse grown by ``offset``."""
+        psi = math.radians(psi_deg)
+        a, b = self.rib_depth + offset, self.rib_half_width + offset
+        return np.array([self.rib_depth - a * math.cos(psi), b * math.sin(psi)])
+
+    def ellipse_normal(self, psi_deg: float, offset: float = 0.0) -> np.ndarray:
+        """Outward unit normal ``(nx, ny)`` of the grown ellipse at angle ψ."""
+        psi = math.radians(psi_deg)
+        a, b = self.rib_depth + offset, self.rib_half_width + offset
+        n = np.array([-math.cos(psi) / a, math.sin(psi) / b])
+        return n / np.linalg.norm(n)
+
+    def radial_direction(self, psi_deg: float) -> np.ndarray:
+        """Unit direction from the axis to the rib point at ψ (defines the cut planes)."""
+        d = self.ellipse_point(psi_deg) - self.axis_centre
+        return d / np.linalg.norm(d)
+
+    def rib_level_set(self, x: np.ndarray) -> np.ndarray:
+        """Approximate signed distance of points (N×3) to the rib surface (negative inside)."""
+        a, b = self.rib_depth, self.rib_half_width
+        u = (x[:, 0] - a) / a
+        v = x[:, 1] / b
+        f = u**2 + v**2 - 1.0
+        grad = np.sqrt((2 * u / a) ** 2 + (2 * v / b) ** 2)
+        return f / np.maximum(grad, 1e-30)
+
+    def axilla_plane_distance(self, x: np.ndarray) -> np.ndarray:
+        """Signed distance of points (N×3) to the axilla cut plane."""
+        d = self.radial_direction(self.axilla_angle)
+        normal = np.array([-d[1], d[0]])  # in-plane normal of the radial plane
+        rel = x[:, :2] - self.axis_centre
+        return rel @ normal
+
+    def mound_frame(self) -> tuple[np.ndarray, np.ndarray]:
+        """Base point on the skin layer and unit axis (3-vectors) of the mound."""
+        p = self.ellipse_point(self.mound_angle, self.layer_thickness)
+        n = self.ellipse_normal(self.mound_angle, self.layer_thickness)
+        tilt = math.radians(self.mound_tilt)
+        # Positive tilt rotates the axis laterally (towards +y) in the transverse plane.
+        c, s = math.cos(tilt), math.sin(tilt)
+        rot = np.array([[c, s], [-s, c]])
+        n = rot @ n
+        return np.array([p[0], p[1], self.mound_z]), np.array([n[0], n[1], 0.0])
+
+    def mound_base_radii(self) -> tuple[float, float]:
+        """Radii of the ellipsoid's cross-section where it meets the skin layer."""
+        shrink = math.sqrt(max(0.0, 1.0 - (self.mound_offset / self.mound_length) ** 2))
+        return self.mound_radius_lateral * shrink, self.mound_radius_cranial * shrink
+
+    @property
+    def mound_projection(self) -> float:
+        """How far the mound tip stands out from the skin layer along its axis."""
+        return self.mound_offset + self.mound_length
+
+    def _arc_length(self, psi0: float, psi1: float, n: int = 64) -> float:
+        psis = np.linspace(psi0, psi1, n)
+        pts = np.array([self.ellipse_point(p, self.layer_thickness) for p in psis])
+        return float(np.sum(np.linalg.norm(np.diff(pts, axis=0), axis=1)))
+
+
+def build_occ_model(model: Any, geometry: BreastGeometry) -> int:
+    """Add the breast volume to a gmsh model with the OpenCASCADE kernel.
+
+    Args:
+        model: ``gmsh.model`` (initialised, with a current model).
+        geometry: shape parameters.
+
+    Returns:
+        The tag of the single resulting volume.
+    """
+    occ = model.occ
+    g = geometry
+    a, b, t = g.rib_depth, g.rib_half_width, g.layer_thickness
+    z0, z1 = g.z_caudal, g.z_cranial
+    pad = 0.05 * (z1 - z0)
+    height = (z1 - z0) + 2 * pad
+
+    def elliptic_cylinder(semi_x: float, semi_y: float) -> int:
+        # gmsh's addEllipse needs r1 >= r2; orient the major axis explicitly.
+        if semi_y >= semi_x:
+            curve = occ.addEllipse(a, 0.0, z0 - pad, semi_y, semi_x, zAxis=[0, 0, 1], xAxis=[0, 1, 0])
+        else:
+            curve = occ.addEllipse(a, 0.0, z0 - pad, semi_x, semi_y, zAxis=[0, 0, 1], xAxis=[1, 0, 0])
+        loop = occ.addCurveLoop([curve])
+        disk = occ.addPlaneSurface([loop])
+        out = occ.extrude([(2, disk)], 0, 0, height)
+        return next(tag for dim, tag in out if dim == 3)
+
+    inner = elliptic_cylinder(a, b)
+    outer = elliptic_cylinder(a + t, b + t)
+
+    # Wedge between the sternal (ψ = 0) and axilla (ψ = axilla_angle) planes through the axis.
+    far = 4.0 * (a + b + t + g.mound_projection)
+    centre = g.axis_centre
+    psis = np.linspace(0.0, g.axilla_angle, 7)
+    ring = [centre + far * g.radial_direction(p) for p in psis]
+    pts = [occ.addPoint(centre[0], centre[1], z0)]
+    pts += [occ.addPoint(p[0], p[1], z0) for p in ring]
+    lines = [occ.addLine(pts[i], pts[(i + 1) % len(pts)]) for i in range(len(pts))]
+    wedge_face = occ.addPlaneSurface([occ.addCurveLoop(lines)])
+    wedge = next(tag for dim, tag in occ.extrude([(2, wedge_face)], 0, 0, z1 - z0) if dim == 3)
+
+    # Mound: an ellipsoid aligned with the local normal at the mound base.
+    base, axis = g.mound_frame()
+    centre3 = base + g.mound_offset * axis
+    sphere = occ.addSphere(0.0, 0.0, 0.0, 1.0)
+    occ.dilate([(3, sphere)], 0, 0, 0, g.mound_length, g.mound_radius_lateral, g.mound_radius_cranial)
+    # Rotate the ellipsoid's x axis onto the mound axis (rotation about z).
+    angle = math.atan2(axis[1], axis[0])
+    occ.rotate([(3, sphere)], 0, 0, 0, 0, 0, 1, angle)
+    occ.translate([(3, sphere)], *centre3)
+
+    body, _ = occ.fuse([(3, outer)], [(3, sphere)])
+    body, _ = occ.intersect(body, [(3, wedge)])
+    body, _ = occ.cut(body, [(3, inner)])
+    occ.synchronize()
+    volumes = [tag for dim, tag in body if dim == 3]
+    if len(volumes) != 1:
+        raise GeometryError(f"the breast geometry produced {len(volumes)} volumes, expected one")
+    return volumes[0]
