@@ -1,0 +1,15 @@
+"""Typed errors of the FE solver."""
+
+from __future__ import annotations
+
+
+class FEError(Exception):
+    """Base class of the solver's errors."""
+
+
+class InvalidParameterError(FEError, ValueError):
+    """A physical or numerical parameter is out of its range (the message names it)."""
+
+
+class MeshError(FEError, ValueError):
+    """The mesh cannot be used: no fixed surface, inverted or degenerate cells, ..."""

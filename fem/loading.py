@@ -1,0 +1,154 @@
+"""Adaptive incremental gravity loading.
+
+Gravity is applied as a load fraction λ that goes from 0 to 1. The scheme tries
+a large step first (by default the whole load); when Newton fails or an element
+inverts (det F ≤ 0) it restores the last converged state and cuts the step;
+after an easy step it grows the step; each step starts from a linear
+extrapolation of the last two converged states. With ``fixed_steps`` it becomes
+the classic fixed-increment scheme that it is benchmarked against.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from fem.parameters import Loading
+from fem.problem import GravityProblem
+from fem.solver import NewtonSolver
+
+log = logging.getLogger(__name__)
+
+_FULL = 1.0 - 1e-12
+
+
+@dataclass
+class StepRecord:
+    """One attempted load increment."""
+
+    fraction: float
+    step: float
+    converged: bool
+    iterations: int
+    reason: str
+    final_residual: float | None
+    min_detF: float | None
+
+
+@dataclass
+class LoadingResult:
+    """Outcome of the whole load path."""
+
+    converged: bool
+    fraction: float
+    reason: str
+    attempts: list[StepRecord] = field(default_factory=list)
+
+    @property
+    def accepted(self) -> list[StepRecord]:
+        """The converged increments, in order."""
+        return [a for a in self.attempts if a.converged]
+
+    @property
+    def newton_iterations(self) -> list[int]:
+        """Newton iterations of each accepted increment."""
+        return [a.iterations for a in self.accepted]
+
+    @property
+    def total_iterations(self) -> int:
+        """Newton iterations of all attempts, failed ones included (each costs work)."""
+        return sum(a.iterations for a in self.attempts)
+
+    def as_dict(self) -> dict:
+        """JSON-friendly record."""
+        return {
+            "converged": self.converged,
+            "fraction": self.fraction,
+            "reason": self.reason,
+            "attempts": [asdict(a) for a in self.attempts],
+        }
+
+
+def solve_incrementally(
+    problem: GravityProblem, solver: NewtonSolver, loading: Loading = Loading()
+) -> LoadingResult:
+    """Drive the problem from zero load to full gravity.
+
+    The problem's state must hold the solution at λ = 0 (zero for a fresh case).
+    On return the state holds the last converged load fraction.
+    """
+    state = problem.w.x.array
+    history: list[tuple[float, np.ndarray]] = [(0.0, state.copy())]
+    fraction = 0.0
+    step = 1.0 / loading.fixed_steps if loading.fixed_steps else loading.initial_step
+    result = LoadingResult(converged=False, fraction=0.0, reason="")
+
+    while fraction < _FULL:
+        if len(result.attempts) >= loading.max_steps:
+            result.reason = f"load-step budget of {loading.max_steps} attempts exhausted"
+            break
+        step = min(step, 1.0 - fraction)
+        target = fraction + step
+        _predict(problem, history, step, loading.extrapolate)
+        problem.set_load_fraction(target)
+        outcome = solver.solve()
+        min_det = problem.min_detF() if outcome.converged else None
+        inverted = min_det is not None and not min_det > 0
+        ok = outcome.converged and not inverted
+        reason = outcome.reason if not inverted else f"inverted element (min det F = {min_det:.3g})"
+        result.attempts.append(
+            StepRecord(
+                fraction=target,
+                step=step,
+                converged=ok,
+                iterations=outcome.iterations,
+                reason=reason,
+                final_residual=outcome.residuals[-1] if outcome.residuals else None,
+                min_detF=min_det,
+            )
+        )
+        log.debug("λ=%.4f step=%.4f %s in %d its", target, step, reason, outcome.iterations)
+        if ok:
+            fraction = target
+            history = [history[-1], (fraction, state.copy())]
+            if not loading.fixed_steps and outcome.iterations <= loading.easy_iterations:
+                step *= loading.growth
+            continue
+        state[:] = history[-1][1]
+        if loading.fixed_steps:
+            result.reason = f"fixed step at λ={target:.4f} failed: {reason}"
+            break
+        step *= loading.cutback
+        if step < loading.min_step:
+            result.reason = (
+                f"step cut below min_step={loading.min_step:g} at λ={fraction:.4f}; "
+                f"last failure: {reason}"
+            )
+            break
+
+    problem.set_load_fraction(fraction)
+    result.fraction = fraction
+    result.converged = fraction >= _FULL
+    if result.converged:
+        result.fraction = 1.0
+        result.reason = "converged"
+    return result
+
+
+def _predict(
+    problem: GravityProblem, history: list[tuple[float, np.ndarray]], step: float, extrapolate: bool
+) -> None:
+    """Set the initial guess: linear extrapolation in λ, unless it would invert an element."""
+    state = problem.w.x.array
+    lam1, w1 = history[-1]
+    state[:] = w1
+    if not extrapolate or len(history) < 2:
+        return
+    lam0, w0 = history[0]
+    if lam1 <= lam0:
+        return
+    state[:] = w1 + (step / (lam1 - lam0)) * (w1 - w0)
+    if not problem.min_detF() > 0:
+        state[:] = w1

@@ -1,0 +1,209 @@
+"""The gravity-loaded breast as a dolfinx variational problem.
+
+Unknowns: displacement u (and, for Taylor–Hood, pressure p). Total potential
+
+    Π(u, p) = ∫ [C1 (Ī1 - 3) - p (J - 1)] dX - ∫ ρ λ g · u dX,
+
+with λ ∈ [0, 1] the load fraction. The residual is Π's first variation and the
+Jacobian its second, so the discrete tangent is symmetric (used by MUMPS LDLᵀ).
+C1 and the body force are ``fem.Constant`` objects: one compiled form serves a
+whole sweep and the load steps within a case.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+import numpy as np
+import ufl
+from dolfinx import fem
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from fem.exceptions import MeshError
+from fem.kinematics import deformation_gradient, jacobian
+from fem.material import Incompressible, NeoHookean, Penalty
+from fem.parameters import Discretisation, FixedBoundaries, Gravity, Material
+from meshes.io import boundary_facets, geometry_nodes
+
+log = logging.getLogger(__name__)
+
+
+def check_mesh(mesh: Any, facet_tags: Any, fixed: FixedBoundaries) -> None:
+    """Reject meshes the solver cannot use, naming the problem.
+
+    Raises:
+        MeshError: if a fixed boundary has no facets, or cells are degenerate or inverted.
+    """
+    comm = mesh.comm
+    for boundary, _ in fixed.items():
+        n = comm.allreduce(len(boundary_facets(facet_tags, [boundary])), op=MPI.SUM)
+        if n == 0:
+            raise MeshError(
+                f"the mesh has no facets tagged {boundary.label!r} (tag {int(boundary)}), "
+                "which the configuration fixes"
+            )
+    x = mesh.geometry.x
+    nodes = geometry_nodes(mesh)[:, :4]
+    n_local = mesh.topology.index_map(mesh.topology.dim).size_local
+    nodes = nodes[:n_local]
+    e1, e2, e3 = (x[nodes[:, i]] - x[nodes[:, 0]] for i in (1, 2, 3))
+    signed = np.einsum("ij,ij->i", np.cross(e1, e2), e3) / 6.0
+    scale = comm.allreduce(float(np.max(np.abs(signed), initial=0.0)), op=MPI.MAX)
+    degenerate = comm.allreduce(int(np.sum(np.abs(signed) <= 1e-10 * scale)), op=MPI.SUM)
+    if degenerate:
+        raise MeshError(f"the mesh has {degenerate} degenerate (zero-volume) cells")
+    positive = comm.allreduce(int(np.sum(signed > 0)), op=MPI.SUM)
+    negative = comm.allreduce(int(np.sum(signed < 0)), op=MPI.SUM)
+    if positive and negative:
+        raise MeshError(
+            f"the mesh has inverted cells: {min(positive, negative)} of "
+            f"{positive + negative} cells are oriented opposite to the rest"
+        )
+
+
+class GravityProblem:
+    """Function spaces, forms and boundary conditions of one mesh.
+
+    Args:
+        mesh: dolfinx mesh (metres).
+        facet_tags: facet tags with :class:`meshes.tags.Boundary` values.
+        discretisation: element choice.
+        fixed: which boundaries are clamped.
+    """
+
+    def __init__(
+        self,
+        mesh: Any,
+        facet_tags: Any,
+        discretisation: Discretisation = Discretisation(),
+        fixed: FixedBoundaries = FixedBoundaries(),
+    ) -> None:
+        check_mesh(mesh, facet_tags, fixed)
+        self.mesh = mesh
+        self.facet_tags = facet_tags
+        self.discretisation = discretisation
+        self.fixed = fixed
+        self.mixed = discretisation.element == "taylor-hood"
+        cell = mesh.ufl_cell()
+
+        scalar = PETSc.ScalarType
+        self.C1 = fem.Constant(mesh, scalar(1.0))
+        self.body_force = fem.Constant(mesh, np.zeros(3, dtype=scalar))
+        self.density = 0.0
+        self.gravity = np.zeros(3)
+
+        if self.mixed:
+            k = discretisation.degree
+            element = ufl.MixedElement(
+                [ufl.VectorElement("Lagrange", cell, k), ufl.FiniteElement("Lagrange", cell, k - 1)]
+            )
+            self.W = fem.FunctionSpace(mesh, element)
+            self.w = fem.Function(self.W, name="state")
+            u, p = ufl.split(self.w)
+            self.V, _ = self.W.sub(0).collapse()
+        else:
+            self.W = fem.VectorFunctionSpace(mesh, ("Lagrange", 1))
+            self.w = fem.Function(self.W, name="state")
+            u, p = self.w, None
+            self.V = self.W
+        self._u_expr = u
+
+        F = deformation_gradient(u)
+        self.J = jacobian(F)
+        psi = NeoHookean(self.C1, isochoric=discretisation.isochoric).strain_energy(F)
+        if self.mixed:
+            psi = psi + Incompressible().strain_energy(F, p)
+        else:
+            self.kappa = fem.Constant(mesh, scalar(discretisation.bulk_ratio))
+            psi = psi + Penalty(self.kappa * self.C1).strain_energy(F)
+
+        dx = ufl.Measure("dx", domain=mesh, metadata={"quadrature_degree": discretisation.quadrature})
+        self.dx = dx
+        potential = psi * dx - ufl.dot(self.body_force, u) * dx
+        residual = ufl.derivative(potential, self.w, ufl.TestFunction(self.W))
+        tangent = ufl.derivative(residual, self.w, ufl.TrialFunction(self.W))
+        self.residual = fem.form(residual)
+        self.tangent = fem.form(tangent)
+        self.bcs = self._dirichlet_bcs()
+        self._volume = mesh.comm.allreduce(
+            fem.assemble_scalar(fem.form(fem.Constant(mesh, scalar(1.0)) * dx)), op=MPI.SUM
+        )
+        self._volume_change = fem.form((self.J - 1) * dx)
+        self._detF_points = self._quadrature_points(discretisation.quadrature)
+        self._detF = fem.Expression(self.J, self._detF_points)
+        n_local = mesh.topology.index_map(mesh.topology.dim).size_local
+        self._cells = np.arange(n_local, dtype=np.int32)
+
+    # -- set-up ---------------------------------------------------------------------------
+    def _dirichlet_bcs(self) -> list[Any]:
+        fdim = self.mesh.topology.dim - 1
+        bcs = []
+        for boundary, comps in self.fixed.items():
+            facets = boundary_facets(self.facet_tags, [boundary])
+            disp = self.W.sub(0) if self.mixed else self.W
+            for c in comps:
+                sub = disp.sub(c)
+                collapsed, _ = sub.collapse()
+                zero = fem.Function(collapsed)
+                dofs = fem.locate_dofs_topological((sub, collapsed), fdim, facets)
+                bcs.append(fem.dirichletbc(zero, dofs, sub))
+        return bcs
+
+    @staticmethod
+    def _quadrature_points(degree: int) -> np.ndarray:
+        import basix
+
+        points, _ = basix.make_quadrature(basix.CellType.tetrahedron, max(degree, 1))
+        return points
+
+    # -- case parameters ----------------------------------------------------------------------
+    def set_case(self, material: Material, gravity: Gravity) -> None:
+        """Set C1 and the (full) gravity load of a case; the load fraction starts at 0."""
+        self.C1.value = material.C1
+        self.density = material.density
+        self.gravity = gravity.vector
+        self.set_load_fraction(0.0)
+
+    def set_load_fraction(self, fraction: float) -> None:
+        """Scale the body force to ``fraction`` of ρ g."""
+        self.body_force.value[:] = fraction * self.density * self.gravity
+
+    # -- state ----------------------------------------------------------------------------------
+    def displacement(self) -> fem.Function:
+        """The displacement as a function on its own (collapsed) space."""
+        if not self.mixed:
+            return self.w
+        u = self.w.sub(0).collapse()
+        u.name = "displacement"
+        return u
+
+    def pressure(self) -> fem.Function | None:
+        """The pressure field (Taylor–Hood only)."""
+        if not self.mixed:
+            return None
+        p = self.w.sub(1).collapse()
+        p.name = "pressure"
+        return p
+
+    def min_detF(self) -> float:
+        """Smallest det F over all quadrature points of all cells (MPI-global)."""
+        values = self._detF.eval(self._cells)
+        local = float(np.min(values)) if values.size else np.inf
+        return self.mesh.comm.allreduce(local, op=MPI.MIN)
+
+    def volume_change(self) -> float:
+        """(∫ J dX - |Ω|) / |Ω|: zero for an exactly incompressible solution."""
+        change = self.mesh.comm.allreduce(fem.assemble_scalar(self._volume_change), op=MPI.SUM)
+        return change / self._volume
+
+    @property
+    def volume(self) -> float:
+        """Reference volume |Ω| in m³."""
+        return self._volume
+
+    def num_dofs(self) -> int:
+        """Global number of unknowns."""
+        im = self.W.dofmap.index_map
+        return im.size_global * self.W.dofmap.index_map_bs

@@ -1,0 +1,108 @@
+"""The sweep: which (C1, Φ, θ) cases exist and how their folders are named.
+
+This is the one place that derives the case list from the config and formats
+case identifiers; the workflow, the dataset and the report all call it.
+
+A case folder is ``c1=<C1 kPa, 2 decimals>_phi=<Φ deg, 1 decimal>_theta=<θ deg, 1 decimal>``,
+e.g. ``c1=1.00_phi=180.0_theta=0.0``. The identifier *is* the case: its
+parameters are parsed back from it, so a rounded angle is the angle solved.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from fem.exceptions import InvalidParameterError
+from fem.parameters import STANDARD_GRAVITY, TISSUE_DENSITY, Gravity, Material
+
+C1_PATTERN = r"[0-9]+\.[0-9]{2}"
+ANGLE_PATTERN = r"-?[0-9]+\.[0-9]"
+CASE_PATTERN = re.compile(
+    rf"c1=(?P<c1>{C1_PATTERN})_phi=(?P<phi>{ANGLE_PATTERN})_theta=(?P<theta>{ANGLE_PATTERN})"
+)
+
+
+@dataclass(frozen=True, slots=True, order=True)
+class Case:
+    """One mechanical setup.
+
+    Attributes:
+        C1: neo-Hookean parameter in kPa (as the paper quotes it).
+        phi: gravity elevation angle Φ in degrees.
+        theta: gravity azimuth angle θ in degrees.
+    """
+
+    C1: float
+    phi: float
+    theta: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("C1", "phi", "theta"):
+            if not math.isfinite(getattr(self, name)):
+                raise InvalidParameterError(f"case {name} must be finite")
+        if self.C1 <= 0:
+            raise InvalidParameterError(f"case C1 must be positive, got {self.C1} kPa")
+        # Normalise to the identifier's precision so that Case(id) round-trips.
+        object.__setattr__(self, "C1", round(float(self.C1), 2))
+        object.__setattr__(self, "phi", round(float(self.phi), 1) + 0.0)
+        object.__setattr__(self, "theta", round(float(self.theta), 1) + 0.0)
+
+    @property
+    def id(self) -> str:
+        """Folder name of the case."""
+        return f"c1={self.C1:.2f}_phi={self.phi:.1f}_theta={self.theta:.1f}"
+
+    @classmethod
+    def from_id(cls, case_id: str) -> Case:
+        """Parse a folder name.
+
+        Raises:
+            InvalidParameterError: if ``case_id`` is not a case identifier.
+        """
+        match = CASE_PATTERN.fullmatch(case_id)
+        if not match:
+            raise InvalidParameterError(
+                f"{case_id!r} is not a case identifier like 'c1=1.00_phi=180.0_theta=0.0'"
+            )
+        return cls(float(match["c1"]), float(match["phi"]), float(match["theta"]))
+
+    def material(self, density: float = TISSUE_DENSITY) -> Material:
+        """The case's material (C1 converted to Pa)."""
+        return Material(C1=self.C1 * 1e3, density=density)
+
+    def gravity(self, magnitude: float = STANDARD_GRAVITY) -> Gravity:
+        """The case's gravity."""
+        return Gravity(phi=self.phi, theta=self.theta, unit="deg", magnitude=magnitude)
+
+
+def grid(spec: Any, name: str) -> list[float]:
+    """Values from a list or from ``{start, stop, step}`` (stop included)."""
+    if isinstance(spec, dict):
+        start, stop, step = (float(spec[k]) for k in ("start", "stop", "step"))
+        if step <= 0 or stop < start:
+            raise InvalidParameterError(f"{name}: need step > 0 and stop >= start")
+        n = int(math.floor((stop - start) / step + 1e-9)) + 1
+        return [float(v) for v in np.round(start + step * np.arange(n), 10)]
+    values = [float(v) for v in spec]
+    if not values:
+        raise InvalidParameterError(f"{name} is empty")
+    return values
+
+
+def sweep_cases(sweep: dict[str, Any]) -> list[Case]:
+    """All cases of a sweep config section, sorted and without duplicates.
+
+    Args:
+        sweep: the ``sweep`` section: ``C1_kPa`` (list or range), ``phi_deg`` (list)
+            and ``theta_deg`` (list, default ``[0]``).
+    """
+    c1s = grid(sweep["C1_kPa"], "sweep.C1_kPa")
+    phis = grid(sweep["phi_deg"], "sweep.phi_deg")
+    thetas = grid(sweep.get("theta_deg", [0.0]), "sweep.theta_deg")
+    cases = {Case(c, p, t) for c in c1s for p in phis for t in thetas}
+    return sorted(cases)
