@@ -1,0 +1,293 @@
+"""One self-describing HDF5 dataset of all cases of a sweep.
+
+Layout (units in attributes; M cases, N material points)::
+
+    /points/X            (N, 3) float64   reference coordinates, m
+    /points/node_index   (N,)   int64     index of the point in the mesh file
+    /points/kind         (N,)   int8      0 domain, 1 boundary (on a fully clamped surface)
+    /cases/id            (M,)   str       case folder name
+    /cases/C1            (M,)   float64   kPa
+    /cases/phi, theta    (M,)   float64   degrees
+    /cases/gravity       (M, 3) float64   m/s^2
+    /cases/status        (M,)   str       converged | failed
+    /cases/reason        (M,)   str       why (solver's words)
+    /cases/converged     (M,)   bool
+    /cases/load_fraction (M,)   float64   fraction of gravity reached
+    /cases/load_steps, newton_iterations  (M,) int64
+    /cases/wall_s        (M,)   float64   solve wall time
+    /cases/max_disp_mm   (M,)   float64
+    /displacement        (M, N, 3) float64  m; NaN for failed cases
+    /splits/by_sample/{train,validation,test}   flat sample indices (case * N + point)
+    /splits/by_case/{train,validation,test}     case indices
+
+Root attributes hold a description, the creation time, the provenance (config
+sections, package versions, git commit) as JSON strings. This module imports
+neither dolfinx nor jax, so any tool can read the format.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import subprocess
+import tempfile
+from collections.abc import Sequence
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+FORMAT_VERSION = 1
+DOMAIN, BOUNDARY = 0, 1
+SPLITS = ("train", "validation", "test")
+REQUIRED_SUMMARY_KEYS = ("status", "case", "C1", "phi", "theta", "gravity_vector", "load_fraction")
+REQUIRED_POINT_FIELDS = ("node_index", "X", "u", "fixed")
+
+
+class DatasetError(ValueError):
+    """A case file is missing, truncated or inconsistent with the others (the message names it)."""
+
+
+def write_points(
+    path: str | Path, node_index: np.ndarray, X: np.ndarray, u: np.ndarray, fixed: np.ndarray
+) -> None:
+    """Write a case's material-point file: ``node_index``, ``X`` (m), ``u`` (m), ``fixed``."""
+    import h5py
+
+    with h5py.File(path, "w") as h5:
+        h5.create_dataset("node_index", data=node_index)
+        h5.create_dataset("X", data=X).attrs["units"] = "m"
+        h5.create_dataset("u", data=u).attrs["units"] = "m"
+        h5.create_dataset("fixed", data=fixed.astype(bool))
+        h5.attrs["description"] = "displacement at the mesh vertices (material points)"
+
+
+def read_points(path: str | Path) -> dict[str, np.ndarray]:
+    """Read a case's material-point file (``points.h5``, see :mod:`fem.io`)."""
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as h5:
+            missing = [k for k in REQUIRED_POINT_FIELDS if k not in h5]
+            if missing:
+                raise DatasetError(f"{path}: missing field(s) {', '.join(missing)}")
+            return {key: h5[key][...] for key in REQUIRED_POINT_FIELDS}
+    except OSError as err:
+        raise DatasetError(f"{path}: unreadable or truncated HDF5 file ({err})") from None
+
+
+def read_summary(path: str | Path) -> dict[str, Any]:
+    """Read a case's ``summary.json`` and check it has the fields the dataset needs."""
+    try:
+        with open(path) as fh:
+            summary = json.load(fh)
+    except (OSError, json.JSONDecodeError) as err:
+        raise DatasetError(f"{path}: unreadable or truncated summary ({err})") from None
+    missing = [k for k in REQUIRED_SUMMARY_KEYS if k not in summary]
+    if missing:
+        raise DatasetError(f"{path}: summary lacks {', '.join(missing)}")
+    return summary
+
+
+@dataclass(frozen=True, slots=True)
+class SplitFractions:
+    """Fractions of the train / validation / test split (the paper's 80/10/10)."""
+
+    train: float = 0.8
+    validation: float = 0.1
+    test: float = 0.1
+
+    def __post_init__(self) -> None:
+        values = (self.train, self.validation, self.test)
+        if any(v < 0 for v in values) or self.train <= 0 or self.validation <= 0:
+            raise DatasetError("split fractions must be non-negative, train and validation positive")
+        if abs(sum(values) - 1.0) > 1e-9:
+            raise DatasetError(f"split fractions must add up to 1, got {sum(values):g}")
+
+    def partition(self, n: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
+        """Randomly partition ``range(n)`` into sorted index arrays."""
+        order = rng.permutation(n)
+        n_train = int(round(self.train * n))
+        n_val = int(round(self.validation * n))
+        if n >= 3:
+            n_train = min(max(n_train, 1), n - 2 if self.test > 0 else n - 1)
+            n_val = min(max(n_val, 1), n - n_train - (1 if self.test > 0 else 0))
+        parts = np.split(order, [n_train, n_train + n_val])
+        return {name: np.sort(p).astype(np.int64) for name, p in zip(SPLITS, parts, strict=True)}
+
+
+def provenance(config: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Package versions, git commit and (optionally) the config that produced the data."""
+    packages = {}
+    for name in ("fenics-dolfinx", "petsc4py", "numpy", "h5py", "gmsh", "snakemake", "jax", "optax"):
+        try:
+            packages[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            packages[name] = None
+    repo = Path(__file__).resolve().parent.parent
+    try:
+        commit = subprocess.run(
+            ["git", "-C", str(repo), "rev-parse", "HEAD"], capture_output=True, text=True, check=True
+        ).stdout.strip()
+        dirty = bool(
+            subprocess.run(
+                ["git", "-C", str(repo), "status", "--porcelain", "--untracked-files=no"],
+                capture_output=True,
+                text=True,
+                check=True,
+            ).stdout.strip()
+        )
+    except (OSError, subprocess.CalledProcessError):
+        commit, dirty = None, None
+    return {"packages": packages, "git_commit": commit, "git_dirty": dirty, "config": config}
+
+
+def build_dataset(
+    summary_paths: Sequence[str | Path],
+    point_paths: Sequence[str | Path],
+    output: str | Path,
+    split: SplitFractions = SplitFractions(),
+    seed: int = 0,
+    config: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Gather case files into one HDF5 dataset, written atomically.
+
+    Raises:
+        DatasetError: naming the case whose files are missing, truncated or whose
+            material points differ from the first case's. Nothing is written then.
+    """
+    if len(summary_paths) != len(point_paths) or not summary_paths:
+        raise DatasetError("need one points file per summary, and at least one case")
+    summaries = [read_summary(p) for p in summary_paths]
+    reference = read_points(point_paths[0])
+    n_points = len(reference["node_index"])
+    displacement = np.full((len(summaries), n_points, 3), np.nan)
+    for i, (summary, path) in enumerate(zip(summaries, point_paths, strict=True)):
+        points = reference if i == 0 else read_points(path)
+        case = summary["case"]
+        if points["u"].shape != (n_points, 3) or points["X"].shape != (n_points, 3):
+            raise DatasetError(
+                f"case {case}: {path} has {len(points['u'])} material points, expected {n_points}"
+            )
+        if not np.array_equal(points["node_index"], reference["node_index"]) or not np.allclose(
+            points["X"], reference["X"], rtol=0, atol=1e-12
+        ):
+            raise DatasetError(f"case {case}: {path} lists different material points (another mesh?)")
+        if summary["status"] == "converged":
+            if not np.all(np.isfinite(points["u"])):
+                raise DatasetError(f"case {case}: converged but its displacement has NaN/inf")
+            displacement[i] = points["u"]
+
+    converged = np.array([s["status"] == "converged" for s in summaries])
+    rng = np.random.default_rng(seed)
+    good_cases = np.flatnonzero(converged)
+    samples = (good_cases[:, None] * n_points + np.arange(n_points)[None, :]).ravel()
+    by_sample = {k: samples[v] for k, v in split.partition(len(samples), rng).items()}
+    by_case = {k: good_cases[v] for k, v in split.partition(len(good_cases), rng).items()}
+
+    def column(key: str, default: Any = np.nan) -> np.ndarray:
+        return np.array([s.get(key, default) if s.get(key) is not None else default for s in summaries])
+
+    wall = np.array([s.get("wall_s", {}).get("solve", np.nan) for s in summaries], dtype=float)
+    iterations = np.array([sum(s.get("newton_iterations", [])) for s in summaries], dtype=np.int64)
+    fields = {
+        "id": np.array([s["case"] for s in summaries], dtype=object),
+        "C1": column("C1").astype(float),
+        "phi": column("phi").astype(float),
+        "theta": column("theta").astype(float),
+        "gravity": np.array([s["gravity_vector"] for s in summaries], dtype=float),
+        "status": np.array([s["status"] for s in summaries], dtype=object),
+        "reason": np.array([s.get("reason", "") for s in summaries], dtype=object),
+        "converged": converged,
+        "load_fraction": column("load_fraction").astype(float),
+        "load_steps": column("load_steps", 0).astype(np.int64),
+        "newton_iterations": iterations,
+        "wall_s": wall,
+        "max_disp_mm": column("max_disp_mm").astype(float),
+    }
+    units = {"C1": "kPa", "phi": "deg", "theta": "deg", "gravity": "m/s^2", "wall_s": "s",
+             "max_disp_mm": "mm", "load_fraction": "1"}
+    kind = np.where(reference["fixed"], BOUNDARY, DOMAIN).astype(np.int8)
+    _write_atomically(
+        Path(output),
+        reference,
+        kind,
+        fields,
+        units,
+        displacement,
+        {"by_sample": by_sample, "by_case": by_case},
+        {"seed": seed, "fractions": [split.train, split.validation, split.test]},
+        provenance(config),
+    )
+    failed = [s["case"] for s in summaries if s["status"] != "converged"]
+    log.info("dataset: %d cases (%d failed), %d points", len(summaries), len(failed), n_points)
+    return {"cases": len(summaries), "failed": failed, "points": n_points}
+
+
+def _write_atomically(
+    output: Path,
+    reference: dict[str, np.ndarray],
+    kind: np.ndarray,
+    fields: dict[str, np.ndarray],
+    units: dict[str, str],
+    displacement: np.ndarray,
+    splits: dict[str, dict[str, np.ndarray]],
+    split_info: dict[str, Any],
+    prov: dict[str, Any],
+) -> None:
+    import h5py
+
+    output.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=output.parent, prefix=f".{output.name}.", suffix=".tmp")
+    os.close(fd)
+    try:
+        with h5py.File(tmp, "w") as h5:
+            h5.attrs["title"] = "Breast displacement under rotated gravity (FE sweep)"
+            h5.attrs["description"] = __doc__
+            h5.attrs["format_version"] = FORMAT_VERSION
+            h5.attrs["created"] = datetime.now(timezone.utc).isoformat()
+            h5.attrs["provenance"] = json.dumps(prov, default=str)
+            pts = h5.create_group("points")
+            pts.create_dataset("X", data=reference["X"]).attrs["units"] = "m"
+            pts.create_dataset("node_index", data=reference["node_index"])
+            k = pts.create_dataset("kind", data=kind)
+            k.attrs["legend"] = json.dumps({"domain": DOMAIN, "boundary": BOUNDARY})
+            cases = h5.create_group("cases")
+            for name, values in fields.items():
+                if values.dtype == object:
+                    ds = cases.create_dataset(name, data=values.astype(str).astype(object),
+                                              dtype=h5py.string_dtype())
+                else:
+                    ds = cases.create_dataset(name, data=values)
+                if name in units:
+                    ds.attrs["units"] = units[name]
+            n_points = displacement.shape[1]
+            d = h5.create_dataset(
+                "displacement",
+                data=displacement,
+                chunks=(1, n_points, 3),
+                compression="gzip",
+                compression_opts=4,
+                shuffle=True,
+            )
+            d.attrs["units"] = "m"
+            d.attrs["description"] = "displacement of each material point per case; NaN if failed"
+            sp = h5.create_group("splits")
+            sp.attrs["seed"] = split_info["seed"]
+            sp.attrs["fractions"] = split_info["fractions"]
+            for kind_name, parts in splits.items():
+                g = sp.create_group(kind_name)
+                for name, idx in parts.items():
+                    g.create_dataset(name, data=idx)
+            sp["by_sample"].attrs["description"] = "flat sample index = case * n_points + point"
+            sp["by_case"].attrs["description"] = "case indices (whole setups held out)"
+        os.replace(tmp, output)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
