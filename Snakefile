@@ -1,0 +1,22 @@
+# Breast biomechanics under gravity: mesh -> FE sweep -> HDF5 dataset -> surrogate -> report.
+# Wiring only: the stages live in workflow/rules, the science in fem/, meshes/, surrogate/.
+from snakemake.utils import min_version
+
+min_version("9.0")
+
+
+configfile: "config.yaml"
+
+
+include: "workflow/rules/common.smk"
+include: "workflow/rules/mesh.smk"
+include: "workflow/rules/solve.smk"
+include: "workflow/rules/aggregate.smk"
+include: "workflow/rules/surrogate.smk"
+include: "workflow/rules/report.smk"
+
+
+rule all:
+    default_target: True
+    input:
+        REPORT,

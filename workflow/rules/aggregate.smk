@@ -1,0 +1,20 @@
+rule aggregate:
+    input:
+        summaries=case_files("summary.json"),
+        points=case_files("points.h5"),
+    output:
+        DATASET,
+    params:
+        dataset=config["dataset"],
+        # Provenance: only the sections the data depend on, so that e.g. a surrogate
+        # setting does not rebuild the dataset.
+        provenance={key: config[key] for key in ("mesh", "material", "fe", "sweep", "dataset")},
+    log:
+        "results/logs/aggregate.log",
+    benchmark:
+        "results/benchmarks/aggregate.tsv"
+    threads: 1
+    resources:
+        mem_mb=4000,
+    script:
+        "../scripts/aggregate.py"

@@ -1,0 +1,21 @@
+rule solve:
+    input:
+        mesh=MESH,
+    output:
+        summary=f"{CASE_DIR}/summary.json",
+        points=f"{CASE_DIR}/points.h5",
+        fields=f"{CASE_DIR}/fields.xdmf",
+        fields_h5=f"{CASE_DIR}/fields.h5",
+    params:
+        fe=config["fe"],
+        material=config["material"],
+        fixed=config["mesh"]["fixed"],
+    log:
+        "results/logs/solve/c1={c1}_phi={phi}_theta={theta}.log",
+    benchmark:
+        "results/benchmarks/solve/c1={c1}_phi={phi}_theta={theta}.tsv"
+    threads: 1
+    resources:
+        mem_mb=3000,
+    script:
+        "../scripts/solve_case.py"

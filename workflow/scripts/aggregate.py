@@ -1,0 +1,17 @@
+"""Snakemake adapter: gather all case files into one HDF5 dataset."""
+
+import logging
+
+from fem.dataset import SplitFractions, build_dataset
+
+logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
+
+cfg = snakemake.params.dataset
+build_dataset(
+    snakemake.input.summaries,
+    snakemake.input.points,
+    snakemake.output[0],
+    split=SplitFractions(**cfg.get("split", {})),
+    seed=int(cfg.get("seed", 0)),
+    config=snakemake.params.provenance,
+)
