@@ -1,0 +1,100 @@
+"""Aggregation of case files into the HDF5 dataset, and its failure modes."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from fem.dataset import BOUNDARY, DatasetError, SplitFractions, build_dataset, write_points
+
+N = 50
+
+
+def _write_case(folder: Path, C1: float, phi: float, status: str = "converged", n: int = N,
+                rng: np.random.Generator | None = None) -> tuple[Path, Path]:
+    rng = rng or np.random.default_rng(0)
+    folder.mkdir(parents=True)
+    X = np.linspace(0, 1, 3 * N).reshape(N, 3)[:n]
+    fixed = np.arange(n) < 5
+    u = np.where(fixed[:, None], 0.0, rng.normal(size=(n, 3)) * 1e-3 / C1)
+    write_points(folder / "points.h5", np.arange(n), X, u, fixed)
+    summary = {"status": status, "reason": "converged" if status == "converged" else "diverged",
+               "case": folder.name, "C1": C1, "phi": phi, "theta": 0.0,
+               "gravity_vector": [9.81 * np.cos(np.radians(phi)), 9.81 * np.sin(np.radians(phi)), 0.0],
+               "load_fraction": 1.0 if status == "converged" else 0.5, "load_steps": 1,
+               "newton_iterations": [5], "wall_s": {"solve": 1.0}, "max_disp_mm": 1.0}
+    (folder / "summary.json").write_text(json.dumps(summary))
+    return folder / "summary.json", folder / "points.h5"
+
+
+def _cases(tmp_path: Path, overrides: dict[int, dict] | None = None) -> tuple[list[Path], list[Path]]:
+    overrides = overrides or {}
+    paths = [_write_case(tmp_path / f"c{i}", 1.0 + i, 30.0 * i, **overrides.get(i, {}))
+             for i in range(5)]
+    return [p[0] for p in paths], [p[1] for p in paths]
+
+
+def test_dataset_schema_and_contents(tmp_path: Path) -> None:
+    summaries, points = _cases(tmp_path, {3: {"status": "failed"}})
+    info = build_dataset(summaries, points, tmp_path / "ds.h5", SplitFractions(), seed=1,
+                         config={"sweep": {"phi_deg": [0]}})
+    assert info["failed"] == ["c3"]
+    with h5py.File(tmp_path / "ds.h5") as h5:
+        assert h5["displacement"].shape == (5, N, 3)
+        assert h5["displacement"].attrs["units"] == "m"
+        assert h5["displacement"].compression == "gzip"
+        assert np.all(np.isnan(h5["displacement"][3]))
+        assert list(h5["cases/status"].asstr()[...]) == ["converged"] * 3 + ["failed", "converged"]
+        assert np.sum(h5["points/kind"][...] == BOUNDARY) == 5
+        prov = json.loads(h5.attrs["provenance"])
+        assert prov["config"] == {"sweep": {"phi_deg": [0]}} and "packages" in prov
+        by_sample = [h5[f"splits/by_sample/{k}"][...] for k in ("train", "validation", "test")]
+        allidx = np.concatenate(by_sample)
+        assert len(allidx) == len(np.unique(allidx)) == 4 * N  # failed case excluded
+        assert not np.any(allidx // N == 3)
+        assert len(by_sample[0]) == pytest.approx(0.8 * 4 * N, abs=1)
+        by_case = np.concatenate([h5[f"splits/by_case/{k}"][...] for k in ("train", "validation", "test")])
+        assert sorted(by_case) == [0, 1, 2, 4]
+
+
+def test_mismatched_point_count_names_the_case(tmp_path: Path) -> None:
+    summaries, points = _cases(tmp_path, {2: {"n": N - 1}})
+    with pytest.raises(DatasetError, match="case c2: .* 49 material points, expected 50"):
+        build_dataset(summaries, points, tmp_path / "ds.h5")
+    assert not (tmp_path / "ds.h5").exists()
+
+
+def test_truncated_case_file_names_the_case(tmp_path: Path) -> None:
+    summaries, points = _cases(tmp_path)
+    data = points[1].read_bytes()
+    points[1].write_bytes(data[: len(data) // 3])
+    with pytest.raises(DatasetError, match="c1/points.h5: unreadable or truncated"):
+        build_dataset(summaries, points, tmp_path / "ds.h5")
+
+
+def test_missing_field_names_the_case(tmp_path: Path) -> None:
+    summaries, points = _cases(tmp_path)
+    with h5py.File(points[4], "a") as h5:
+        del h5["u"]
+    with pytest.raises(DatasetError, match="c4/points.h5: missing field"):
+        build_dataset(summaries, points, tmp_path / "ds.h5")
+    summary = json.loads(summaries[0].read_text())
+    del summary["phi"]
+    summaries[0].write_text(json.dumps(summary))
+    with pytest.raises(DatasetError, match="c0/summary.json: summary lacks phi"):
+        build_dataset(summaries, points, tmp_path / "ds.h5")
+
+
+def test_existing_dataset_survives_a_failed_rebuild(tmp_path: Path) -> None:
+    summaries, points = _cases(tmp_path)
+    build_dataset(summaries, points, tmp_path / "ds.h5")
+    before = (tmp_path / "ds.h5").read_bytes()
+    points[0].write_bytes(b"garbage")
+    with pytest.raises(DatasetError):
+        build_dataset(summaries, points, tmp_path / "ds.h5")
+    assert (tmp_path / "ds.h5").read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []

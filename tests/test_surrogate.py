@@ -1,0 +1,125 @@
+"""The Siamese MLP: data checks, loss, one short training, save/load, bad input."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from fem.dataset import build_dataset, write_points
+from surrogate.config import SurrogateConfig, SurrogateConfigError
+
+N = 200
+
+
+def _field(X: np.ndarray, C1: float, phi: float) -> np.ndarray:
+    """A smooth displacement (m) that vanishes on x = 0 and scales with 1/C1, like gravity sag."""
+    g = np.array([np.cos(np.radians(phi)), np.sin(np.radians(phi)), 0.0])
+    return 0.01 / C1 * X[:, :1] ** 2 * (g + 0.3 * np.roll(g, 1) * X[:, 1:2])
+
+
+@pytest.fixture(scope="module")
+def dataset_path(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("ds")
+    rng = np.random.default_rng(0)
+    X = rng.uniform(0, 1, size=(N, 3))
+    X[:20, 0] = 0.0  # a clamped 'rib' at x = 0
+    fixed = X[:, 0] == 0.0
+    summaries, points = [], []
+    for C1 in (1.0, 2.0, 3.0, 4.0, 5.0):
+        for phi in (0.0, 90.0, 180.0, -90.0):
+            case = folder / f"c{C1}_{phi}"
+            case.mkdir()
+            write_points(case / "points.h5", np.arange(N), X, _field(X, C1, phi), fixed)
+            (case / "summary.json").write_text(json.dumps({
+                "status": "converged", "case": case.name, "C1": C1, "phi": phi, "theta": 0.0,
+                "gravity_vector": [0, 0, 0], "load_fraction": 1.0}))
+            summaries.append(case / "summary.json")
+            points.append(case / "points.h5")
+    build_dataset(summaries, points, folder / "dataset.h5")
+    return folder / "dataset.h5"
+
+
+def test_config_validation_names_the_key() -> None:
+    with pytest.raises(SurrogateConfigError, match="surrogate.width"):
+        SurrogateConfig(width=0)
+    with pytest.raises(SurrogateConfigError, match="unknown surrogate parameter"):
+        SurrogateConfig.from_mapping({"widht": 3})
+
+
+def test_loss_is_eq2() -> None:
+    import jax.numpy as jnp
+
+    from surrogate.model import init_params, loss
+
+    params = init_params(__import__("jax").random.PRNGKey(0), SurrogateConfig(hidden_layers=1, width=4))
+    # zero the output layers: predictions are 0, so the loss is the weighted mean target norm
+    for net in params:
+        W, b = params[net][-1]
+        params[net][-1] = (W * 0, b * 0)
+    x = jnp.zeros((3, 7))
+    y = jnp.array([[3.0, 4.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
+    b = jnp.array([False, False, True])
+    value = loss(params, x, y, b, jnp.ones(3), 10.0, "tanh")
+    assert float(value) == pytest.approx((5.0 + 1.0 + 10.0 * 1.0) / 3, rel=1e-5)
+
+
+def test_training_reduces_the_loss_and_round_trips(dataset_path: Path, tmp_path: Path) -> None:
+    from surrogate.data import load_dataset
+    from surrogate.predict import Surrogate, save_model
+    from surrogate.train import train_and_evaluate
+
+    ds = load_dataset(dataset_path)
+    config = SurrogateConfig(hidden_layers=2, width=16, batch_size=256, max_epochs=40, patience=40)
+    result = train_and_evaluate(ds, config, progress=False)
+    losses = [h["validation_loss"] for h in result.history]
+    assert losses[-1] < 0.5 * losses[0]
+    assert result.best_validation_loss == min(losses)
+    save_model(tmp_path / "model", result, ds)
+    model = Surrogate.load(tmp_path / "model")
+    u = model.predict(3.0, 90.0)
+    assert u.shape == (N, 3)
+    case = ds.case_index(3.0, 90.0)
+    assert np.mean(np.linalg.norm(u - ds.displacement[case], axis=1)) < 0.5 * np.mean(
+        np.linalg.norm(ds.displacement[case], axis=1)
+    )
+    # the same weights give the same prediction after reloading
+    np.testing.assert_allclose(Surrogate.load(tmp_path / "model").predict(3.0, 90.0), u, rtol=1e-6)
+
+
+def test_bad_inputs_are_named(dataset_path: Path, tmp_path: Path) -> None:
+    from surrogate.data import DatasetFormatError, load_dataset
+    from surrogate.predict import ExtrapolationWarning, ModelFileError, Surrogate, save_model
+    from surrogate.train import train_and_evaluate
+
+    ds = load_dataset(dataset_path)
+    result = train_and_evaluate(ds, SurrogateConfig(hidden_layers=1, width=4, max_epochs=1), progress=False)
+    save_model(tmp_path / "m", result, ds)
+    model = Surrogate.load(tmp_path / "m")
+    with pytest.raises(ValueError, match="C1 must be a finite number"):
+        model.predict(float("nan"), 0.0)
+    with pytest.raises(ValueError, match="phi must be a finite number"):
+        model.predict(1.0, float("inf"))
+    with pytest.warns(ExtrapolationWarning, match="outside the training range"):
+        model.predict(9.0, 0.0)
+    # a model file from another architecture
+    meta = json.loads((tmp_path / "m" / "model.json").read_text())
+    meta["config"]["width"] = 8
+    (tmp_path / "m" / "model.json").write_text(json.dumps(meta))
+    with pytest.raises(ModelFileError, match="1x8"):
+        Surrogate.load(tmp_path / "m")
+    # a dataset with NaN in a converged case, and one without a split
+    broken = tmp_path / "broken.h5"
+    broken.write_bytes(dataset_path.read_bytes())
+    with h5py.File(broken, "a") as h5:
+        h5["displacement"][0, 0, 0] = np.nan
+    with pytest.raises(DatasetFormatError, match="NaN"):
+        load_dataset(broken)
+    broken.write_bytes(dataset_path.read_bytes())
+    with h5py.File(broken, "a") as h5:
+        del h5["splits/by_case/validation"]
+    with pytest.raises(DatasetFormatError, match="by_case/validation"):
+        load_dataset(broken)

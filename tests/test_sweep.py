@@ -1,0 +1,71 @@
+"""Case identifiers, the sweep definition and parameter validation (no FE)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import yaml
+
+from fem.exceptions import InvalidParameterError
+from fem.parameters import Gravity, Loading, Material, SolverSettings
+from fem.sweep import Case, sweep_cases
+from tests.conftest import REPO
+
+
+def test_case_id_round_trips() -> None:
+    case = Case(1.0, -150.0, 0.0)
+    assert case.id == "c1=1.00_phi=-150.0_theta=0.0"
+    assert Case.from_id(case.id) == case
+
+
+def test_case_id_rejects_garbage() -> None:
+    with pytest.raises(InvalidParameterError, match="not a case identifier"):
+        Case.from_id("c1=1_phi=0")
+
+
+def test_default_config_is_the_papers_688_cases() -> None:
+    config = yaml.safe_load((REPO / "config.yaml").read_text())
+    cases = sweep_cases(config["sweep"])
+    assert len(cases) == 688
+    c1s = sorted({c.C1 for c in cases})
+    phis = sorted({c.phi for c in cases})
+    assert len(c1s) == 43 and c1s[0] == 0.8 and c1s[-1] == 5.0
+    assert len(phis) == 16 and phis[0] == -150.0 and phis[-1] == 180.0
+    assert 0.0 in phis  # the supine clinical cases are part of the sweep
+
+
+@pytest.mark.parametrize("phi, expected", [(0.0, [9.81, 0, 0]), (180.0, [-9.81, 0, 0]), (90.0, [0, 9.81, 0])])
+def test_gravity_follows_eq1(phi: float, expected: list[float]) -> None:
+    np.testing.assert_allclose(Gravity(phi).vector, expected, atol=1e-12)
+
+
+def test_gravity_theta_rotates_about_x() -> None:
+    g = Gravity(90.0, 90.0).vector
+    np.testing.assert_allclose(g, [0, 0, 9.81], atol=1e-12)
+    np.testing.assert_allclose(Gravity(math.pi, 0.0, unit="rad").vector, [-9.81, 0, 0], atol=1e-12)
+
+
+@pytest.mark.parametrize("C1", [0.0, -1.0, float("nan"), float("inf")])
+def test_bad_c1_is_rejected_by_name(C1: float) -> None:
+    with pytest.raises(InvalidParameterError, match="C1"):
+        Material(C1=C1)
+
+
+def test_unknown_angle_unit_is_rejected() -> None:
+    with pytest.raises(InvalidParameterError, match="angle unit 'grad'"):
+        Gravity(90.0, unit="grad")
+
+
+def test_unknown_loading_key_is_named() -> None:
+    with pytest.raises(InvalidParameterError, match="initial_stepp"):
+        Loading.from_mapping({"initial_stepp": 0.5})
+
+
+def test_solver_settings_from_config() -> None:
+    settings = SolverSettings.from_config(
+        {"fe": {"discretisation": {"degree": 3}}, "mesh": {"fixed": {"rib": "all", "cranial": ["z"]}}}
+    )
+    assert settings.discretisation.degree == 3
+    assert dict((b.label, c) for b, c in settings.fixed.items()) == {"rib": (0, 1, 2), "cranial": (2,)}
