@@ -7,7 +7,7 @@ rule report:
     output:
         html=REPORT,
     params:
-        report=config.get("report", {}),
+        clinical=config["clinical"],
     log:
         "results/logs/report.log",
     threads: 1

@@ -40,7 +40,7 @@ plot_sweep_map(ds.C1, ds.phi, wall, out.parent / "sweep_cost.png", "FE solve wal
                failed=~ds.converged, title="FE cost per case")
 
 rows = []
-for item in snakemake.params.report.get("clinical", []):
+for item in snakemake.params.clinical:
     try:
         case = ds.case_index(item["C1"], item["phi"], item.get("theta", 0.0))
     except KeyError:
