@@ -4,7 +4,11 @@ SHELL := /bin/bash
 VENV := .venv
 PY := $(VENV)/bin/python
 JOBS ?= 2
+CONFIG ?= config.yaml
+WORKDIR ?= .
 SNAKEMAKE_ARGS ?=
+SNAKEMAKE := $(VENV)/bin/snakemake --snakefile $(CURDIR)/Snakefile --directory $(abspath $(WORKDIR)) \
+	--configfile $(abspath $(CONFIG)) --workflow-profile $(CURDIR)/workflow/profiles/default
 
 # Debian packages: dolfinx 0.5.2 (PETSc 3.18, MPI), h5py on the same HDF5, a fast BLAS for MUMPS,
 # the X/GL libraries the gmsh wheel links against, and SLURM + munge for the
@@ -31,7 +35,7 @@ system-packages:
 $(VENV)/.installed: requirements.lock constraints.txt pyproject.toml
 	@echo "setup: creating $(VENV) over /usr/bin/python3 and installing requirements.lock"
 	/usr/bin/python3 -m venv --system-site-packages $(VENV)
-	$(PY) -m pip install --disable-pip-version-check -q -c constraints.txt -r requirements.lock
+	$(PY) -m pip install --disable-pip-version-check -q --no-deps -c constraints.txt -r requirements.lock
 	$(PY) -m pip install --disable-pip-version-check -q -c constraints.txt --no-deps --no-build-isolation -e .
 	$(PY) -c "import numpy, petsc4py, dolfinx, jax, optax, gmsh, snakemake; assert numpy.__version__ == '1.24.2', numpy.__version__"
 	touch $@
@@ -39,18 +43,26 @@ $(VENV)/.installed: requirements.lock constraints.txt pyproject.toml
 test: setup
 	$(PY) -m pytest -q tests
 
+# The whole run holds a kernel lock (flock), released even when the run is SIGKILLed; while we
+# hold it no other `make reproduce` can be running on WORKDIR, so a Snakemake lock left by a
+# killed run is stale and safe to clear. Finished cases are kept; interrupted ones are redone.
 reproduce: setup
-	$(VENV)/bin/snakemake -j$(JOBS) $(SNAKEMAKE_ARGS)
+	@mkdir -p $(WORKDIR)/results
+	@flock --nonblock --conflict-exit-code 75 $(WORKDIR)/results/.reproduce.lock sh -c \
+		'$(SNAKEMAKE) --unlock --quiet all >/dev/null 2>&1; $(SNAKEMAKE) -j$(JOBS) $(SNAKEMAKE_ARGS)' \
+		|| { rc=$$?; [ $$rc -ne 75 ] || echo "another 'make reproduce' is running on $(WORKDIR)" >&2; exit $$rc; }
 
 lint: setup
 	$(VENV)/bin/snakemake --lint
 
-# Re-resolve the pins from requirements.in (needs network); review the diff.
+# Re-resolve the pins from requirements.in (needs network); review the diff. Lines marked
+# "# NODEPS" are installed without dependency resolution (see requirements.in).
 lock:
 	rm -rf /tmp/lock-venv && /usr/bin/python3 -m venv --system-site-packages /tmp/lock-venv
 	/tmp/lock-venv/bin/pip install -q -c constraints.txt -r requirements.in
-	{ echo "# Complete pinned set of PyPI packages installed into .venv (over Debian's python3-dolfinx)."; \
-	  echo "# Regenerate after changing requirements.in:  make lock"; \
+	/tmp/lock-venv/bin/pip install -q --no-deps $$(sed -n 's/^# NODEPS //p' requirements.in)
+	{ echo "# Complete pinned set of PyPI packages installed into .venv (over Debian's python3-dolfinx),"; \
+	  echo "# installed with --no-deps so that exactly these versions land. Regenerate: make lock"; \
 	  /tmp/lock-venv/bin/pip list --local --format=freeze | grep -v -E '^(pip|setuptools)=='; } > requirements.lock
 
 clean-results:
