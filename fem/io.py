@@ -161,7 +161,9 @@ class CaseWriter:
         self.comm = comm
         self.tmp = self.outdir / ".partial"
         if comm.rank == 0:
-            self.tmp.mkdir(parents=True, exist_ok=True)
+            # files staged by a run that was killed before its commit are stale
+            shutil.rmtree(self.tmp, ignore_errors=True)
+            self.tmp.mkdir(parents=True)
         comm.barrier()
 
     def path(self, name: str) -> Path:
