@@ -1,0 +1,113 @@
+"""The sweep as a user drives it: resume after SIGKILL, and rerun only what a change touches."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+import yaml
+
+from tests.conftest import REPO
+from tests.test_workflow import job_counts, snakemake
+
+# Twelve quick cases on the coarse test mesh.
+KILL_CONFIG = {
+    "mesh": {"source": "parametric", "size": {"global_size": 0.03, "mound_size": 0.02}},
+    "sweep": {"C1_kPa": [1.0, 2.0, 3.0, 4.0], "phi_deg": [0.0, 90.0, 180.0]},
+    "clinical": [],
+}
+
+
+def make_reproduce(workdir: Path, config: Path, *targets: str, **popen) -> subprocess.Popen:
+    """Start the README's reproduce command on ``workdir``."""
+    cmd = ["make", "-s", "-C", str(REPO), "reproduce", f"WORKDIR={workdir}", f"CONFIG={config}",
+           f"SNAKEMAKE_ARGS={' '.join(targets)}"]
+    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, **popen)
+
+
+def finished_cases(workdir: Path) -> dict[Path, tuple[int, int]]:
+    """Summary files present now, with (inode, mtime) to detect rewrites."""
+    return {p: (p.stat().st_ino, p.stat().st_mtime_ns)
+            for p in (workdir / "results/cases").glob("*/summary.json")}
+
+
+def test_sigkill_mid_sweep_resumes_without_recomputing(tmp_path: Path) -> None:
+    config = tmp_path / "config.yaml"
+    config.write_text(yaml.safe_dump(KILL_CONFIG))
+    target = "results/dataset/dataset.h5"
+    run = make_reproduce(tmp_path, config, target, start_new_session=True)
+    deadline = time.monotonic() + 300
+    while len(finished_cases(tmp_path)) < 3 and time.monotonic() < deadline and run.poll() is None:
+        time.sleep(0.2)
+    # cases that finished well before the kill: Snakemake has recorded them as complete
+    time.sleep(2.0)
+    done_early = finished_cases(tmp_path)
+    time.sleep(1.0)
+    os.killpg(run.pid, signal.SIGKILL)
+    run.wait()
+    assert 3 <= len(done_early) < 12, "the kill must land mid-sweep"
+    assert not (tmp_path / target).exists()
+
+    resumed = make_reproduce(tmp_path, config, target)
+    output, _ = resumed.communicate(timeout=600)
+    assert resumed.returncode == 0, output[-3000:]
+    after = finished_cases(tmp_path)
+    assert len(after) == 12
+    for path, stamp in done_early.items():
+        assert after[path] == stamp, f"{path.parent.name} was recomputed"
+    assert list((tmp_path / "results/cases").glob("*/.partial")) == []
+    with h5py.File(tmp_path / target) as h5:
+        assert h5["displacement"].shape[0] == 12
+        assert np.all(h5["cases/converged"][...])
+        assert np.all(np.isfinite(h5["displacement"][...]))
+
+
+@pytest.fixture(scope="module")
+def finished_small_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    workdir = tmp_path_factory.mktemp("rerun")
+    run = snakemake(workdir, "-j2")
+    assert run.returncode == 0, run.stderr[-3000:]
+    return workdir
+
+
+def _planned(workdir: Path, change: dict) -> dict[str, int]:
+    config = yaml.safe_load((REPO / "tests" / "config.yaml").read_text())
+    for dotted, value in change.items():
+        node = config
+        *parents, key = dotted.split(".")
+        for p in parents:
+            node = node.setdefault(p, {})
+        node[key] = value
+    path = workdir / "changed.yaml"
+    path.write_text(yaml.safe_dump(config))
+    run = snakemake(workdir, "-n", "-j2", config=path)
+    assert run.returncode == 0, run.stderr[-3000:]
+    text = run.stdout + run.stderr
+    return job_counts(text) if "Job stats:" in text else {}
+
+
+def test_nothing_to_do_when_nothing_changed(finished_small_run: Path) -> None:
+    assert _planned(finished_small_run, {}) == {}
+
+
+def test_surrogate_change_reruns_training_only(finished_small_run: Path) -> None:
+    planned = _planned(finished_small_run, {"surrogate.width": 16})
+    assert "train" in planned
+    assert {"mesh", "solve", "aggregate"}.isdisjoint(planned)
+
+
+def test_new_stiffness_solves_only_the_new_cases(finished_small_run: Path) -> None:
+    planned = _planned(finished_small_run, {"sweep.C1_kPa": [1.0, 5.0, 2.5]})
+    assert planned["solve"] == 3  # 1 new C1 x 3 angles
+    assert "mesh" not in planned and planned["aggregate"] == 1
+
+
+def test_solver_change_resolves_every_case_but_keeps_the_mesh(finished_small_run: Path) -> None:
+    planned = _planned(finished_small_run, {"fe.loading.initial_step": 0.5})
+    assert planned["solve"] == 6 and "mesh" not in planned
