@@ -80,6 +80,65 @@ class Case:
         return Gravity(phi=self.phi, theta=self.theta, unit="deg", magnitude=magnitude)
 
 
+PAPER_PHI_DEG = (-150.0, -120.0, -90.0, -60.0, -35.0, -15.0, 0.0, 15.0, 35.0, 60.0, 90.0,
+                 120.0, 145.0, 160.0, 170.0, 180.0)
+"""The paper's 16 gravity angles are not printed; it says they span [-150°, 180°] and cluster
+about the poles (0° supine, 180° prone) and thin out about ±90° (its Fig. 4b). These follow
+that description: steps of 10–15° next to the poles, 30° next to ±90°, and both clinical
+positions (0° and 180°) are sampled exactly."""
+
+PHI_SAMPLINGS = ("paper", "uniform", "equal_area")
+
+
+def sample_phi(spec: Any) -> list[float]:
+    """Gravity elevation angles Φ (degrees) from a list or a sampling rule.
+
+    Args:
+        spec: a list of angles, or ``{sampling, n, min, max}`` with ``sampling``
+            ``paper`` (:data:`PAPER_PHI_DEG`), ``uniform`` (equal steps, both ends
+            included) or ``equal_area`` (density ∝ |sin Φ|, the area of the band of
+            directions at Φ on the unit sphere: more angles about ±90°, fewer at the
+            poles; the paper's suggested future work).
+    """
+    if not isinstance(spec, dict):
+        return grid(spec, "sweep.phi_deg")
+    sampling = spec.get("sampling", "paper")
+    if sampling not in PHI_SAMPLINGS:
+        raise InvalidParameterError(
+            f"sweep.phi_deg.sampling must be one of {PHI_SAMPLINGS}, got {sampling!r}"
+        )
+    if sampling == "paper":
+        return list(PAPER_PHI_DEG)
+    n = int(spec.get("n", 16))
+    lo, hi = float(spec.get("min", -150.0)), float(spec.get("max", 180.0))
+    if n < 1 or not lo < hi:
+        raise InvalidParameterError("sweep.phi_deg needs n >= 1 and min < max")
+    if sampling == "uniform":
+        return [float(v) for v in np.linspace(lo, hi, n)] if n > 1 else [lo]
+    # equal_area: place angles at the midpoints of n bins of equal probability
+    fine = np.linspace(lo, hi, 20001)
+    density = np.abs(np.sin(np.radians(fine))) + 1e-12
+    cdf = np.concatenate([[0.0], np.cumsum(0.5 * (density[1:] + density[:-1]) * np.diff(fine))])
+    cdf /= cdf[-1]
+    return [float(v) for v in np.interp((np.arange(n) + 0.5) / n, cdf, fine)]
+
+
+def sphere_directions(n: int) -> list[tuple[float, float]]:
+    """``n`` gravity directions spread evenly over the whole sphere, as (Φ, θ) in degrees.
+
+    A Fibonacci lattice (equal area per point, Deserno's 'equidistributed points'): the
+    paper's stated future work of leaving the θ = 0 plane.
+    """
+    if n < 1:
+        raise InvalidParameterError("sweep.sphere.n must be >= 1")
+    i = np.arange(n)
+    gx = 1.0 - (2.0 * i + 1.0) / n  # cos Φ, uniform: equal area bands
+    azimuth = i * np.pi * (3.0 - np.sqrt(5.0))  # golden angle
+    phi = np.degrees(np.arccos(gx))
+    theta = np.degrees(np.arctan2(np.sin(azimuth), np.cos(azimuth)))
+    return [(float(p), float(t)) for p, t in zip(phi, theta, strict=True)]
+
+
 def grid(spec: Any, name: str) -> list[float]:
     """Values from a list or from ``{start, stop, step}`` (stop included)."""
     if isinstance(spec, dict):
@@ -98,11 +157,15 @@ def sweep_cases(sweep: dict[str, Any]) -> list[Case]:
     """All cases of a sweep config section, sorted and without duplicates.
 
     Args:
-        sweep: the ``sweep`` section: ``C1_kPa`` (list or range), ``phi_deg`` (list)
-            and ``theta_deg`` (list, default ``[0]``).
+        sweep: the ``sweep`` section: ``C1_kPa`` (list or range) and either ``phi_deg``
+            (list or sampling rule, see :func:`sample_phi`) × ``theta_deg`` (list, default
+            ``[0]``), or ``sphere: {n}`` (directions over the whole sphere).
     """
     c1s = grid(sweep["C1_kPa"], "sweep.C1_kPa")
-    phis = grid(sweep["phi_deg"], "sweep.phi_deg")
-    thetas = grid(sweep.get("theta_deg", [0.0]), "sweep.theta_deg")
-    cases = {Case(c, p, t) for c in c1s for p in phis for t in thetas}
+    if sweep.get("sphere"):
+        directions = sphere_directions(int(sweep["sphere"]["n"]))
+    else:
+        thetas = grid(sweep.get("theta_deg", [0.0]), "sweep.theta_deg")
+        directions = [(p, t) for p in sample_phi(sweep["phi_deg"]) for t in thetas]
+    cases = {Case(c, p, t) for c in c1s for p, t in directions}
     return sorted(cases)

@@ -69,3 +69,41 @@ def test_solver_settings_from_config() -> None:
     )
     assert settings.discretisation.degree == 3
     assert dict((b.label, c) for b, c in settings.fixed.items()) == {"rib": (0, 1, 2), "cranial": (2,)}
+
+
+def test_paper_angles_cluster_about_the_poles() -> None:
+    from fem.sweep import sample_phi
+
+    phis = np.array(sample_phi({"sampling": "paper"}))
+    assert len(phis) == 16 and phis.min() == -150.0 and phis.max() == 180.0
+    assert {0.0, 180.0} <= set(phis)
+    steps = np.diff(np.sort(phis))
+    mid = 0.5 * (np.sort(phis)[1:] + np.sort(phis)[:-1])
+    near_pole = steps[np.minimum(np.abs(mid), 180 - np.abs(mid)) < 30]
+    near_equator = steps[np.abs(np.abs(mid) - 90) < 30]
+    assert near_pole.max() < near_equator.min()
+
+
+def test_equal_area_angles_follow_sin_phi() -> None:
+    from fem.sweep import sample_phi
+
+    phis = np.array(sample_phi({"sampling": "equal_area", "n": 400, "min": 0.0, "max": 180.0}))
+    # density proportional to sin: the fraction within 30 degrees of a pole is 1 - cos 30
+    near_poles = np.mean((phis < 30) | (phis > 150))
+    assert near_poles == pytest.approx(1 - np.cos(np.radians(30)), abs=0.01)
+    uniform = sample_phi({"sampling": "uniform", "n": 16})
+    assert np.allclose(np.diff(uniform), 22.0)
+
+
+def test_sphere_directions_are_unit_and_cover_the_sphere() -> None:
+    from fem.sweep import sphere_directions
+
+    dirs = np.array([Gravity(p, t).vector for p, t in sphere_directions(500)]) / 9.81
+    np.testing.assert_allclose(np.linalg.norm(dirs, axis=1), 1.0)
+    assert np.linalg.norm(dirs.mean(axis=0)) < 0.01  # no side favoured
+    assert dirs[:, 2].min() < -0.9 and dirs[:, 2].max() > 0.9  # theta != 0 reached
+
+
+def test_sphere_sweep_replaces_the_angle_grid() -> None:
+    cases = sweep_cases({"C1_kPa": [1.0, 2.0], "sphere": {"n": 10}})
+    assert len(cases) == 20 and len({c.theta for c in cases}) > 5
