@@ -1,49 +1,45 @@
-"""Mesh the parametric breast, tag its boundaries by name and write dolfinx XDMF."""
+"""Mesh the parametric breast, tag its boundaries by name, report quality, write XDMF and PNG."""
 
 from __future__ import annotations
 
 import logging
 import math
+import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from meshes.parametric import BreastGeometry, GeometryError, build_occ_model
+from meshes.exceptions import GeometryError
+from meshes.parametric import (
+    ANATOMICAL_BREAST_VOLUME_ML,
+    ANATOMICAL_MAX_PROJECTION_M,
+    BreastGeometry,
+    build_occ_model,
+)
 from meshes.quality import quality_report
+from meshes.sizing import MeshSize, add_size_field
 from meshes.tags import TISSUE, Boundary
+
+__all__ = [
+    "MeshSize",
+    "classify_surfaces",
+    "gmsh_quality",
+    "gmsh_session",
+    "mesh_arrays",
+    "mesh_parametric",
+    "mound_volume",
+    "surface_predicates",
+    "write_parametric_mesh",
+    "write_parametric_surface",
+]
 
 log = logging.getLogger(__name__)
 
-
-@dataclass(frozen=True, slots=True)
-class MeshSize:
-    """Element sizes (metres) and geometric order.
-
-    Attributes:
-        global_size: target element size away from the mound.
-        mound_size: target element size inside the mound.
-        order: geometric order of the mesh (1: straight tetrahedra, 2: curved).
-    """
-
-    global_size: float = 0.012
-    mound_size: float = 0.008
-    order: int = 1
-
-    def __post_init__(self) -> None:
-        for name in ("global_size", "mound_size"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise GeometryError(f"mesh.{name} must be a positive length, got {value!r}")
-        if self.order not in (1, 2):
-            raise GeometryError(f"mesh.order must be 1 or 2, got {self.order!r}")
-
-    def as_dict(self) -> dict[str, Any]:
-        """Parameters as a plain mapping (for JSON metadata)."""
-        return asdict(self)
+TETRA_TYPES = (4, 11)  # gmsh element types: 4-node and 10-node tetrahedra
+TRIANGLE_TYPES = (2, 9)  # 3-node and 6-node triangles
 
 
 @contextmanager
@@ -95,32 +91,11 @@ def classify_surfaces(
     return groups
 
 
-def mesh_parametric(model: Any, geometry: BreastGeometry, size: MeshSize) -> dict[Boundary, list[int]]:
-    """Build, mesh and tag the parametric breast in ``model``.
-
-    Returns:
-        The gmsh surface tags of each named boundary.
-    """
-    volume = build_occ_model(model, geometry)
-
-    # Size field: fine inside (and just around) the mound, where displacements peak.
-    base, axis = geometry.mound_frame()
-    centre = base + 0.5 * geometry.mound_projection * axis
-    radius = 0.5 * geometry.mound_projection + max(
-        geometry.mound_radius_lateral, geometry.mound_radius_cranial
-    )
-    field = model.mesh.field
-    ball = field.add("Ball")
-    field.setNumber(ball, "Radius", radius)
-    field.setNumber(ball, "Thickness", radius)
-    field.setNumber(ball, "VIn", size.mound_size)
-    field.setNumber(ball, "VOut", size.global_size)
-    for key, value in zip(("XCenter", "YCenter", "ZCenter"), centre, strict=True):
-        field.setNumber(ball, key, float(value))
-    field.setAsBackgroundMesh(ball)
-
+def _set_meshing_options(size: MeshSize) -> None:
     import gmsh
 
+    # Sizes come from the background field only; gmsh's defaults (sizes from CAD
+    # points, curvature, boundary extension) would override the laws of MeshSize.
     gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
     gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
     gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
@@ -128,8 +103,25 @@ def mesh_parametric(model: Any, geometry: BreastGeometry, size: MeshSize) -> dic
     gmsh.option.setNumber("Mesh.Algorithm", 6)  # Frontal-Delaunay for 2D
     gmsh.option.setNumber("Mesh.Algorithm3D", 1)  # Delaunay
     gmsh.option.setNumber("Mesh.Optimize", 1)
+    # Same mesh on every run: the sweep's material points must not move between jobs.
+    gmsh.option.setNumber("Mesh.RandomSeed", 1)
+
+
+def mesh_parametric(
+    model: Any, geometry: BreastGeometry, size: MeshSize
+) -> dict[Boundary, list[int]]:
+    """Build, mesh and tag the parametric breast in ``model``.
+
+    Returns:
+        The gmsh surface tags of each named boundary.
+    """
+    volume = build_occ_model(model, geometry)
+    add_size_field(model, geometry, size)
+    _set_meshing_options(size)
     model.mesh.generate(3)
     if size.order == 2:
+        # Curved tetrahedra: the mid-edge nodes are put on the CAD surfaces, so the
+        # curved rib and skin are represented to third order in the element size.
         model.mesh.setOrder(2)
 
     tol = 1e-6 * max(geometry.rib_depth, geometry.rib_half_width)
@@ -147,51 +139,233 @@ def mesh_parametric(model: Any, geometry: BreastGeometry, size: MeshSize) -> dic
     return groups
 
 
-def gmsh_quality(model: Any, groups: dict[Boundary, list[int]]) -> dict[str, Any]:
-    """Quality figures of the meshed model (see :func:`meshes.quality.quality_report`)."""
+def mesh_arrays(
+    model: Any, groups: dict[Boundary, list[int]]
+) -> tuple[np.ndarray, np.ndarray, dict[Boundary, np.ndarray]]:
+    """Nodes, tetrahedra (vertex columns only) and boundary triangles of a meshed model.
+
+    Returns:
+        ``(x (N, 3), tets (n, 4), facets)`` where indices refer to rows of ``x`` and
+        ``facets`` maps each boundary to its triangles (m, 3), possibly empty.
+    """
     node_tags, coords, _ = model.mesh.getNodes()
     x = coords.reshape(-1, 3)
     index = np.zeros(int(node_tags.max()) + 1, dtype=np.int64)
     index[node_tags.astype(np.int64)] = np.arange(len(node_tags))
-    tets, tet_tags = [], []
-    for etype in (4, 11):  # linear and quadratic tetrahedra
-        tags, nodes = model.mesh.getElementsByType(etype)
-        if len(tags):
+    tets = []
+    for etype in TETRA_TYPES:
+        _, nodes = model.mesh.getElementsByType(etype)
+        if len(nodes):
             n = model.mesh.getElementProperties(etype)[3]
             tets.append(index[nodes.reshape(-1, n)[:, :4].astype(np.int64)])
-            tet_tags.append(tags)
-    tet_array, tag_array = np.concatenate(tets), np.concatenate(tet_tags)
-    facets = {}
-    for boundary, surfaces in groups.items():
-        tris = []
-        for s in surfaces:
+    facets: dict[Boundary, np.ndarray] = {}
+    for boundary in Boundary:
+        tris = [np.empty((0, 3), dtype=np.int64)]
+        for s in groups.get(boundary, []):
             types, _, nodes = model.mesh.getElements(2, s)
             for etype, enodes in zip(types, nodes, strict=True):
-                n = model.mesh.getElementProperties(etype)[3]
-                tris.append(index[enodes.reshape(-1, n)[:, :3].astype(np.int64)])
+                if etype in TRIANGLE_TYPES:
+                    n = model.mesh.getElementProperties(etype)[3]
+                    tris.append(index[enodes.reshape(-1, n)[:, :3].astype(np.int64)])
         facets[boundary] = np.concatenate(tris)
+    return x, np.concatenate(tets), facets
+
+
+def curved_measures(model: Any, groups: dict[Boundary, list[int]]) -> dict[str, Any]:
+    """Volume and boundary areas of a second-order mesh, integrated over its curved cells.
+
+    The figures of :func:`meshes.quality.quality_report` use the straight-sided
+    tetrahedra through the vertices; the solver integrates over the curved ones.
+    """
+
+    def integrate(etype: int, tag: int = -1) -> float:
+        if len(model.mesh.getElementsByType(etype, tag)[0]) == 0:
+            return 0.0
+        local, weights = model.mesh.getIntegrationPoints(etype, "Gauss4")
+        _, det, _ = model.mesh.getJacobians(etype, local, tag)
+        return float(np.sum(np.abs(det.reshape(-1, len(weights))) @ weights))
+
+    volume = integrate(11)
+    return {
+        "volume_m3": volume,
+        "volume_ml": 1e6 * volume,
+        "area_m2": {b.label: sum(integrate(9, s) for s in tags) for b, tags in groups.items()},
+    }
+
+
+def gmsh_quality(model: Any, groups: dict[Boundary, list[int]]) -> dict[str, Any]:
+    """Quality figures of the meshed model (see :func:`meshes.quality.quality_report`).
+
+    Adds ``nodes`` (geometry nodes: more than ``vertices`` for order 2) and, for a
+    second-order mesh, its ``curved`` volume and areas.
+    """
+    x, tets, facets = mesh_arrays(model, groups)
+    tags = np.concatenate([model.mesh.getElementsByType(t)[0] for t in TETRA_TYPES])
     measures = {
-        name: np.asarray(model.mesh.getElementQualities(tag_array, name))
+        name: np.asarray(model.mesh.getElementQualities(tags, name))
         for name in ("minSICN", "gamma")
     }
-    return quality_report(x, tet_array, facets, measures)
+    report = quality_report(x, tets, facets, measures)
+    report["nodes"] = int(len(x))
+    if len(model.mesh.getElementsByType(11)[0]):
+        report["curved"] = curved_measures(model, groups)
+    return report
+
+
+def cad_measures(model: Any, groups: dict[Boundary, list[int]]) -> dict[str, Any]:
+    """Exact volume and boundary areas of the CAD model (what the mesh approximates)."""
+    occ = model.occ
+    return {
+        "volume_m3": float(sum(occ.getMass(3, tag) for _, tag in model.getEntities(3))),
+        "area_m2": {
+            b.label: float(sum(occ.getMass(2, t) for t in tags)) for b, tags in groups.items()
+        },
+    }
+
+
+def mound_volume(geometry: BreastGeometry) -> float:
+    """Volume of the mound, m³: the part of the ellipsoid outside the skin layer.
+
+    This is the "breast volume" the report quotes: the tissue that stands out
+    beyond the layer over the chest wall, not the layer under it.
+    """
+    with gmsh_session("mound") as model:
+        occ = model.occ
+        g = geometry
+        base, axis = g.mound_frame()
+        sphere = occ.addSphere(0.0, 0.0, 0.0, 1.0)
+        occ.dilate(
+            [(3, sphere)], 0, 0, 0, g.mound_length, g.mound_radius_lateral, g.mound_radius_cranial
+        )
+        occ.rotate([(3, sphere)], 0, 0, 0, 0, 0, 1, math.atan2(axis[1], axis[0]))
+        occ.translate([(3, sphere)], *(base + g.mound_offset * axis))
+        a, b = g.rib_depth + g.layer_thickness, g.rib_half_width + g.layer_thickness
+        z0 = g.mound_z - 2 * (g.mound_length + g.mound_radius_cranial)
+        if b >= a:
+            curve = occ.addEllipse(g.rib_depth, 0, z0, b, a, zAxis=[0, 0, 1], xAxis=[0, 1, 0])
+        else:
+            curve = occ.addEllipse(g.rib_depth, 0, z0, a, b, zAxis=[0, 0, 1], xAxis=[1, 0, 0])
+        disk = occ.addPlaneSurface([occ.addCurveLoop([curve])])
+        cylinder = [e for e in occ.extrude([(2, disk)], 0, 0, -2 * z0) if e[0] == 3]
+        mound, _ = occ.cut([(3, sphere)], cylinder)
+        occ.synchronize()
+        return float(sum(occ.getMass(3, tag) for dim, tag in mound if dim == 3))
+
+
+def anatomy(geometry: BreastGeometry, x: np.ndarray) -> dict[str, Any]:
+    """Breast volume and projection of a parametric mesh, and whether they are plausible.
+
+    Args:
+        geometry: shape parameters.
+        x: mesh node coordinates (N, 3).
+    """
+    volume_ml = 1e6 * mound_volume(geometry)
+    projection = float(geometry.rib_distance(x).max())
+    lo, hi = ANATOMICAL_BREAST_VOLUME_ML
+    plausible = lo <= volume_ml <= hi and projection <= ANATOMICAL_MAX_PROJECTION_M
+    if not plausible:
+        log.warning(
+            "the breast is anatomically implausible: volume %.0f ml (expected %.0f-%.0f), "
+            "projection %.1f cm from the chest wall (expected <= %.0f cm)",
+            volume_ml,
+            lo,
+            hi,
+            100 * projection,
+            100 * ANATOMICAL_MAX_PROJECTION_M,
+        )
+    return {
+        "breast_volume_ml": volume_ml,
+        "breast_volume_definition": (
+            "mound only: the tissue outside the skin layer's outer surface (the ellipsoid "
+            "minus the layer cylinder); the layer over the chest wall is not counted"
+        ),
+        "projection_from_chest_wall_m": projection,
+        "projection_definition": "largest distance of a mesh node from the rib-cage surface",
+        "mound_projection_from_skin_layer_m": geometry.mound_projection,
+        "plausible": bool(plausible),
+    }
 
 
 def write_parametric_mesh(
-    geometry: BreastGeometry, size: MeshSize, xdmf_path: str | Path
+    geometry: BreastGeometry,
+    size: MeshSize,
+    xdmf_path: str | Path,
+    png_path: str | Path | None = None,
 ) -> dict[str, Any]:
-    """Mesh the parametric breast, write mesh, cell and facet tags to XDMF.
+    """Mesh the parametric breast, write mesh, cell and facet tags to XDMF (and a PNG).
 
     Returns:
-        The mesh quality report, with the geometry and size parameters.
+        The mesh quality report, with the geometry and size parameters, the
+        anatomical figures and the wall time of meshing.
     """
     from meshes.io import write_gmsh_model
 
+    start = time.perf_counter()
     with gmsh_session() as model:
         groups = mesh_parametric(model, geometry, size)
+        mesh_s = time.perf_counter() - start
         report = gmsh_quality(model, groups)
+        cad = cad_measures(model, groups)
+        x, _, facets = mesh_arrays(model, groups)
         write_gmsh_model(model, xdmf_path)
+    report["source"] = "parametric"
+    report["cad"] = cad
+    # how much volume the straight-sided (or curved) cells lose against the exact CAD
+    meshed = report.get("curved", report)["volume_m3"]
+    report["volume_error_vs_cad"] = meshed / cad["volume_m3"] - 1.0
+    report["anatomy"] = anatomy(geometry, x)
     report["geometry"] = geometry.as_dict()
     report["size"] = size.as_dict()
     report["mound_projection_m"] = geometry.mound_projection
+    report["mesh_wall_s"] = mesh_s
+    if png_path is not None:
+        from meshes.plot import plot_boundaries
+
+        plot_boundaries(
+            x,
+            facets,
+            png_path,
+            title=f"parametric breast: {report['cells']} tetrahedra (order {size.order}), "
+            f"{report['dofs']['P2/P1']} P2/P1 unknowns",
+        )
+    log.info(
+        "parametric mesh: %d cells, %d vertices, %.0f ml, meshed in %.2f s",
+        report["cells"],
+        report["vertices"],
+        report["volume_ml"],
+        mesh_s,
+    )
     return report
+
+
+def write_parametric_surface(geometry: BreastGeometry, size: MeshSize, path: str | Path) -> None:
+    """Write the closed outer surface of the parametric breast (STL, OBJ, PLY: by suffix).
+
+    This is what a user's surface scan of this geometry would look like: one
+    triangulated closed surface, with no boundary names.
+    """
+    import meshio
+
+    with gmsh_session() as model:
+        build_occ_model(model, geometry)
+        add_size_field(model, geometry, size)
+        _set_meshing_options(size)
+        model.mesh.generate(2)
+        groups = {Boundary.SKIN: [tag for _, tag in model.getEntities(2)]}
+        x, tris = _surface_triangles(model, groups[Boundary.SKIN])
+    used = np.unique(tris)
+    remap = np.full(len(x), -1, dtype=np.int64)
+    remap[used] = np.arange(len(used))
+    meshio.write(str(path), meshio.Mesh(x[used], [("triangle", remap[tris])]))
+
+
+def _surface_triangles(model: Any, surfaces: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    node_tags, coords, _ = model.mesh.getNodes()
+    x = coords.reshape(-1, 3)
+    index = np.zeros(int(node_tags.max()) + 1, dtype=np.int64)
+    index[node_tags.astype(np.int64)] = np.arange(len(node_tags))
+    tris = []
+    for s in surfaces:
+        _, nodes = model.mesh.getElementsByType(2, s)
+        tris.append(index[nodes.reshape(-1, 3).astype(np.int64)])
+    return x, np.concatenate(tris)

@@ -10,13 +10,47 @@ from typing import Any
 
 import numpy as np
 
-from meshes.tags import CELL_TAGS_NAME, FACET_TAGS_NAME, MESH_NAME, Boundary
+from meshes.exceptions import MeshInputError
+from meshes.tags import CELL_TAGS_NAME, FACET_TAGS_NAME, MESH_NAME, TISSUE, Boundary
+
+__all__ = [
+    "MeshInputError",
+    "add_tagged_mesh",
+    "boundary_facets",
+    "geometry_nodes",
+    "read_mesh",
+    "write_gmsh_model",
+]
 
 log = logging.getLogger(__name__)
 
 
-class MeshInputError(ValueError):
-    """A mesh file is missing, unreadable or lacks what the solver needs."""
+def add_tagged_mesh(
+    model: Any, x: np.ndarray, tets: np.ndarray, facets: dict[Boundary, np.ndarray]
+) -> dict[Boundary, list[int]]:
+    """Put a tagged tetrahedral mesh given as arrays into an empty gmsh model.
+
+    One discrete volume holds the cells and one discrete surface per named
+    boundary its triangles, each with its physical group, so that the model
+    converts to dolfinx exactly like a meshed CAD model.
+
+    Returns:
+        The gmsh surface tag of each boundary that has facets.
+    """
+    volume = model.addDiscreteEntity(3)
+    # dolfinx's gmshio expects node tags 1..N in order
+    model.mesh.addNodes(3, volume, np.arange(1, len(x) + 1), np.asarray(x, dtype=float).ravel())
+    model.mesh.addElementsByType(volume, 4, [], (np.asarray(tets, dtype=np.int64) + 1).ravel())
+    model.addPhysicalGroup(3, [volume], TISSUE, name="tissue")
+    groups: dict[Boundary, list[int]] = {}
+    for boundary, tris in facets.items():
+        if len(tris) == 0:
+            continue
+        surface = model.addDiscreteEntity(2)
+        model.mesh.addElementsByType(surface, 2, [], (np.asarray(tris, dtype=np.int64) + 1).ravel())
+        model.addPhysicalGroup(2, [surface], int(boundary), name=boundary.label)
+        groups[boundary] = [surface]
+    return groups
 
 
 def write_gmsh_model(model: Any, xdmf_path: str | Path) -> None:

@@ -28,9 +28,14 @@ from typing import Any
 
 import numpy as np
 
+from meshes.exceptions import GeometryError
 
-class GeometryError(ValueError):
-    """A geometry parameter is out of range or the parameters are inconsistent."""
+__all__ = ["BreastGeometry", "GeometryError", "build_occ_model", "rib_cage_surface"]
+
+ANATOMICAL_BREAST_VOLUME_ML = (300.0, 1500.0)
+"""Plausible range of the mound (breast) volume, millilitres."""
+ANATOMICAL_MAX_PROJECTION_M = 0.15
+"""Largest plausible projection of the breast from the chest wall, metres."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -60,7 +65,7 @@ class BreastGeometry:
     axilla_angle: float = 80.0
     z_caudal: float = -0.10
     z_cranial: float = 0.12
-    mound_angle: float = 35.0
+    mound_angle: float = 47.5
     mound_z: float = 0.0
     mound_tilt: float = 0.0
     mound_length: float = 0.07
@@ -89,9 +94,7 @@ class BreastGeometry:
                 f"geometry.axilla_angle must lie in [10, 150] degrees, got {self.axilla_angle}"
             )
         if not self.z_caudal < self.mound_z < self.z_cranial:
-            raise GeometryError(
-                "geometry.mound_z must lie strictly between z_caudal and z_cranial"
-            )
+            raise GeometryError("geometry.mound_z must lie strictly between z_caudal and z_cranial")
         if not 0.0 < self.mound_angle < self.axilla_angle:
             raise GeometryError(
                 "geometry.mound_angle must lie strictly between 0 (sternum) and axilla_angle"
@@ -190,6 +193,40 @@ class BreastGeometry:
         """How far the mound tip stands out from the skin layer along its axis."""
         return self.mound_offset + self.mound_length
 
+    @property
+    def mound_tip(self) -> np.ndarray:
+        """The point of the mound farthest out along its axis (the nipple)."""
+        base, axis = self.mound_frame()
+        return base + self.mound_projection * axis
+
+    def rib_distance(self, x: np.ndarray) -> np.ndarray:
+        """Distance of points (N×3) from the rib-cage cylinder (exact, to round-off).
+
+        Unlike :meth:`rib_level_set` this is a true distance far from the surface,
+        which is what a projection from the chest wall needs. The nearest point of
+        the ellipse is found by sampling, then polished by Newton's method on
+        d/dψ |R(ψ) − p|² = 0.
+        """
+        a, b = self.rib_depth, self.rib_half_width
+        p = np.atleast_2d(np.asarray(x, dtype=float))[:, :2] - np.array([a, 0.0])
+        ring = np.linspace(-math.pi, math.pi, 721)
+        # (cos, sin) parametrisation about the centre: R(ψ) = (-a cos ψ, b sin ψ)
+        d2 = (p[:, None, 0] + a * np.cos(ring)) ** 2 + (p[:, None, 1] - b * np.sin(ring)) ** 2
+        psi = ring[np.argmin(d2, axis=1)]
+        for _ in range(8):
+            c, s = np.cos(psi), np.sin(psi)
+            rx, ry = -a * c - p[:, 0], b * s - p[:, 1]
+            g = rx * (a * s) + ry * (b * c)
+            h = (a * s) ** 2 + (b * c) ** 2 + rx * (a * c) + ry * (-b * s)
+            psi = psi - g / np.where(np.abs(h) > 1e-30, h, 1e-30)
+        rx, ry = -a * np.cos(psi) - p[:, 0], b * np.sin(psi) - p[:, 1]
+        return np.hypot(rx, ry)
+
+    @property
+    def projection_from_chest_wall(self) -> float:
+        """Distance of the mound tip from the rib-cage (chest-wall) surface, metres."""
+        return float(self.rib_distance(self.mound_tip[None, :])[0])
+
     def _arc_length(self, psi0: float, psi1: float, n: int = 64) -> float:
         psis = np.linspace(psi0, psi1, n)
         pts = np.array([self.ellipse_point(p, self.layer_thickness) for p in psis])
@@ -216,9 +253,13 @@ def build_occ_model(model: Any, geometry: BreastGeometry) -> int:
     def elliptic_cylinder(semi_x: float, semi_y: float) -> int:
         # gmsh's addEllipse needs r1 >= r2; orient the major axis explicitly.
         if semi_y >= semi_x:
-            curve = occ.addEllipse(a, 0.0, z0 - pad, semi_y, semi_x, zAxis=[0, 0, 1], xAxis=[0, 1, 0])
+            curve = occ.addEllipse(
+                a, 0.0, z0 - pad, semi_y, semi_x, zAxis=[0, 0, 1], xAxis=[0, 1, 0]
+            )
         else:
-            curve = occ.addEllipse(a, 0.0, z0 - pad, semi_x, semi_y, zAxis=[0, 0, 1], xAxis=[1, 0, 0])
+            curve = occ.addEllipse(
+                a, 0.0, z0 - pad, semi_x, semi_y, zAxis=[0, 0, 1], xAxis=[1, 0, 0]
+            )
         loop = occ.addCurveLoop([curve])
         disk = occ.addPlaneSurface([loop])
         out = occ.extrude([(2, disk)], 0, 0, height)
@@ -242,7 +283,9 @@ def build_occ_model(model: Any, geometry: BreastGeometry) -> int:
     base, axis = g.mound_frame()
     centre3 = base + g.mound_offset * axis
     sphere = occ.addSphere(0.0, 0.0, 0.0, 1.0)
-    occ.dilate([(3, sphere)], 0, 0, 0, g.mound_length, g.mound_radius_lateral, g.mound_radius_cranial)
+    occ.dilate(
+        [(3, sphere)], 0, 0, 0, g.mound_length, g.mound_radius_lateral, g.mound_radius_cranial
+    )
     # Rotate the ellipsoid's x axis onto the mound axis (rotation about z).
     angle = math.atan2(axis[1], axis[0])
     occ.rotate([(3, sphere)], 0, 0, 0, 0, 0, 1, angle)
@@ -256,3 +299,37 @@ def build_occ_model(model: Any, geometry: BreastGeometry) -> int:
     if len(volumes) != 1:
         raise GeometryError(f"the breast geometry produced {len(volumes)} volumes, expected one")
     return volumes[0]
+
+
+def rib_cage_surface(
+    geometry: BreastGeometry, margin: float = 0.02, spacing: float = 0.004
+) -> tuple[np.ndarray, np.ndarray]:
+    """Triangulate the rib-cage cylinder over the tissue patch (and ``margin`` beyond it).
+
+    The surface a user would give as the rib rule of an imported model of this
+    geometry ("facets within a distance of this surface"); it is also how the
+    import is tested against the parametric mesh.
+
+    Args:
+        geometry: shape parameters.
+        margin: extension beyond the sternal, axilla, cranial and caudal cuts, metres.
+        spacing: target edge length of the triangulation, metres (its chordal error
+            is about ``spacing**2 / (8 * radius of curvature)``).
+
+    Returns:
+        ``(points (N, 3), triangles (M, 3))``.
+    """
+    g = geometry
+    arc = g._arc_length(0.0, g.axilla_angle)  # on the skin ellipse: an upper bound
+    dpsi = (margin / max(arc, 1e-9)) * g.axilla_angle
+    n_psi = max(8, int(math.ceil((arc + 2 * margin) / spacing)))
+    n_z = max(4, int(math.ceil((g.z_cranial - g.z_caudal + 2 * margin) / spacing)))
+    psis = np.radians(np.linspace(-dpsi, g.axilla_angle + dpsi, n_psi + 1))
+    zs = np.linspace(g.z_caudal - margin, g.z_cranial + margin, n_z + 1)
+    ring = np.stack([g.rib_depth - g.rib_depth * np.cos(psis), g.rib_half_width * np.sin(psis)], 1)
+    points = np.array([[p[0], p[1], z] for z in zs for p in ring])
+    idx = np.arange(len(points)).reshape(len(zs), len(ring))
+    a, b = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel()
+    c, d = idx[1:, :-1].ravel(), idx[1:, 1:].ravel()
+    triangles = np.concatenate([np.stack([a, b, d], 1), np.stack([a, d, c], 1)])
+    return points, triangles

@@ -1,4 +1,4 @@
-"""The parametric geometry: validation, tags, areas and the rib surface."""
+"""The parametric geometry: validation, tags, areas, the rib surface, sizes, order, outputs."""
 
 from __future__ import annotations
 
@@ -7,9 +7,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from meshes.parametric import BreastGeometry, GeometryError
+from meshes.sizing import MeshSize
 from meshes.tags import Boundary
+from tests.conftest import REPO
 
 
 def test_geometry_rejects_bad_values_by_name() -> None:
@@ -26,12 +29,57 @@ def test_mound_may_not_reach_a_cut_plane() -> None:
         BreastGeometry(mound_radius_cranial=0.11)
 
 
+def test_mesh_size_rejects_bad_values_by_name() -> None:
+    with pytest.raises(GeometryError, match="grading"):
+        MeshSize(grading=0.0)
+    with pytest.raises(GeometryError, match="mound_size"):
+        MeshSize(global_size=0.01, mound_size=0.02)
+    with pytest.raises(GeometryError, match="order"):
+        MeshSize(order=3)
+    with pytest.raises(GeometryError, match="unknown mesh.size"):
+        MeshSize.from_mapping({"globl_size": 0.01})
+
+
+def test_config_geometry_is_the_code_default() -> None:
+    # the workflow's default breast and BreastGeometry() (used by tests and tools) must agree
+    config = yaml.safe_load((REPO / "config.yaml").read_text())["mesh"]
+    assert BreastGeometry.from_mapping(config["geometry"]) == BreastGeometry()
+    assert MeshSize.from_mapping(config["size"]) == MeshSize()
+
+
+def test_default_breast_is_anatomically_plausible() -> None:
+    from meshes.build import mound_volume
+
+    g = BreastGeometry()
+    assert 300.0 <= 1e6 * mound_volume(g) <= 1500.0
+    assert g.projection_from_chest_wall <= 0.15
+    # the projection counts the layer: tip to rib = layer + offset + length along the normal
+    assert g.projection_from_chest_wall == pytest.approx(
+        g.layer_thickness + g.mound_projection, rel=0.05
+    )
+
+
+def test_rib_distance_is_exact() -> None:
+    g = BreastGeometry()
+    psi = np.radians(np.linspace(-180, 180, 200001))
+    ring = np.stack([g.rib_depth * (1 - np.cos(psi)), g.rib_half_width * np.sin(psi)], 1)
+    x = np.random.default_rng(0).uniform(-0.15, 0.3, (50, 3))
+    brute = np.sqrt(((x[:, None, :2] - ring[None]) ** 2).sum(axis=2)).min(axis=1)
+    assert np.allclose(g.rib_distance(x), brute, atol=1e-6)
+
+
 def test_all_six_surfaces_are_tagged_and_areas_add_up(coarse_mesh: Path) -> None:
     report = json.loads((coarse_mesh.parent / "quality.json").read_text())
     areas = report["area_m2"]
     assert set(areas) == {b.label for b in Boundary}
     assert all(a > 0 for a in areas.values())
-    assert report["inverted_cells"] == 0
+    assert report["inverted_cells"] == 0 and report["degenerate_cells"] == 0
+    # the six named surfaces cover the boundary exactly: no facet left out, none inside
+    assert report["untagged_exterior_facets"] == 0 and report["tagged_interior_facets"] == 0
+    assert sum(areas.values()) == pytest.approx(report["exterior_area_m2"], rel=1e-12)
+    # and they are the CAD's surfaces: each meshed area within 2 % of the exact one
+    for name, exact in report["cad"]["area_m2"].items():
+        assert areas[name] == pytest.approx(exact, rel=0.02), name
     from meshes.io import read_mesh
 
     mesh, _, facet_tags = read_mesh(coarse_mesh)
@@ -42,6 +90,35 @@ def test_all_six_surfaces_are_tagged_and_areas_add_up(coarse_mesh: Path) -> None
     mesh.topology.create_connectivity(2, 3)
     exterior = exterior_facet_indices(mesh.topology)
     assert np.array_equal(np.sort(facet_tags.indices), np.sort(exterior))
+
+
+def test_quality_report_has_every_field(coarse_mesh: Path) -> None:
+    report = json.loads((coarse_mesh.parent / "quality.json").read_text())
+    for key in (
+        "cells",
+        "vertices",
+        "nodes",
+        "volume_ml",
+        "area_m2",
+        "boundary_area_m2",
+        "min_minSICN",
+        "mean_minSICN",
+        "min_gamma",
+        "mean_gamma",
+        "min_dihedral_deg",
+        "dofs",
+        "mesh_wall_s",
+        "anatomy",
+        "cad",
+        "volume_error_vs_cad",
+    ):
+        assert key in report, key
+    assert 0 < report["min_minSICN"] <= report["mean_minSICN"] <= 1
+    assert 0 < report["min_dihedral_deg"] < 70.53  # the regular tetrahedron's angle bounds the min
+    assert abs(report["volume_error_vs_cad"]) < 0.02
+    # Taylor-Hood P2/P1: 3 (V + E) + V unknowns
+    v, e = report["vertices"], report["edges"]
+    assert report["dofs"]["P2/P1"] == 3 * (v + e) + v
 
 
 def test_every_rib_node_lies_on_the_rib_cage(coarse_mesh: Path) -> None:
@@ -59,3 +136,99 @@ def test_every_rib_node_lies_on_the_rib_cage(coarse_mesh: Path) -> None:
     skin_x = mesh.geometry.x[np.unique(entities_to_geometry(mesh._mesh, 2, skin, False))]
     # the skin is not the rib: most skin nodes lie centimetres away from the rib cage
     assert np.median(BreastGeometry().rib_level_set(skin_x)) > 0.01
+
+
+def test_second_order_mesh_is_curved_onto_the_cad(tmp_path: Path) -> None:
+    from dolfinx.cpp.mesh import entities_to_geometry
+
+    from meshes.build import write_parametric_mesh
+    from meshes.io import read_mesh
+
+    size = MeshSize(global_size=0.03, mound_size=0.02, order=2)
+    report = write_parametric_mesh(BreastGeometry(), size, tmp_path / "mesh.xdmf")
+    assert report["nodes"] > report["vertices"]
+    # curved cells hold the CAD's volume and rib area far better than straight ones
+    assert abs(report["volume_error_vs_cad"]) < 1e-3
+    assert report["curved"]["area_m2"]["rib"] == pytest.approx(
+        report["cad"]["area_m2"]["rib"], rel=1e-4
+    )
+    assert abs(report["volume_m3"] / report["cad"]["volume_m3"] - 1) > abs(
+        report["volume_error_vs_cad"]
+    )
+    mesh, _, facet_tags = read_mesh(tmp_path / "mesh.xdmf")
+    assert mesh.geometry.dofmap.links(0).size == 10
+    rib = facet_tags.indices[facet_tags.values == int(Boundary.RIB)]
+    rib_vertices = np.unique(entities_to_geometry(mesh._mesh, 2, rib, False))
+    on_rib = np.abs(BreastGeometry().rib_level_set(mesh.geometry.x)) < 1e-6
+    assert np.all(on_rib[rib_vertices])
+    # mid-edge nodes sit on the curved rib cage too (not on chords, ~1 mm inside it): a
+    # triangulated surface has about three edges per vertex, so about 4x the nodes
+    assert on_rib.sum() > 3 * rib_vertices.size
+
+
+def test_size_field_refines_the_mound_and_optionally_the_rib(tmp_path: Path) -> None:
+    from meshes.build import gmsh_session, mesh_arrays, mesh_parametric
+    from meshes.quality import tet_volumes
+
+    g = BreastGeometry()
+    tip = g.mound_tip
+
+    def edge_lengths(size: MeshSize) -> tuple[float, float, float]:
+        with gmsh_session() as model:
+            groups = mesh_parametric(model, g, size)
+            x, tets, facets = mesh_arrays(model, groups)
+        h = np.cbrt(
+            6 * np.sqrt(2) * np.abs(tet_volumes(x, tets))
+        )  # edge of the equal-volume regular tet
+        centre = x[tets].mean(axis=1)
+        near_tip = np.linalg.norm(centre - tip, axis=1) < 0.03
+        far = np.abs(centre[:, 2] - g.z_cranial) < 0.03
+        rib_nodes = np.unique(facets[Boundary.RIB])
+        on_rib = np.isin(tets, rib_nodes).sum(axis=1) >= 3
+        return (
+            float(np.median(h[near_tip])),
+            float(np.median(h[far])),
+            float(np.median(h[on_rib & far])),
+        )
+
+    uniform = edge_lengths(MeshSize(global_size=0.03, mound_size=0.03))
+    mound = edge_lengths(MeshSize(global_size=0.03, mound_size=0.012))
+    rib = edge_lengths(MeshSize(global_size=0.03, mound_size=0.012, rib_size=0.008))
+    assert mound[0] < 0.6 * uniform[0]  # finer at the tip ...
+    assert mound[1] == pytest.approx(uniform[1], rel=0.15)  # ... not far from it
+    assert rib[2] < 0.6 * mound[2]  # rib_size refines the chest wall far from the mound too
+
+
+def test_png_shows_the_named_surfaces(tmp_path: Path) -> None:
+    from meshes.config import MeshConfig, make_mesh
+
+    config = MeshConfig.from_mapping(
+        {"source": "parametric", "size": {"global_size": 0.03, "mound_size": 0.02}}
+    )
+    paths = [tmp_path / n for n in ("mesh.xdmf", "quality.json", "mesh.png")]
+    report = make_mesh(config, *paths)
+    png = paths[2].read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 50_000
+    assert json.loads(paths[1].read_text())["cells"] == report["cells"]
+    # the picture carries all six surface colours (the legend alone has each one once)
+    import matplotlib.image
+
+    from meshes.plot import COLOURS
+
+    pixels = (matplotlib.image.imread(paths[2])[..., :3] * 255).round().astype(int).reshape(-1, 3)
+    for boundary, colour in COLOURS.items():
+        rgb = np.array([int(colour[i : i + 2], 16) for i in (1, 3, 5)])
+        assert np.any(np.all(np.abs(pixels - rgb) <= 2, axis=1)), boundary
+
+
+def test_mesh_config_rejects_unknown_keys_and_missing_file() -> None:
+    from meshes.config import MeshConfig
+
+    with pytest.raises(GeometryError, match="unknown mesh key"):
+        MeshConfig.from_mapping({"source": "parametric", "sizes": {}})
+    with pytest.raises(GeometryError, match="mesh.file is missing"):
+        MeshConfig.from_mapping({"source": "file"})
+    assert (
+        MeshConfig.from_mapping({"source": "parametric", "fixed": {"rib": "all"}}).input_files()
+        == []
+    )

@@ -1,18 +1,14 @@
-"""Snakemake adapter: build the tagged breast mesh and its quality report."""
+"""Snakemake adapter: build (or import) the tagged breast mesh, its quality report and picture."""
 
-import json
 import logging
 
-from meshes.build import MeshSize, write_parametric_mesh
-from meshes.parametric import BreastGeometry
+from meshes.config import MeshConfig, make_mesh
 
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
 
-cfg = snakemake.params.mesh
-report = write_parametric_mesh(
-    BreastGeometry.from_mapping(cfg.get("geometry", {})),
-    MeshSize(**cfg.get("size", {})),
+make_mesh(
+    MeshConfig.from_mapping(snakemake.params.mesh),
     snakemake.output.xdmf,
+    snakemake.output.quality,
+    snakemake.output.png,
 )
-with open(snakemake.output.quality, "w") as fh:
-    json.dump(report, fh, indent=2)

@@ -1,0 +1,91 @@
+"""The ``mesh`` config section as one validated object, and the stage that acts on it."""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from meshes.exceptions import GeometryError
+from meshes.importing import ImportSpec, write_imported_mesh
+from meshes.parametric import BreastGeometry
+from meshes.sizing import MeshSize
+
+log = logging.getLogger(__name__)
+
+SOURCES = ("parametric", "file")
+
+
+@dataclass(frozen=True, slots=True)
+class MeshConfig:
+    """Where the geometry comes from and how it is meshed.
+
+    Attributes:
+        source: ``parametric`` (the OCC breast of :class:`BreastGeometry`) or ``file``
+            (a user's surface or volume mesh, :class:`ImportSpec`).
+        geometry: parameters of the parametric breast (ignored for ``file``).
+        size: element sizes and order.
+        file: what to import (required for ``file``).
+    """
+
+    source: str = "parametric"
+    geometry: BreastGeometry = field(default_factory=BreastGeometry)
+    size: MeshSize = field(default_factory=MeshSize)
+    file: ImportSpec | None = None
+
+    def __post_init__(self) -> None:
+        if self.source not in SOURCES:
+            raise GeometryError(f"mesh.source must be one of {SOURCES}, got {self.source!r}")
+        if self.source == "file" and self.file is None:
+            raise GeometryError("mesh.source is 'file' but mesh.file is missing")
+
+    @classmethod
+    def from_mapping(cls, values: dict[str, Any]) -> MeshConfig:
+        """Build from the ``mesh`` config mapping.
+
+        ``mesh.fixed`` is the solver's (``fem.parameters.FixedBoundaries``) and is not
+        read here; any other unknown key is rejected by name.
+        """
+        known = {"source", "geometry", "size", "file", "fixed"}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise GeometryError(f"unknown mesh key(s): {', '.join(unknown)}")
+        source = values.get("source", "parametric")
+        file_values = values.get("file")
+        return cls(
+            source=source,
+            geometry=BreastGeometry.from_mapping(values.get("geometry") or {}),
+            size=MeshSize.from_mapping(values.get("size") or {}),
+            # the file section may stay in the config while the parametric source is used
+            file=ImportSpec.from_mapping(file_values) if file_values and source == "file" else None,
+        )
+
+    def input_files(self) -> list[str]:
+        """Files the mesh is built from (none for the parametric source)."""
+        return self.file.input_files() if self.source == "file" and self.file else []
+
+
+def make_mesh(
+    config: MeshConfig, xdmf_path: str | Path, quality_path: str | Path, png_path: str | Path
+) -> dict[str, Any]:
+    """Build (or import) the tagged mesh; write XDMF, the quality JSON and the PNG.
+
+    Returns:
+        The quality report that was written.
+    """
+    if config.source == "parametric":
+        from meshes.build import write_parametric_mesh
+
+        report = write_parametric_mesh(config.geometry, config.size, xdmf_path, png_path)
+    else:
+        assert config.file is not None  # __post_init__ guarantees it
+        report = write_imported_mesh(config.file, config.size, xdmf_path, png_path)
+    target = Path(quality_path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")  # renamed into place
+    tmp.write_text(json.dumps(report, indent=2))
+    os.replace(tmp, target)
+    return report

@@ -1,0 +1,41 @@
+"""Typed errors of the geometry and meshing stage.
+
+Every error names the problem in words a user can act on (which file, which
+check, how many facets or elements, what to change in the config). Callers that
+only care that *some* input was bad catch :class:`MeshInputError`; tests and
+tools that react to one kind catch the subclass.
+"""
+
+from __future__ import annotations
+
+
+class GeometryError(ValueError):
+    """A geometry or meshing parameter is out of range or the parameters are inconsistent."""
+
+
+class MeshInputError(ValueError):
+    """A mesh or surface file is missing, unreadable or lacks what the solver needs."""
+
+
+class UnitsError(MeshInputError):
+    """The model's size is implausible for a breast in the declared units (e.g. mm read as m)."""
+
+
+class SurfaceNotClosedError(MeshInputError):
+    """A surface has holes (edges with one triangle) or non-manifold edges (three or more)."""
+
+
+class SelfIntersectionError(MeshInputError):
+    """Triangles of a surface cross each other."""
+
+
+class InvalidElementsError(MeshInputError):
+    """Elements are degenerate (zero volume or area) or inverted (opposite orientation)."""
+
+
+class NoRibFacetsError(MeshInputError):
+    """The rule that selects the rib (fixed chest-wall) surface matched no boundary facet."""
+
+
+class SurfaceRuleError(MeshInputError):
+    """A boundary rule is inconsistent with the input (unknown group, facets matched twice)."""

@@ -1,0 +1,391 @@
+"""Importing a person's geometry: surfaces and volume meshes, boundary rules, broken input.
+
+Inputs are generated in the test (gmsh boxes, the parametric breast's own surface),
+so every file is small and its exact volume and areas are known.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import meshio
+import numpy as np
+import pytest
+import yaml
+
+from meshes.build import MeshSize, gmsh_session, write_parametric_mesh, write_parametric_surface
+from meshes.exceptions import (
+    GeometryError,
+    InvalidElementsError,
+    MeshInputError,
+    NoRibFacetsError,
+    SelfIntersectionError,
+    SurfaceNotClosedError,
+    SurfaceRuleError,
+    UnitsError,
+)
+from meshes.importing import ImportSpec, write_imported_mesh
+from meshes.parametric import BreastGeometry, rib_cage_surface
+from meshes.tags import Boundary
+from tests.conftest import REPO
+
+BOX = (0.05, 0.2, 0.15)  # a slab of tissue: 5 cm deep (x), 20 cm wide (y), 15 cm tall (z)
+SIZE = MeshSize(global_size=0.03, mound_size=0.02)
+RIB_PLANE = {"plane": {"point": [0.0, 0.0, 0.0], "normal": [1.0, 0.0, 0.0]}, "distance": 0.001}
+
+
+def box_mesh(dim: int) -> tuple[np.ndarray, np.ndarray]:
+    """The BOX meshed by gmsh: its surface triangles (dim 2) or its tetrahedra (dim 3)."""
+    from meshes.build import mesh_arrays
+
+    with gmsh_session("box") as model:
+        model.occ.addBox(0, 0, 0, *BOX)
+        model.occ.synchronize()
+        import gmsh
+
+        gmsh.option.setNumber("Mesh.MeshSizeMax", 0.025)
+        model.mesh.generate(dim)
+        if dim == 3:
+            x, tets, _ = mesh_arrays(model, {})
+            return x, tets
+        node_tags, coords, _ = model.mesh.getNodes()
+        _, nodes = model.mesh.getElementsByType(2)
+        index = np.zeros(int(node_tags.max()) + 1, dtype=np.int64)
+        index[node_tags.astype(np.int64)] = np.arange(len(node_tags))
+        return coords.reshape(-1, 3), index[nodes.reshape(-1, 3).astype(np.int64)]
+
+
+def write_surface(path: Path, x: np.ndarray, tris: np.ndarray) -> Path:
+    meshio.write(str(path), meshio.Mesh(x, [("triangle", tris)]))
+    return path
+
+
+def write_volume(path: Path, x: np.ndarray, tets: np.ndarray) -> Path:
+    meshio.write(str(path), meshio.Mesh(x, [("tetra", tets)]))
+    return path
+
+
+def spec(path: Path, units: str = "m", **surfaces: dict) -> ImportSpec:
+    return ImportSpec.from_mapping(
+        {"path": str(path), "units": units, "surfaces": surfaces or {"rib": RIB_PLANE}}
+    )
+
+
+# -- the acceptance test of the issue ------------------------------------------------------
+
+
+@pytest.mark.parametrize("remesh", [False, True])
+def test_stl_of_default_geometry_gives_same_volume_and_rib_area(
+    tmp_path: Path, remesh: bool
+) -> None:
+    """An STL of the default breast's outer surface reproduces the parametric mesh.
+
+    With the rib rule, the volume agrees within 1 % and the rib area within 2 %.
+    """
+    geometry = BreastGeometry()
+    reference = write_parametric_mesh(geometry, MeshSize(), tmp_path / "parametric.xdmf")
+    # a scan of the same breast, triangulated differently from the reference mesh
+    stl = tmp_path / "breast.stl"
+    write_parametric_surface(geometry, MeshSize(global_size=0.012, mound_size=0.008), stl)
+    ribcage = write_surface(tmp_path / "ribcage.stl", *rib_cage_surface(geometry))
+    rules = {"rib": {"surface": str(ribcage), "distance": 0.0005}}
+    imported = write_imported_mesh(
+        ImportSpec.from_mapping({"path": str(stl), "surfaces": rules, "remesh": remesh}),
+        MeshSize(),
+        tmp_path / "imported.xdmf",
+    )
+    assert imported["volume_m3"] == pytest.approx(reference["volume_m3"], rel=0.01)
+    assert imported["area_m2"]["rib"] == pytest.approx(reference["area_m2"]["rib"], rel=0.02)
+    assert imported["inverted_cells"] == 0 and imported["untagged_exterior_facets"] == 0
+    # only rib and skin are named: the four cuts are skin unless a rule names them
+    assert imported["area_m2"]["rib"] + imported["area_m2"]["skin"] == pytest.approx(
+        imported["exterior_area_m2"]
+    )
+    # and the solver accepts it: rib facets present, every rib node on the rib cage
+    from dolfinx.cpp.mesh import entities_to_geometry
+
+    from meshes.io import read_mesh
+
+    mesh, _, facet_tags = read_mesh(tmp_path / "imported.xdmf")
+    rib = facet_tags.indices[facet_tags.values == int(Boundary.RIB)]
+    x = mesh.geometry.x[np.unique(entities_to_geometry(mesh._mesh, 2, rib, False))]
+    assert np.max(np.abs(geometry.rib_level_set(x))) < 0.0005
+
+
+# -- rules ---------------------------------------------------------------------------------
+
+
+def test_plane_rules_name_the_box_faces(tmp_path: Path) -> None:
+    stl = write_surface(tmp_path / "box.stl", *box_mesh(2))
+    top = {"plane": {"point": [0, 0, BOX[2]], "normal": [0, 0, 1]}, "distance": 0.001}
+    report = write_imported_mesh(
+        spec(stl, rib=RIB_PLANE, cranial=top), SIZE, tmp_path / "m.xdmf", tmp_path / "m.png"
+    )
+    areas = report["area_m2"]
+    assert areas["rib"] == pytest.approx(BOX[1] * BOX[2], rel=1e-9)
+    assert areas["cranial"] == pytest.approx(BOX[0] * BOX[1], rel=1e-9)
+    total = 2 * (BOX[0] * BOX[1] + BOX[1] * BOX[2] + BOX[0] * BOX[2])
+    assert areas["skin"] == pytest.approx(total - areas["rib"] - areas["cranial"], rel=1e-9)
+    assert report["volume_m3"] == pytest.approx(np.prod(BOX), rel=1e-9)
+    assert (tmp_path / "m.png").stat().st_size > 20_000
+
+
+def test_units_are_converted(tmp_path: Path) -> None:
+    x, tris = box_mesh(2)
+    stl = write_surface(tmp_path / "box_mm.stl", 1000.0 * x, tris)
+    rib = {"plane": {"point": [0, 0, 0], "normal": [1, 0, 0]}, "distance": 1.0}  # 1 mm
+    report = write_imported_mesh(spec(stl, "mm", rib=rib), SIZE, tmp_path / "m.xdmf")
+    assert report["volume_m3"] == pytest.approx(np.prod(BOX), rel=1e-9)
+
+
+def test_group_rule_on_a_gmsh_volume_mesh(tmp_path: Path) -> None:
+    import gmsh
+
+    path = tmp_path / "box.msh"
+    with gmsh_session("box") as model:
+        box = model.occ.addBox(0, 0, 0, *BOX)
+        model.occ.synchronize()
+        faces = {tag: model.occ.getCenterOfMass(2, tag) for _, tag in model.getEntities(2)}
+        back = next(t for t, c in faces.items() if abs(c[0]) < 1e-9)
+        top = next(t for t, c in faces.items() if abs(c[2] - BOX[2]) < 1e-9)
+        model.addPhysicalGroup(3, [box], 1, name="tissue")
+        model.addPhysicalGroup(2, [back], 7, name="chest_wall")
+        model.addPhysicalGroup(2, [top], 8, name="top")
+        gmsh.option.setNumber("Mesh.MeshSizeMax", 0.025)
+        model.mesh.generate(3)
+        gmsh.write(str(path))
+    report = write_imported_mesh(
+        spec(path, rib={"group": "chest_wall"}, cranial={"group": 8}), SIZE, tmp_path / "m.xdmf"
+    )
+    assert report["area_m2"]["rib"] == pytest.approx(BOX[1] * BOX[2], rel=1e-9)
+    assert report["area_m2"]["cranial"] == pytest.approx(BOX[0] * BOX[1], rel=1e-9)
+    assert report["input"]["kind"] == "volume mesh"
+    with pytest.raises(SurfaceRuleError, match="groups are: chest_wall, .*top"):
+        write_imported_mesh(spec(path, rib={"group": "ribs"}), SIZE, tmp_path / "bad.xdmf")
+
+
+@pytest.mark.parametrize("suffix", [".vtu", ".xdmf"])
+def test_volume_mesh_formats(tmp_path: Path, suffix: str) -> None:
+    path = write_volume(tmp_path / f"box{suffix}", *box_mesh(3))
+    report = write_imported_mesh(spec(path), SIZE, tmp_path / "m.xdmf")
+    assert report["volume_m3"] == pytest.approx(np.prod(BOX), rel=1e-9)
+    assert report["area_m2"]["rib"] == pytest.approx(BOX[1] * BOX[2], rel=1e-9)
+
+
+def test_rules_that_overlap_are_refused(tmp_path: Path) -> None:
+    stl = write_surface(tmp_path / "box.stl", *box_mesh(2))
+    wide = {"plane": {"point": [0.01, 0, 0], "normal": [1, 0, 0]}, "distance": 0.02}
+    with pytest.raises(SurfaceRuleError, match="match both the rib and the sternal rules"):
+        write_imported_mesh(spec(stl, rib=RIB_PLANE, sternal=wide), SIZE, tmp_path / "m.xdmf")
+
+
+# -- broken input: one test per kind ---------------------------------------------------------
+
+
+def test_surface_not_closed(tmp_path: Path) -> None:
+    x, tris = box_mesh(2)
+    stl = write_surface(tmp_path / "open.stl", x, tris[2:])  # two triangles missing: a hole
+    with pytest.raises(
+        SurfaceNotClosedError, match=r"not a closed surface: \d+ edge\(s\) belong to one triangle"
+    ):
+        write_imported_mesh(spec(stl), SIZE, tmp_path / "m.xdmf")
+    assert not (tmp_path / "m.xdmf").exists()
+
+
+def test_surface_not_manifold(tmp_path: Path) -> None:
+    x, tris = box_mesh(2)
+    # a fin glued to one edge of the box: that edge now has three triangles
+    a, b = tris[0][:2]
+    fin = np.vstack([x, [[-0.05, 0.1, 0.07]]])
+    stl = write_surface(tmp_path / "fin.stl", fin, np.vstack([tris, [[a, b, len(x)]]]))
+    with pytest.raises(SurfaceNotClosedError, match="three or more triangles"):
+        write_imported_mesh(spec(stl), SIZE, tmp_path / "m.xdmf")
+
+
+def test_surface_self_intersecting(tmp_path: Path) -> None:
+    x, tris = box_mesh(2)
+    # two overlapping copies of the box: each closed, together crossing each other
+    shifted = x + np.array([0.02, 0.05, 0.04])
+    both = write_surface(
+        tmp_path / "two.stl", np.vstack([x, shifted]), np.vstack([tris, tris + len(x)])
+    )
+    with pytest.raises(
+        SelfIntersectionError, match=r"intersects itself: \d+ pair\(s\) of triangles cross"
+    ):
+        write_imported_mesh(spec(both), SIZE, tmp_path / "m.xdmf")
+
+
+def test_wrong_units_millimetres_read_as_metres(tmp_path: Path) -> None:
+    x, tris = box_mesh(2)
+    stl = write_surface(tmp_path / "box_mm.stl", 1000.0 * x, tris)
+    with pytest.raises(
+        UnitsError,
+        match=r"is 255 m across .* probably in other units.*0.255 m across: "
+        r"set mesh.file.units: mm",
+    ):
+        write_imported_mesh(spec(stl, "m"), SIZE, tmp_path / "m.xdmf")
+
+
+def test_wrong_units_metres_read_as_centimetres(tmp_path: Path) -> None:
+    stl = write_surface(tmp_path / "box.stl", *box_mesh(2))
+    with pytest.raises(UnitsError, match="units: m"):
+        write_imported_mesh(
+            spec(stl, "cm", rib={"plane": RIB_PLANE["plane"]}), SIZE, tmp_path / "m.xdmf"
+        )
+
+
+def test_no_rib_facets_found(tmp_path: Path) -> None:
+    stl = write_surface(tmp_path / "box.stl", *box_mesh(2))
+    far = {"plane": {"point": [-0.1, 0, 0], "normal": [1, 0, 0]}, "distance": 0.001}
+    with pytest.raises(
+        NoRibFacetsError,
+        match="no boundary facets found for the rib surface.*closest facet lies 100 mm",
+    ):
+        write_imported_mesh(spec(stl, rib=far), SIZE, tmp_path / "m.xdmf")
+    # a surface rule far from the model cannot even measure how far: it says so
+    points, triangles = rib_cage_surface(BreastGeometry())
+    rib_far = write_surface(tmp_path / "far.stl", points + [0.5, 0.0, 0.0], triangles)
+    with pytest.raises(NoRibFacetsError, match="no facet comes within 10 mm"):
+        write_imported_mesh(
+            spec(stl, rib={"surface": str(rib_far), "distance": 0.001}), SIZE, tmp_path / "m.xdmf"
+        )
+    # a group rule on a file without groups
+    with pytest.raises(SurfaceRuleError, match="has no boundary groups"):
+        write_imported_mesh(spec(stl, rib={"group": "rib"}), SIZE, tmp_path / "m.xdmf")
+
+
+def test_inverted_elements(tmp_path: Path) -> None:
+    x, tets = box_mesh(3)
+    tets = tets.copy()
+    tets[[3, 17]] = tets[[3, 17]][:, [1, 0, 2, 3]]  # two cells turned inside out
+    path = write_volume(tmp_path / "inverted.vtu", x, tets)
+    with pytest.raises(InvalidElementsError, match=r"2 inverted tetrahedra .* the first \(#3\)"):
+        write_imported_mesh(spec(path), SIZE, tmp_path / "m.xdmf")
+
+
+def test_degenerate_elements(tmp_path: Path) -> None:
+    x, tets = box_mesh(3)
+    tets = tets.copy()
+    tets[5, 3] = tets[5, 2]  # a cell with a repeated vertex: zero volume
+    path = write_volume(tmp_path / "flat.vtu", x, tets)
+    with pytest.raises(InvalidElementsError, match=r"1 degenerate \(zero-volume\) tetrahedra"):
+        write_imported_mesh(spec(path), SIZE, tmp_path / "m.xdmf")
+
+
+def test_degenerate_surface_triangles() -> None:
+    from meshes.checks import check_triangles
+
+    x = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [2, 0, 0.0]])
+    check_triangles(x, np.array([[0, 1, 2]]), "ok")
+    with pytest.raises(InvalidElementsError, match="1 degenerate \\(zero-area\\) triangle"):
+        check_triangles(x, np.array([[0, 1, 2], [0, 1, 3]]), "collinear")
+
+
+def test_unreadable_or_unsupported_input(tmp_path: Path) -> None:
+    with pytest.raises(MeshInputError, match="unsupported file type '.step'"):
+        spec(tmp_path / "breast.step")
+    with pytest.raises(MeshInputError, match="does not exist"):
+        write_imported_mesh(spec(tmp_path / "missing.stl"), SIZE, tmp_path / "m.xdmf")
+    garbage = tmp_path / "garbage.stl"
+    garbage.write_bytes(b"solid nothing\n  facet normal oops\n")
+    with pytest.raises(MeshInputError, match="cannot read"):
+        write_imported_mesh(spec(garbage), SIZE, tmp_path / "m.xdmf")
+    with pytest.raises(GeometryError, match="order 2"):
+        write_imported_mesh(spec(garbage), MeshSize(order=2), tmp_path / "m.xdmf")
+    with pytest.raises(GeometryError, match="rule for the rib"):
+        ImportSpec.from_mapping({"path": "a.stl", "surfaces": {"cranial": RIB_PLANE}})
+
+
+# -- the checks as functions -----------------------------------------------------------------
+
+
+def test_self_intersections_finds_exactly_the_crossing_pair() -> None:
+    from meshes.checks import self_intersections
+
+    x = np.array(
+        [
+            [0, 0, 0],
+            [1, 0, 0],
+            [0, 1, 0],  # triangle 0 in z = 0
+            [0.2, 0.2, -0.5],
+            [0.3, 0.2, 0.5],
+            [0.2, 0.3, 0.5],  # triangle 1 pierces it
+            [5, 5, 5],
+            [6, 5, 5],
+            [5, 6, 5],  # triangle 2 far away
+            [1, 0, 0],
+            [2, 0, 0],
+            [1, 1, 0.0],  # triangle 3 touches 0 at a shared corner only
+        ],
+        dtype=float,
+    )
+    tris = np.arange(12).reshape(4, 3)
+    tris[3, 0] = 1  # shares vertex 1 with triangle 0
+    assert self_intersections(x, tris).tolist() == [[0, 1]]
+
+
+def test_closed_surfaces_pass_every_check(tmp_path: Path) -> None:
+    from meshes.checks import check_closed, check_no_self_intersections
+
+    stl = tmp_path / "breast.stl"
+    write_parametric_surface(BreastGeometry(), SIZE, stl)
+    surface = meshio.read(str(stl))
+    from meshes.checks import merge_duplicate_points
+
+    x, tris = merge_duplicate_points(surface.points, surface.cells_dict["triangle"], 1e-10)
+    check_closed(x, tris, "the breast")
+    check_no_self_intersections(x, tris, "the breast")
+
+
+# -- the workflow's mesh rule with an imported file -----------------------------------------
+
+
+def file_config(**file_section: object) -> dict:
+    config = yaml.safe_load((REPO / "tests" / "config.yaml").read_text())
+    config["mesh"]["source"] = "file"
+    config["mesh"]["file"] = {
+        "path": "box.stl",
+        "units": "m",
+        "surfaces": {"rib": RIB_PLANE},
+        **file_section,
+    }
+    return config
+
+
+def test_schema_accepts_a_file_source_and_rejects_a_missing_rib_rule() -> None:
+    import jsonschema
+
+    schema = yaml.safe_load((REPO / "workflow/schemas/config.schema.yaml").read_text())
+    validator = jsonschema.Draft7Validator(schema)
+    assert list(validator.iter_errors(file_config())) == []
+    no_rib = file_config(surfaces={"cranial": {"group": "top"}})
+    assert any("'rib' is a required property" in e.message for e in validator.iter_errors(no_rib))
+    bad_units = file_config(units="inch")
+    assert any(list(e.absolute_path)[-1] == "units" for e in validator.iter_errors(bad_units))
+
+
+def test_mesh_rule_depends_on_the_imported_file(tmp_path: Path) -> None:
+    write_surface(tmp_path / "box.stl", *box_mesh(2))
+    path = tmp_path / "file.yaml"
+    path.write_text(yaml.safe_dump(file_config()))
+    cmd = [
+        sys.executable,
+        "-m",
+        "snakemake",
+        "-s",
+        str(REPO / "Snakefile"),
+        "-d",
+        str(tmp_path),
+        "--configfile",
+        str(path),
+        "-j1",
+        "-n",
+        "results/mesh/mesh.xdmf",
+    ]
+    run = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp_path)
+    assert run.returncode == 0, run.stderr[-3000:]
+    plan = run.stdout + run.stderr
+    # the file is the rule's input (editing it rebuilds the mesh); the PNG is an output
+    assert "input: box.stl" in plan and "results/mesh/mesh.png" in plan
