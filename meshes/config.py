@@ -13,6 +13,7 @@ from meshes.exceptions import GeometryError
 from meshes.importing import ImportSpec, write_imported_mesh
 from meshes.parametric import BreastGeometry
 from meshes.sizing import MeshSize
+from meshes.tags import Boundary
 
 log = logging.getLogger(__name__)
 
@@ -55,13 +56,29 @@ class MeshConfig:
             raise GeometryError(f"unknown mesh key(s): {', '.join(unknown)}")
         source = values.get("source", "parametric")
         file_values = values.get("file")
-        return cls(
+        config = cls(
             source=source,
             geometry=BreastGeometry.from_mapping(values.get("geometry") or {}),
             size=MeshSize.from_mapping(values.get("size") or {}),
             # the file section may stay in the config while the parametric source is used
             file=ImportSpec.from_mapping(file_values) if file_values and source == "file" else None,
         )
+        if config.file is not None:
+            # An imported mesh names only the surfaces its rules select (the rest is skin):
+            # clamping a surface no rule names would fail in every solve, so stop here.
+            unnamed = [
+                name
+                for name, spec in (values.get("fixed") or {}).items()
+                if spec != "none"
+                and Boundary.from_label(name) not in config.file.surfaces
+                and Boundary.from_label(name) != Boundary.SKIN
+            ]
+            if unnamed:
+                raise GeometryError(
+                    f"mesh.fixed clamps {', '.join(unnamed)}, but mesh.file.surfaces has no rule "
+                    "that names it: add a rule (group, plane or surface) for it"
+                )
+        return config
 
     def input_files(self) -> list[str]:
         """Files the mesh is built from (none for the parametric source)."""

@@ -234,7 +234,11 @@ def read_input(path: str | Path, units: str) -> InputMesh:
         raise MeshInputError(f"mesh file {path} does not exist")
     try:
         mesh = meshio.read(str(path))
-    except Exception as err:  # meshio raises many types; all mean "cannot read this file"
+    # meshio raises many types (and its XDMF reader calls sys.exit): all mean "cannot read"
+    except (Exception, SystemExit) as err:
+        if path.suffix.lower() == ".xdmf":
+            # meshio reads single-grid XDMF only; dolfinx writes mesh and tags as several
+            return _read_dolfinx_xdmf(path, units, err)
         raise MeshInputError(f"cannot read {path}: {type(err).__name__}: {err}") from err
     scale = UNITS[units]
     points = np.asarray(mesh.points, dtype=float)[:, :3] * scale
@@ -271,6 +275,47 @@ def read_input(path: str | Path, units: str) -> InputMesh:
         triangles=np.concatenate(tris) if tris else np.empty((0, 3), dtype=np.int64),
         triangle_groups=np.concatenate(groups) if groups else np.empty(0, dtype=np.int64),
         group_names=names,
+    )
+
+
+def _read_dolfinx_xdmf(path: Path, units: str, meshio_error: Exception) -> InputMesh:
+    """Read an XDMF file as dolfinx writes it (this project's mesh.xdmf, for instance).
+
+    The facet tags become groups, named after :class:`Boundary` (their values).
+    """
+    from dolfinx.cpp.mesh import entities_to_geometry
+    from dolfinx.io import XDMFFile
+    from mpi4py import MPI
+
+    from meshes.io import geometry_nodes
+    from meshes.tags import FACET_TAGS_NAME, MESH_NAME
+
+    try:
+        with XDMFFile(MPI.COMM_SELF, str(path), "r") as xdmf:
+            mesh = xdmf.read_mesh(name=MESH_NAME)
+            mesh.topology.create_connectivity(2, 3)
+            try:
+                tags = xdmf.read_meshtags(mesh, name=FACET_TAGS_NAME)
+            except RuntimeError:
+                tags = None
+    except RuntimeError as err:
+        raise MeshInputError(
+            f"cannot read {path}: meshio reads single-grid XDMF only ({meshio_error}) and dolfinx "
+            f"found no mesh named {MESH_NAME!r} in it ({err})"
+        ) from err
+    if mesh.topology.cell_name() != "tetrahedron":
+        raise MeshInputError(f"{path} holds {mesh.topology.cell_name()} cells, not tetrahedra")
+    if tags is not None and len(tags.indices):
+        triangles = entities_to_geometry(mesh._mesh, 2, tags.indices, False).astype(np.int64)
+        groups = tags.values.astype(np.int64)
+    else:
+        triangles, groups = np.empty((0, 3), dtype=np.int64), np.empty(0, dtype=np.int64)
+    return InputMesh(
+        points=np.asarray(mesh.geometry.x, dtype=float) * UNITS[units],
+        tets=geometry_nodes(mesh)[:, :4].astype(np.int64),  # vertices only
+        triangles=triangles,
+        triangle_groups=groups,
+        group_names={b.label: int(b) for b in Boundary},
     )
 
 
@@ -492,6 +537,21 @@ def prepare_input(
     return x, tets, facets, info
 
 
+def imported_anatomy(x: np.ndarray, facets: dict[Boundary, np.ndarray]) -> dict[str, Any]:
+    """Projection of an imported model from its chest wall (the rib facets)."""
+    from scipy.spatial import cKDTree
+
+    rib_vertices = np.unique(facets[Boundary.RIB])
+    distance, _ = cKDTree(x[rib_vertices]).query(x)
+    return {
+        "projection_from_chest_wall_m": float(distance.max()),
+        "projection_definition": (
+            "largest distance of a mesh node from the nearest vertex of a rib facet (an upper "
+            "bound of the distance from the rib surface, by at most the rib facets' size)"
+        ),
+    }
+
+
 def write_imported_mesh(
     spec: ImportSpec,
     size: MeshSize,
@@ -524,6 +584,7 @@ def write_imported_mesh(
         write_gmsh_model(model, xdmf_path)
     report["source"] = "file"
     report["input"] = info
+    report["anatomy"] = imported_anatomy(x, facets)
     report["size"] = size.as_dict()
     report["mesh_wall_s"] = mesh_s
     if png_path is not None:

@@ -6,6 +6,7 @@ so every file is small and its exact volume and areas are known.
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -129,6 +130,8 @@ def test_plane_rules_name_the_box_faces(tmp_path: Path) -> None:
     total = 2 * (BOX[0] * BOX[1] + BOX[1] * BOX[2] + BOX[0] * BOX[2])
     assert areas["skin"] == pytest.approx(total - areas["rib"] - areas["cranial"], rel=1e-9)
     assert report["volume_m3"] == pytest.approx(np.prod(BOX), rel=1e-9)
+    # the projection from the chest wall is the slab's depth (the rib is the x = 0 face)
+    assert report["anatomy"]["projection_from_chest_wall_m"] == pytest.approx(BOX[0], rel=0.05)
     assert (tmp_path / "m.png").stat().st_size > 20_000
 
 
@@ -389,3 +392,29 @@ def test_mesh_rule_depends_on_the_imported_file(tmp_path: Path) -> None:
     plan = run.stdout + run.stderr
     # the file is the rule's input (editing it rebuilds the mesh); the PNG is an output
     assert "input: box.stl" in plan and "results/mesh/mesh.png" in plan
+
+
+def test_clamping_a_surface_no_rule_names_is_refused() -> None:
+    from meshes.config import MeshConfig
+
+    config = file_config()["mesh"]
+    config["fixed"] = {"rib": "all", "cranial": ["z"]}
+    with pytest.raises(GeometryError, match="mesh.fixed clamps cranial, but mesh.file.surfaces"):
+        MeshConfig.from_mapping(config)
+    config["file"]["surfaces"]["cranial"] = {"group": "top"}
+    assert MeshConfig.from_mapping(config).input_files() == ["box.stl"]
+
+
+def test_a_dolfinx_xdmf_mesh_round_trips_with_its_tags(coarse_mesh: Path, tmp_path: Path) -> None:
+    """This project's own mesh.xdmf (several grids, which meshio cannot read) imports with
+    its facet tags as groups: every area is kept."""
+    original = json.loads((coarse_mesh.parent / "quality.json").read_text())
+    rules = {b.label: {"group": b.label} for b in Boundary if b != Boundary.SKIN}
+    report = write_imported_mesh(
+        ImportSpec.from_mapping({"path": str(coarse_mesh), "surfaces": rules}),
+        SIZE,
+        tmp_path / "m.xdmf",
+    )
+    assert report["cells"] == original["cells"]
+    for name, area in original["area_m2"].items():
+        assert report["area_m2"][name] == pytest.approx(area, rel=1e-12), name
