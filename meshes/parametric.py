@@ -65,7 +65,7 @@ class BreastGeometry:
     axilla_angle: float = 80.0
     z_caudal: float = -0.10
     z_cranial: float = 0.12
-    mound_angle: float = 47.5
+    mound_angle: float = 46.0
     mound_z: float = 0.0
     mound_tilt: float = 0.0
     mound_length: float = 0.07
