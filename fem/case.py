@@ -46,7 +46,7 @@ class CaseRunner:
         self.problem = GravityProblem(
             self.mesh, self.facet_tags, settings.discretisation, settings.fixed
         )
-        self.solver = NewtonSolver(self.problem, settings.petsc_options)
+        self.solver = NewtonSolver(self.problem, settings.petsc_options, settings.solver)
         self.setup_s = time.perf_counter() - start
 
     def solve(self, case: Case) -> tuple[LoadingResult, dict[str, float]]:
@@ -61,17 +61,23 @@ class CaseRunner:
         problem, solver = self.problem, self.solver
         problem.set_case(material, gravity)
         problem.w.x.array[:] = 0.0
-        before = (solver.timings.residual, solver.timings.jacobian, solver.timings.snes)
+        t = solver.timings
+        before = (t.residual, t.jacobian, t.snes, t.residual_evaluations, t.jacobian_evaluations)
+        cpu_start = time.process_time()
         start = time.perf_counter()
         result = solve_incrementally(problem, solver, self.settings.loading)
         solve_s = time.perf_counter() - start
-        residual = solver.timings.residual - before[0]
-        jacobian = solver.timings.jacobian - before[1]
-        snes = solver.timings.snes - before[2]
+        residual = t.residual - before[0]
+        jacobian = t.jacobian - before[1]
+        snes = t.snes - before[2]
         timings = {
             "solve": solve_s,
             "assembly": residual + jacobian,
             "linear_solve": max(snes - residual - jacobian, 0.0),
+            # CPU seconds of this process: robust to other jobs sharing the cores
+            "solve_cpu": time.process_time() - cpu_start,
+            "residual_evaluations": t.residual_evaluations - before[3],
+            "jacobian_evaluations": t.jacobian_evaluations - before[4],
         }
         return result, timings
 
@@ -97,6 +103,8 @@ class CaseRunner:
             "load_fraction": result.fraction,
             "load_steps": len(accepted),
             "rejected_steps": len(result.attempts) - len(accepted),
+            "first_failure": result.first_failure,
+            "failure_kinds": result.failure_kinds,
             "newton_iterations": result.newton_iterations,
             "total_newton_iterations": result.total_iterations,
             "final_residual": accepted[-1].final_residual if accepted else None,
@@ -106,7 +114,14 @@ class CaseRunner:
             "volume_change": problem.volume_change(),
             "min_detF": problem.min_detF(),
             "dofs": problem.num_dofs(),
-            "wall_s": {"setup": self.setup_s, **timings},
+            "wall_s": {
+                "setup": self.setup_s,
+                **{k: timings[k] for k in ("solve", "assembly", "linear_solve")},
+            },
+            "cpu_s": {"solve": timings["solve_cpu"]},
+            "residual_evaluations": timings["residual_evaluations"],
+            "jacobian_evaluations": timings["jacobian_evaluations"],
+            "linear_iterations": result.linear_iterations,
             "linear_system_s": linear_s,
             "factorization_equivalents": timings["solve"] / linear_s if linear_s > 0 else None,
             "mpi_size": self.comm.size,

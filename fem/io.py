@@ -105,11 +105,12 @@ def gather_boundary_vertices(
         flags[entities_to_geometry(mesh._mesh, mesh.topology.dim - 1, facets, False)[:, :3].ravel()] = True
     nodes = vertex_nodes(mesh)
     gathered = _gather_by_node(mesh, nodes, flags[nodes])
-    if gathered is None:
-        return None
-    # a vertex shared between ranks is on the boundary if any rank says so
+    # A vertex shared between ranks is on the boundary if any rank says so. Every rank
+    # must take part in this second gather (returning early on rank > 0 deadlocked).
     index = np.asarray(mesh.geometry.input_global_indices, dtype=np.int64)[nodes]
     on = mesh.comm.gather(index[flags[nodes]], root=0)
+    if gathered is None:
+        return None
     return gathered[0], np.isin(gathered[0], np.concatenate(on))
 
 

@@ -35,6 +35,7 @@ class StepRecord:
     reason: str
     final_residual: float | None
     min_detF: float | None
+    linear_iterations: int = 0
 
 
 @dataclass
@@ -57,6 +58,26 @@ class LoadingResult:
         return [a.iterations for a in self.accepted]
 
     @property
+    def first_failure(self) -> str:
+        """Reason of the first rejected increment ("" if none was rejected)."""
+        return next((a.reason for a in self.attempts if not a.converged), "")
+
+    @property
+    def failure_kinds(self) -> dict[str, int]:
+        """Rejected increments counted by :func:`failure_kind`."""
+        kinds: dict[str, int] = {}
+        for a in self.attempts:
+            if not a.converged:
+                kind = failure_kind(a.reason)
+                kinds[kind] = kinds.get(kind, 0) + 1
+        return kinds
+
+    @property
+    def linear_iterations(self) -> int:
+        """Krylov iterations of all attempts (one per Newton iteration for a direct solver)."""
+        return sum(a.linear_iterations for a in self.attempts)
+
+    @property
     def total_iterations(self) -> int:
         """Newton iterations of all attempts, failed ones included (each costs work)."""
         return sum(a.iterations for a in self.attempts)
@@ -69,6 +90,30 @@ class LoadingResult:
             "reason": self.reason,
             "attempts": [asdict(a) for a in self.attempts],
         }
+
+
+def failure_kind(reason: str) -> str:
+    """Class of a rejected increment's reason.
+
+    ``inversion`` (det F ≤ 0 at a quadrature point of a converged state), ``nan``
+    (the residual became NaN/Inf: an element inverted during the iteration),
+    ``line_search`` (no acceptable step length), ``linear_solver`` (factorisation or
+    Krylov failure), ``petsc_error`` (PETSc raised, e.g. AMG set-up on a garbage
+    state), ``newton`` (iteration limit or divergence), ``other``.
+    """
+    if reason.startswith("inverted"):
+        return "inversion"
+    if reason == "diverged_fnorm_nan":
+        return "nan"
+    if reason.startswith("petsc_error"):
+        return "petsc_error"
+    if "line_search" in reason:
+        return "line_search"
+    if "linear_solve" in reason:
+        return "linear_solver"
+    if reason.startswith("diverged"):
+        return "newton"
+    return "other"
 
 
 def solve_incrementally(
@@ -107,6 +152,7 @@ def solve_incrementally(
                 reason=reason,
                 final_residual=outcome.residuals[-1] if outcome.residuals else None,
                 min_detF=min_det,
+                linear_iterations=outcome.linear_iterations,
             )
         )
         log.debug("λ=%.4f step=%.4f %s in %d its", target, step, reason, outcome.iterations)

@@ -255,6 +255,8 @@ class SolverSettings:
         petsc_options: overrides of :func:`fem.solver.default_parameters`.
         density: tissue density (kg/m³).
         gravity: |g| (m/s²).
+        solver: linear-solver preset of :func:`fem.solver.default_parameters`
+            (``direct``, ``direct-lu`` or ``iterative``).
     """
 
     discretisation: Discretisation = Discretisation()
@@ -263,6 +265,12 @@ class SolverSettings:
     petsc_options: dict[str, Any] = field(default_factory=dict)
     density: float = TISSUE_DENSITY
     gravity: float = STANDARD_GRAVITY
+    solver: str = "direct"
+
+    def __post_init__(self) -> None:
+        from fem.options import solver_options  # options imports exceptions only
+
+        solver_options(self.solver, self.petsc_options)  # names an unknown preset or line search
 
     @classmethod
     def from_config(cls, config: dict[str, Any]) -> SolverSettings:
@@ -276,6 +284,7 @@ class SolverSettings:
             petsc_options=dict(fe.get("petsc_options", {}) or {}),
             density=_finite("density", material.get("density", TISSUE_DENSITY)),
             gravity=_finite("gravity", material.get("gravity", STANDARD_GRAVITY)),
+            solver=str(fe.get("solver", "direct")),
         )
 
     def describe(self, defaults: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -285,6 +294,7 @@ class SolverSettings:
             defaults: the solver's default PETSc options, merged under the overrides.
         """
         return {
+            "solver": self.solver,
             "discretisation": as_dict(self.discretisation),
             "fixed": {b.label: list(c) for b, c in self.fixed.items()},
             "loading": as_dict(self.loading),

@@ -63,6 +63,27 @@ def check_mesh(mesh: Any, facet_tags: Any, fixed: FixedBoundaries) -> None:
         )
 
 
+def strain_energy(
+    F: ufl.core.expr.Expr,
+    p: ufl.core.expr.Expr | None,
+    C1: ufl.core.expr.Expr,
+    discretisation: Discretisation,
+    kappa_ratio: ufl.core.expr.Expr | float | None = None,
+) -> ufl.core.expr.Expr:
+    """Strain energy density of the chosen discretisation (per reference volume).
+
+    Taylor–Hood: ψ = C1 (Ī1 - 3) - p (J - 1); P1-penalty: ψ = C1 (Ī1 - 3) + κ/2 (J - 1)²
+    with κ = ``kappa_ratio`` · C1 (default ``discretisation.bulk_ratio``).
+    """
+    psi = NeoHookean(C1, isochoric=discretisation.isochoric).strain_energy(F)
+    if discretisation.element == "taylor-hood":
+        if p is None:
+            raise ValueError("the Taylor-Hood strain energy needs the pressure field")
+        return psi + Incompressible().strain_energy(F, p)
+    ratio = discretisation.bulk_ratio if kappa_ratio is None else kappa_ratio
+    return psi + Penalty(ratio * C1).strain_energy(F)
+
+
 class GravityProblem:
     """Function spaces, forms and boundary conditions of one mesh.
 
@@ -112,20 +133,18 @@ class GravityProblem:
 
         F = deformation_gradient(u)
         self.J = jacobian(F)
-        psi = NeoHookean(self.C1, isochoric=discretisation.isochoric).strain_energy(F)
-        if self.mixed:
-            psi = psi + Incompressible().strain_energy(F, p)
-        else:
-            self.kappa = fem.Constant(mesh, scalar(discretisation.bulk_ratio))
-            psi = psi + Penalty(self.kappa * self.C1).strain_energy(F)
+        self.kappa = fem.Constant(mesh, scalar(discretisation.bulk_ratio))
+        psi = strain_energy(F, p, self.C1, discretisation, self.kappa)
 
         dx = ufl.Measure("dx", domain=mesh, metadata={"quadrature_degree": discretisation.quadrature})
         self.dx = dx
         potential = psi * dx - ufl.dot(self.body_force, u) * dx
         residual = ufl.derivative(potential, self.w, ufl.TestFunction(self.W))
         tangent = ufl.derivative(residual, self.w, ufl.TrialFunction(self.W))
+        self._tangent_ufl = tangent
         self.residual = fem.form(residual)
         self.tangent = fem.form(tangent)
+        self._preconditioner: fem.FormMetaClass | None = None
         self.bcs = self._dirichlet_bcs()
         self._volume = mesh.comm.allreduce(
             fem.assemble_scalar(fem.form(fem.Constant(mesh, scalar(1.0)) * dx)), op=MPI.SUM
@@ -135,6 +154,24 @@ class GravityProblem:
         self._detF = fem.Expression(self.J, self._detF_points)
         n_local = mesh.topology.index_map(mesh.topology.dim).size_local
         self._cells = np.arange(n_local, dtype=np.int32)
+
+    @property
+    def preconditioner(self) -> fem.FormMetaClass:
+        """Tangent plus -1/(2 C1) times the pressure mass matrix in the pressure block.
+
+        The preconditioning matrix of the iterative solver: its pressure block
+        approximates the Schur complement -B A⁻¹ Bᵀ (spectrally equivalent to the
+        pressure mass matrix over the shear modulus μ = 2 C1 for a stable
+        Taylor–Hood pair). Compiled on first use only.
+        """
+        if not self.mixed:
+            return self.tangent
+        if self._preconditioner is None:
+            dp = ufl.split(ufl.TrialFunction(self.W))[1]
+            q = ufl.split(ufl.TestFunction(self.W))[1]
+            mass = -(0.5 / self.C1) * dp * q * self.dx
+            self._preconditioner = fem.form(self._tangent_ufl + mass)
+        return self._preconditioner
 
     # -- set-up ---------------------------------------------------------------------------
     def _dirichlet_bcs(self) -> list[Any]:

@@ -1,7 +1,10 @@
 """PETSc SNES Newton solver for :class:`fem.problem.GravityProblem`.
 
-All solver options live in :func:`default_parameters`; a config overrides them
-key by key (PETSc option names without the leading dash).
+The options (Newton settings and the named linear-solver presets ``direct``,
+``direct-lu``, ``iterative``) live in :func:`fem.options.default_parameters`;
+this module applies them to a SNES, sets up what the presets need beyond
+options (the field split of the mixed space, the rigid-body near-nullspace,
+the preconditioning matrix) and times the solver's phases.
 """
 
 from __future__ import annotations
@@ -12,9 +15,11 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
 from dolfinx.fem import petsc as fem_petsc
 from petsc4py import PETSc
 
+from fem.options import LINE_SEARCHES, SOLVER_PRESETS, default_parameters, solver_options
 from fem.problem import GravityProblem
 
 log = logging.getLogger(__name__)
@@ -22,29 +27,15 @@ log = logging.getLogger(__name__)
 _prefix_counter = itertools.count()
 
 
-def default_parameters() -> dict[str, Any]:
-    """Default PETSc options: Newton with backtracking line search and MUMPS LU."""
-    return {
-        "snes_type": "newtonls",
-        "snes_linesearch_type": "bt",
-        "snes_rtol": 1e-9,
-        "snes_atol": 1e-10,
-        "snes_stol": 0.0,
-        "snes_max_it": 25,
-        "snes_divergence_tolerance": 1e8,
-        "ksp_type": "preonly",
-        "pc_type": "lu",
-        "pc_factor_mat_solver_type": "mumps",
-    }
-
-
 @dataclass
 class Timings:
-    """Accumulated wall-clock seconds of one solver's phases."""
+    """Accumulated wall-clock seconds (and counts) of one solver's phases."""
 
     residual: float = 0.0
     jacobian: float = 0.0
     snes: float = 0.0
+    residual_evaluations: int = 0
+    jacobian_evaluations: int = 0
 
     @property
     def assembly(self) -> float:
@@ -59,12 +50,24 @@ class Timings:
 
 @dataclass
 class SolveResult:
-    """Outcome of one SNES solve."""
+    """Outcome of one SNES solve.
+
+    Attributes:
+        converged: SNES reported convergence.
+        reason: PETSc's converged/diverged reason, lower case.
+        iterations: Newton iterations.
+        residuals: residual norm before the first and after every iteration.
+        linear_iterations: Krylov iterations summed over the Newton iterations
+            (1 per iteration for the direct solvers).
+        linear_reason: the last linear solve's reason (e.g. a failed factorisation).
+    """
 
     converged: bool
     reason: str
     iterations: int
     residuals: list[float] = field(default_factory=list)
+    linear_iterations: int = 0
+    linear_reason: str = ""
 
 
 class NewtonSolver:
@@ -72,30 +75,124 @@ class NewtonSolver:
 
     Args:
         problem: the variational problem.
-        options: PETSc options overriding :func:`default_parameters`.
+        options: PETSc options overriding the preset's :func:`default_parameters`.
+        preset: linear-solver preset (see the module docstring).
     """
 
-    def __init__(self, problem: GravityProblem, options: dict[str, Any] | None = None) -> None:
+    def __init__(
+        self,
+        problem: GravityProblem,
+        options: dict[str, Any] | None = None,
+        preset: str = "direct",
+    ) -> None:
         self.problem = problem
-        self.options = {**default_parameters(), **(options or {})}
+        self.preset = preset
+        self.options = solver_options(preset, options)
+        if self.options.get("pc_type") == "fieldsplit" and not problem.mixed:
+            self.options = _single_field(self.options)
         self.timings = Timings()
         comm = problem.mesh.comm
         self.A = fem_petsc.create_matrix(problem.tangent)
         self.A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+        self.P = None
+        if self._fieldsplit:
+            self.P = fem_petsc.create_matrix(problem.preconditioner)
         self.b = fem_petsc.create_vector(problem.residual)
         self.x = problem.w.vector.duplicate()
+        self._split, self._u_order = self._split_index_sets() if self._fieldsplit else (None, None)
+        self._near_nullspace = self._rigid_body_modes() if self._uses_amg else None
+        if self._split is not None and self._near_nullspace is not None:
+            # fieldsplit hands the modes to the displacement block's AMG
+            self._split[0].compose("nearnullspace", self._near_nullspace)
+
         self.snes = PETSc.SNES().create(comm)
         self.prefix = f"breast_{next(_prefix_counter)}_"
         self.snes.setOptionsPrefix(self.prefix)
+        # The options stay in PETSc's database (under this solver's unique prefix) until
+        # destroy(): fieldsplit creates its sub-solvers, and reads their options, only at
+        # the first PCSetUp.
         opts = PETSc.Options()
         for key, value in self.options.items():
             opts[f"{self.prefix}{key}"] = value
         self.snes.setFunction(self._residual, self.b)
-        self.snes.setJacobian(self._jacobian, self.A)
+        self.snes.setJacobian(self._jacobian, self.A, self.P if self.P is not None else self.A)
         self.snes.setFromOptions()
-        for key in self.options:
-            del opts[f"{self.prefix}{key}"]
-        self.snes.setConvergenceHistory()
+        self._configure_pc(self.snes.getKSP(), self.A)
+        self.snes.setConvergenceHistory(reset=True)
+
+    # -- set-up ---------------------------------------------------------------------------
+    @property
+    def _fieldsplit(self) -> bool:
+        return self.options.get("pc_type") == "fieldsplit"
+
+    @property
+    def _uses_amg(self) -> bool:
+        amg = ("gamg", "ml", "hypre")
+        return self.options.get("pc_type") in amg or self.options.get("fieldsplit_u_pc_type") in amg
+
+    def _rigid_body_modes(self) -> PETSc.NullSpace:
+        """The six rigid-body modes of the displacement space, orthonormalised.
+
+        AMG builds its coarse spaces from them; without them smoothed aggregation
+        sees only translations and converges poorly for elasticity.
+        """
+        from dolfinx import la
+
+        V = self.problem.V
+        comm = self.problem.mesh.comm
+        n = V.dofmap.index_map.size_local  # owned nodes; 3 dofs each
+        x = V.tabulate_dof_coordinates()[:n]
+        modes = np.zeros((6, n, 3))
+        for i in range(3):
+            modes[i, :, i] = 1.0
+        for k, (a, b) in enumerate([(0, 1), (1, 2), (2, 0)]):  # rotation in the (a, b) plane
+            modes[3 + k, :, a] = -x[:, b]
+            modes[3 + k, :, b] = x[:, a]
+        modes = modes.reshape(6, -1)
+        if self._u_order is not None:
+            # the displacement block of the mixed space, in its index set's (sorted) order
+            modes = modes[:, self._u_order]
+        # Fresh PETSc vectors that own their memory (a dolfinx Function's vector would
+        # dangle once the Function is collected).
+        vectors = []
+        for mode in modes:
+            v = PETSc.Vec().createMPI((3 * n, PETSc.DECIDE), comm=comm)
+            v.array[:] = mode
+            vectors.append(v)
+        la.orthonormalize(vectors)
+        return PETSc.NullSpace().create(vectors=vectors, comm=self.problem.mesh.comm)
+
+    def _split_index_sets(self) -> tuple[tuple[PETSc.IS, PETSc.IS], np.ndarray]:
+        """Global indices of the owned displacement and pressure dofs of the mixed space.
+
+        Returns:
+            The two (sorted, as fieldsplit requires) index sets, and the permutation
+            that sorts the collapsed displacement space's owned dofs into the first.
+        """
+        W = self.problem.W
+        comm = self.problem.mesh.comm
+        owned = W.dofmap.index_map.size_local * W.dofmap.index_map_bs
+        offset = W.dofmap.index_map.local_range[0] * W.dofmap.index_map_bs
+        index_sets, orders = [], []
+        for i in (0, 1):
+            Vi, dofs = W.sub(i).collapse()
+            n = Vi.dofmap.index_map.size_local * Vi.dofmap.index_map_bs
+            dofs = np.asarray(dofs[:n], dtype=np.int64)
+            if np.any(dofs >= owned):
+                raise RuntimeError("collapsed sub-space owns dofs its parent does not")
+            order = np.argsort(dofs, kind="stable")
+            iset = PETSc.IS().createGeneral((dofs[order] + offset).astype(PETSc.IntType), comm=comm)
+            index_sets.append(iset)
+            orders.append(order)
+        return (index_sets[0], index_sets[1]), orders[0]
+
+    def _configure_pc(self, ksp: PETSc.KSP, A: PETSc.Mat) -> None:
+        """Tell the preconditioner the field split and the rigid-body modes."""
+        pc = ksp.getPC()
+        if self._split is not None:
+            pc.setFieldSplitIS(("u", self._split[0]), ("p", self._split[1]))
+        elif self._near_nullspace is not None:
+            A.setNearNullSpace(self._near_nullspace)
 
     # -- SNES callbacks ---------------------------------------------------------------------
     def _update_state(self, x: PETSc.Vec) -> None:
@@ -115,20 +212,40 @@ class NewtonSolver:
         b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         fem_petsc.set_bc(b, self.problem.bcs, x, -1.0)
         self.timings.residual += time.perf_counter() - start
+        self.timings.residual_evaluations += 1
 
-    def _jacobian(self, snes: PETSc.SNES, x: PETSc.Vec, A: PETSc.Mat, P: PETSc.Mat) -> None:
-        start = time.perf_counter()
+    def _assemble_operators(self, A: PETSc.Mat, P: PETSc.Mat | None) -> None:
+        """Assemble the tangent into A and, with a field split, the preconditioner into P."""
         A.zeroEntries()
         fem_petsc.assemble_matrix(A, self.problem.tangent, bcs=self.problem.bcs)
         A.assemble()
+        # petsc4py hands callbacks fresh wrappers, so P is never A by identity: ask the flag.
+        if self._fieldsplit and P is not None:
+            P.zeroEntries()
+            fem_petsc.assemble_matrix(P, self.problem.preconditioner, bcs=self.problem.bcs)
+            P.assemble()
+
+    def _jacobian(self, snes: PETSc.SNES, x: PETSc.Vec, A: PETSc.Mat, P: PETSc.Mat) -> None:
+        start = time.perf_counter()
+        self._assemble_operators(A, P)
         self.timings.jacobian += time.perf_counter() - start
+        self.timings.jacobian_evaluations += 1
 
     # -- driver ---------------------------------------------------------------------------------
     def solve(self) -> SolveResult:
         """Run Newton from the problem's current state; on success the state holds the solution."""
         self.problem.w.vector.copy(self.x)
+        self.snes.setConvergenceHistory(reset=True)
         start = time.perf_counter()
-        self.snes.solve(None, self.x)
+        try:
+            self.snes.solve(None, self.x)
+        except PETSc.Error as err:
+            # A PETSc error inside one Newton solve (e.g. an AMG set-up on a state full
+            # of NaN) fails this increment only; the loader cuts back from the last
+            # converged state, which the caller still holds.
+            self.timings.snes += time.perf_counter() - start
+            log.warning("PETSc error in SNES solve: %s", str(err).splitlines()[-1])
+            return SolveResult(False, f"petsc_error {err.ierr}", self.snes.getIterationNumber())
         self.timings.snes += time.perf_counter() - start
         reason = self.snes.getConvergedReason()
         iterations = self.snes.getIterationNumber()
@@ -137,53 +254,93 @@ class NewtonSolver:
         converged = reason > 0
         if converged:
             self._update_state(self.x)
-        return SolveResult(converged, _reason_name(reason), iterations, residuals)
+        ksp = self.snes.getKSP()
+        return SolveResult(
+            converged,
+            _reason_name(reason),
+            iterations,
+            residuals,
+            linear_iterations=int(self.snes.getLinearSolveIterations()),
+            linear_reason=_KSP_REASONS.get(ksp.getConvergedReason(), str(ksp.getConvergedReason())),
+        )
 
     def time_linear_system(self) -> float:
         """Seconds for one Jacobian assembly + factorisation + solve at the current state.
 
-        This is the unit of cost of a Newton solve, measured in the same process so
-        that `nonlinear time / this` is a machine-independent ratio.
+        This is the unit of cost of a Newton solve, measured in the same process with
+        the same options (a fresh KSP, so the symbolic analysis or AMG set-up is
+        included), so that `nonlinear time / this` is a machine-independent ratio.
         """
         A = fem_petsc.create_matrix(self.problem.tangent)
         A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+        P = fem_petsc.create_matrix(self.problem.preconditioner) if self._fieldsplit else None
         ksp = PETSc.KSP().create(self.problem.mesh.comm)
-        prefix = f"{self.prefix}lin_"
-        ksp.setOptionsPrefix(prefix)
-        opts = PETSc.Options()
-        ksp_keys = [k for k in self.options if k.startswith(("ksp_", "pc_", "mat_", "fieldsplit_"))]
-        for key in ksp_keys:
-            opts[f"{prefix}{key}"] = self.options[key]
-        ksp.setFromOptions()
-        for key in ksp_keys:
-            del opts[f"{prefix}{key}"]
+        # Same option prefix as the SNES's own KSP, so every linear-solver option applies.
+        ksp.setOptionsPrefix(self.snes.getKSP().getOptionsPrefix())
         x = self.b.duplicate()
         b = self.b.duplicate()
+        saved = (
+            self.timings.residual,
+            self.timings.jacobian,
+            self.timings.residual_evaluations,
+            self.timings.jacobian_evaluations,
+        )
         self._residual(self.snes, self.problem.w.vector, b)
-        saved = (self.timings.residual, self.timings.jacobian)
         start = time.perf_counter()
-        A.zeroEntries()
-        fem_petsc.assemble_matrix(A, self.problem.tangent, bcs=self.problem.bcs)
-        A.assemble()
-        ksp.setOperators(A)
+        self._assemble_operators(A, P)
+        ksp.setOperators(A, P if P is not None else A)
+        ksp.setFromOptions()
+        self._configure_pc(ksp, A)
         ksp.solve(b, x)
         elapsed = time.perf_counter() - start
-        self.timings.residual, self.timings.jacobian = saved
+        (
+            self.timings.residual,
+            self.timings.jacobian,
+            self.timings.residual_evaluations,
+            self.timings.jacobian_evaluations,
+        ) = saved
         ksp.destroy()
         A.destroy()
+        if P is not None:
+            P.destroy()
+        x.destroy()
+        b.destroy()
         return elapsed
 
     def destroy(self) -> None:
-        """Free PETSc objects."""
+        """Free PETSc objects and this solver's entries in the options database."""
+        opts = PETSc.Options()
+        for key in self.options:
+            opts.delValue(f"{self.prefix}{key}")
         self.snes.destroy()
-        self.A.destroy()
-        self.b.destroy()
-        self.x.destroy()
+        for obj in (self.A, self.P, self.b, self.x):
+            if obj is not None:
+                obj.destroy()
+
+
+def _single_field(options: dict[str, Any]) -> dict[str, Any]:
+    """Turn fieldsplit options into options for a displacement-only problem.
+
+    The P1-penalty element has no pressure block: its tangent is preconditioned
+    directly with the displacement block's solver.
+    """
+    out = {k: v for k, v in options.items() if not k.startswith(("pc_fieldsplit_", "fieldsplit_"))}
+    prefix = "fieldsplit_u_"
+    out.update(
+        {k[len(prefix):]: v for k, v in options.items()
+         if k.startswith(prefix) and k != prefix + "ksp_type"}
+    )
+    return out
 
 
 _REASONS = {
     getattr(PETSc.SNES.ConvergedReason, name): name
     for name in dir(PETSc.SNES.ConvergedReason)
+    if name.isupper() or name.startswith(("CONVERGED", "DIVERGED"))
+}
+_KSP_REASONS = {
+    getattr(PETSc.KSP.ConvergedReason, name): name.lower()
+    for name in dir(PETSc.KSP.ConvergedReason)
     if name.isupper() or name.startswith(("CONVERGED", "DIVERGED"))
 }
 
@@ -192,4 +349,12 @@ def _reason_name(reason: int) -> str:
     return _REASONS.get(reason, str(reason)).lower()
 
 
-__all__ = ["NewtonSolver", "SolveResult", "Timings", "default_parameters"]
+__all__ = [
+    "LINE_SEARCHES",
+    "SOLVER_PRESETS",
+    "NewtonSolver",
+    "SolveResult",
+    "Timings",
+    "default_parameters",
+    "solver_options",
+]

@@ -1,0 +1,115 @@
+"""A case that cannot converge fails cleanly; bad input is refused before anything is written."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fem.exceptions import InvalidParameterError, MeshError
+from fem.parameters import Gravity, Loading, Material, SolverSettings
+from fem.sweep import Case
+
+
+def test_unconvergeable_case_ends_failed_with_fraction_and_reason(coarse_mesh: Path, tmp_path: Path) -> None:
+    from fem.case import run_case
+
+    # 0.02 kPa is 40x softer than the paper's softest tissue: the breast would fold over.
+    # A small attempt budget keeps the test short; the outcome must still be a clean record.
+    settings = SolverSettings(loading=Loading(max_steps=6), petsc_options={"snes_max_it": 8})
+    summary = run_case(coarse_mesh, Case(0.02, 0.0), tmp_path / "case", settings)
+    on_disk = json.loads((tmp_path / "case" / "summary.json").read_text())
+    assert on_disk["status"] == summary["status"] == "failed"
+    assert 0.0 <= on_disk["load_fraction"] < 1.0
+    assert "budget" in on_disk["reason"] or "min_step" in on_disk["reason"]
+    assert on_disk["rejected_steps"] >= 1 and on_disk["first_failure"]
+    assert len(on_disk["load_path"]) <= 6
+    # the fields hold the last converged state, which is finite and uninverted
+    from fem.dataset import read_points
+
+    points = read_points(tmp_path / "case" / "points.h5")
+    assert np.all(np.isfinite(points["u"]))
+    assert on_disk["min_detF"] > 0
+
+
+def test_failed_first_step_is_cut_back_and_recovers(coarse_mesh: Path) -> None:
+    from fem.case import CaseRunner
+
+    # three Newton iterations are too few for the whole load at once, enough for halves
+    runner = CaseRunner(coarse_mesh, SolverSettings(petsc_options={"snes_max_it": 3}))
+    result, _ = runner.solve(Case(1.0, 0.0))
+    assert result.converged
+    assert not result.attempts[0].converged and result.attempts[0].fraction == 1.0
+    assert result.attempts[1].fraction == 0.5
+    assert result.first_failure.startswith("diverged_max_it")
+
+
+@pytest.mark.parametrize("c1", [0.0, -1.0, math.nan, math.inf])
+def test_bad_c1_is_named(c1: float) -> None:
+    with pytest.raises(InvalidParameterError, match="C1"):
+        Material(C1=c1)
+    with pytest.raises(InvalidParameterError, match="C1"):
+        Case(c1, 0.0)
+
+
+def test_unknown_angle_unit_is_named() -> None:
+    with pytest.raises(InvalidParameterError, match="unknown angle unit 'grad'"):
+        Gravity(phi=90.0, unit="grad")
+    assert np.allclose(Gravity(phi=math.pi, unit="rad").vector, [-9.81, 0.0, 0.0])
+
+
+def _rewrite_mesh(source: Path, target: Path, move_vertex: bool = False, drop_tag: int | None = None) -> None:
+    """Copy an XDMF mesh, optionally pushing one interior vertex through its neighbours
+    (inverting cells) or removing one facet tag."""
+    from dolfinx.io import XDMFFile
+    from dolfinx.mesh import exterior_facet_indices, meshtags
+    from mpi4py import MPI
+
+    from meshes.io import read_mesh
+    from meshes.tags import CELL_TAGS_NAME, FACET_TAGS_NAME, MESH_NAME
+
+    mesh, cell_tags, facet_tags = read_mesh(source, MPI.COMM_SELF)
+    if move_vertex:
+        mesh.topology.create_connectivity(2, 0)
+        boundary_nodes = np.unique(
+            mesh.topology.connectivity(2, 0).array.reshape(-1, 3)[exterior_facet_indices(mesh.topology)]
+        )
+        x = mesh.geometry.x
+        interior = np.setdiff1d(np.arange(len(x)), boundary_nodes)
+        centre = x.mean(axis=0)
+        node = interior[np.argmin(np.linalg.norm(x[interior] - centre, axis=1))]
+        x[node] += np.array([0.08, 0.0, 0.0])  # several element sizes: folds cells over
+    if drop_tag is not None:
+        keep = facet_tags.values != drop_tag
+        facet_tags = meshtags(mesh, 2, facet_tags.indices[keep], facet_tags.values[keep])
+    mesh.name, cell_tags.name, facet_tags.name = MESH_NAME, CELL_TAGS_NAME, FACET_TAGS_NAME
+    with XDMFFile(MPI.COMM_SELF, str(target), "w") as xdmf:
+        xdmf.write_mesh(mesh)
+        xdmf.write_meshtags(cell_tags)
+        xdmf.write_meshtags(facet_tags)
+
+
+@pytest.mark.parametrize(
+    "kind, message",
+    [("inverted", "inverted cells"), ("no-rib", "no facets tagged 'rib'")],
+)
+def test_bad_mesh_is_named_and_nothing_is_written(
+    coarse_mesh: Path, tmp_path: Path, kind: str, message: str
+) -> None:
+    from fem.case import run_case
+
+    bad = tmp_path / "bad.xdmf"
+    _rewrite_mesh(coarse_mesh, bad, move_vertex=kind == "inverted", drop_tag=1 if kind == "no-rib" else None)
+    with pytest.raises(MeshError, match=message):
+        run_case(bad, Case(1.0, 0.0), tmp_path / "case")
+    assert not (tmp_path / "case").exists()
+
+
+def test_bad_settings_from_config_are_named() -> None:
+    with pytest.raises(InvalidParameterError, match="unknown loading parameter"):
+        SolverSettings.from_config({"fe": {"loading": {"max_step": 3}}})
+    with pytest.raises(InvalidParameterError, match="unknown element"):
+        SolverSettings.from_config({"fe": {"discretisation": {"element": "p2-penalty"}}})

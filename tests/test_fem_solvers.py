@@ -1,0 +1,112 @@
+"""Element and solver options: every combination converges to the same answer.
+
+Coarse default geometry, prone C1 = 1 kPa (about 25 mm of sag): large enough that
+the options' differences would show.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fem.exceptions import InvalidParameterError
+from fem.parameters import Discretisation, SolverSettings
+from fem.sweep import Case
+
+CASE = Case(1.0, 180.0)
+
+
+def _displacement(mesh: Path, **settings) -> tuple[np.ndarray, object]:
+    from fem.case import CaseRunner
+
+    runner = CaseRunner(mesh, SolverSettings(**settings))
+    result, timings = runner.solve(CASE)
+    assert result.converged, result.reason
+    u = runner.problem.displacement().x.array.reshape(-1, 3).copy()
+    runner.solver.destroy()
+    return u, result
+
+
+@pytest.fixture(scope="module")
+def reference(coarse_mesh: Path) -> np.ndarray:
+    """Default settings (P2/P1, MUMPS LDLᵀ, bt line search)."""
+    return _displacement(coarse_mesh)[0]
+
+
+@pytest.mark.parametrize(
+    "solver, options",
+    [
+        ("direct-lu", {}),
+        ("iterative", {}),
+        ("direct", {"snes_linesearch_type": "l2"}),
+        ("direct", {"snes_linesearch_type": "cp"}),
+        ("direct", {"snes_linesearch_type": "basic"}),
+    ],
+)
+def test_solver_options_agree(coarse_mesh: Path, reference: np.ndarray, solver: str, options: dict) -> None:
+    u, result = _displacement(coarse_mesh, solver=solver, petsc_options=options)
+    assert np.max(np.abs(u - reference)) <= 1e-7 * np.abs(reference).max()
+    if solver == "iterative":
+        # Krylov iterations were really spent (not a direct solve in disguise)
+        assert result.attempts and result.newton_iterations[0] >= 3
+
+
+def test_ldlt_is_a_symmetric_factorisation(coarse_mesh: Path) -> None:
+    from fem.case import CaseRunner
+
+    runner = CaseRunner(coarse_mesh)
+    runner.solve(CASE)
+    pc = runner.solver.snes.getKSP().getPC()
+    assert pc.getType() == "cholesky" and pc.getFactorSolverType() == "mumps"
+    assert runner.solver.A.isSymmetric(1e-10 * runner.solver.A.norm())
+    runner.solver.destroy()
+
+
+def test_higher_order_and_quadrature_change_the_answer_only_slightly(
+    coarse_mesh: Path, reference: np.ndarray
+) -> None:
+    from fem.case import CaseRunner
+    from fem.evaluation import evaluate
+
+    scale = np.abs(reference).max()
+    # same element, other quadrature: converges, close but not identical
+    u_q, _ = _displacement(coarse_mesh, discretisation=Discretisation(quadrature_degree=2))
+    assert 0 < np.max(np.abs(u_q - reference)) < 0.05 * scale
+    # P3/P2 and the P1-penalty baseline, compared at the P2 dof nodes
+    x = CaseRunner(coarse_mesh).problem.V.tabulate_dof_coordinates()
+    solutions = {}
+    for name, disc in (("p3p2", Discretisation(degree=3)), ("p1", Discretisation(element="p1-penalty"))):
+        runner = CaseRunner(coarse_mesh, SolverSettings(discretisation=disc))
+        result, _ = runner.solve(CASE)
+        assert result.converged, (disc, result.reason)
+        solutions[name] = evaluate(runner.problem.displacement(), x)[0]
+        runner.solver.destroy()
+    assert np.max(np.abs(solutions["p3p2"] - reference)) < 0.05 * scale
+    # P1 with a stiff penalty locks on a coarse mesh: it sags visibly less
+    p1_sag = np.linalg.norm(solutions["p1"], axis=1).max()
+    assert 0.2 * scale < p1_sag < 0.9 * np.linalg.norm(reference, axis=1).max()
+
+
+@pytest.mark.parametrize(
+    "settings, message",
+    [
+        ({"solver": "cg-please"}, "unknown solver preset 'cg-please'"),
+        ({"petsc_options": {"snes_linesearch_type": "wolfe"}}, "unknown line search 'wolfe'"),
+    ],
+)
+def test_unknown_solver_options_are_named(settings: dict, message: str) -> None:
+    with pytest.raises(InvalidParameterError, match=message):
+        SolverSettings(**settings)
+
+
+def test_config_selects_preset_and_overrides() -> None:
+    settings = SolverSettings.from_config(
+        {"fe": {"solver": "iterative", "petsc_options": {"ksp_rtol": 1e-6}}}
+    )
+    from fem.options import solver_options
+
+    options = solver_options(settings.solver, settings.petsc_options)
+    assert options["pc_type"] == "fieldsplit" and options["ksp_rtol"] == 1e-6
+    assert settings.describe(options)["solver"] == "iterative"
