@@ -139,8 +139,10 @@ class GravityProblem:
         dx = ufl.Measure("dx", domain=mesh, metadata={"quadrature_degree": discretisation.quadrature})
         self.dx = dx
         potential = psi * dx - ufl.dot(self.body_force, u) * dx
-        residual = ufl.derivative(potential, self.w, ufl.TestFunction(self.W))
-        tangent = ufl.derivative(residual, self.w, ufl.TrialFunction(self.W))
+        # kept: the preconditioner's pressure block must use these very arguments
+        self._test, self._trial = ufl.TestFunction(self.W), ufl.TrialFunction(self.W)
+        residual = ufl.derivative(potential, self.w, self._test)
+        tangent = ufl.derivative(residual, self.w, self._trial)
         self._tangent_ufl = tangent
         self.residual = fem.form(residual)
         self.tangent = fem.form(tangent)
@@ -167,8 +169,8 @@ class GravityProblem:
         if not self.mixed:
             return self.tangent
         if self._preconditioner is None:
-            dp = ufl.split(ufl.TrialFunction(self.W))[1]
-            q = ufl.split(ufl.TestFunction(self.W))[1]
+            dp = ufl.split(self._trial)[1]
+            q = ufl.split(self._test)[1]
             mass = -(0.5 / self.C1) * dp * q * self.dx
             self._preconditioner = fem.form(self._tangent_ufl + mass)
         return self._preconditioner
