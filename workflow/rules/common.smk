@@ -35,10 +35,28 @@ def check_config(config):
         raise WorkflowError(f"invalid configuration: {err}") from None
 
 
+def canonical(value):
+    """``value`` with every mapping's keys sorted, recursively.
+
+    Snakemake compares a rule's params with the last run's by their text, in which a
+    mapping's key order shows; sorting makes two configs that differ only in key order
+    (a file rewritten by a tool, keys moved by hand) the same experiment.
+    """
+    if isinstance(value, dict):
+        return {key: canonical(value[key]) for key in sorted(value)}
+    if isinstance(value, list):
+        return [canonical(item) for item in value]
+    return value
+
+
 check_config(config)
+_canonical = canonical(config)
+config.clear()
+config.update(_canonical)
 
 CASES = sweep_cases(config["sweep"])
 CASE_DIR = "results/cases/c1={c1}_phi={phi}_theta={theta}"
+OUTSIDE_DIR = "results/outside/c1={c1}_phi={phi}_theta={theta}"
 MESH = "results/mesh/mesh.xdmf"
 DATASET = "results/dataset/dataset.h5"
 MODEL = "results/surrogate/model/model.json"
@@ -54,3 +72,14 @@ wildcard_constraints:
 def case_files(name):
     """Path of file ``name`` in every case folder of the sweep."""
     return [f"results/cases/{case.id}/{name}" for case in CASES]
+
+
+def all_cores():
+    """Every core of a local run, so that a timed job has the machine to itself.
+
+    A cluster run sets no total (each job gets its own node share): 2 there.
+    """
+    try:
+        return workflow.cores
+    except WorkflowError:
+        return 2
