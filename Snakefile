@@ -11,6 +11,7 @@ configfile: "config.yaml"
 include: "workflow/rules/common.smk"
 include: "workflow/rules/mesh.smk"
 include: "workflow/rules/solve.smk"
+include: "workflow/rules/fe_study.smk"
 include: "workflow/rules/aggregate.smk"
 include: "workflow/rules/surrogate.smk"
 include: "workflow/rules/report.smk"
@@ -20,3 +21,4 @@ rule all:
     default_target: True
     input:
         REPORT,
+        SURROGATE_RESULTS,

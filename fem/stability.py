@@ -1,0 +1,130 @@
+"""Where the nonlinear solve fails: load steps, Newton iterations and failures over (C1, Φ).
+
+For every loading scheme (adaptive, and fixed-step baselines) and every (C1, Φ) of a
+grid reaching below the paper's C1 range, one solve from rest is recorded: whether
+it converged, the load fraction reached, accepted and rejected increments, Newton
+iterations, the first failure and the classes of all failures (Newton, line search,
+inverted element, NaN residual, linear solver), time, and the largest displacement.
+
+:func:`lowest_converging` reads off, per scheme and Φ, the lowest C1 from which every
+grid value upwards converged, and what failed first at the next C1 below it.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fem.parameters import Loading, SolverSettings
+from fem.sweep import Case
+
+log = logging.getLogger(__name__)
+
+
+def loading_schemes(adaptive: Loading, fixed_steps: list[int]) -> dict[str, Loading]:
+    """The adaptive scheme and one fixed-step baseline per entry of ``fixed_steps``."""
+    schemes = {"adaptive": adaptive}
+    for n in fixed_steps:
+        schemes[f"fixed-{n}"] = replace(adaptive, fixed_steps=int(n))
+    return schemes
+
+
+def stability_map(
+    mesh_path: str | Path,
+    settings: SolverSettings,
+    C1_kPa: list[float],
+    phi_deg: list[float],
+    schemes: dict[str, Loading],
+) -> dict[str, Any]:
+    """Solve every (scheme, C1, Φ) once from rest and record how it went.
+
+    Returns:
+        ``{"mesh", "dofs", "schemes", "records": [...], "lowest_converging": ...}``.
+    """
+    from fem.case import CaseRunner
+
+    runner = CaseRunner(mesh_path, settings)
+    records = []
+    for name, loading in schemes.items():
+        runner.settings = replace(settings, loading=loading)
+        for c1 in sorted(C1_kPa, reverse=True):
+            for phi in phi_deg:
+                case = Case(c1, phi)
+                start = time.perf_counter()
+                result, timings = runner.solve(case)
+                u = runner.problem.displacement().x.array.reshape(-1, 3)
+                records.append(
+                    {
+                        "scheme": name,
+                        "C1": case.C1,
+                        "phi": case.phi,
+                        "converged": bool(result.converged),
+                        "load_fraction": result.fraction,
+                        "reason": result.reason,
+                        "load_steps": len(result.accepted),
+                        "rejected_steps": len(result.attempts) - len(result.accepted),
+                        "newton_iterations": result.total_iterations,
+                        "newton_iterations_accepted": int(sum(result.newton_iterations)),
+                        "first_failure": result.first_failure,
+                        "failure_kinds": result.failure_kinds,
+                        "wall_s": time.perf_counter() - start,
+                        "cpu_s": timings["solve_cpu"],
+                        "max_disp_mm": 1e3 * float(np.linalg.norm(u, axis=1).max(initial=0.0)),
+                        "min_detF": runner.problem.min_detF(),
+                    }
+                )
+                log.info(
+                    "%s C1=%.2f phi=%.1f: %s at %.3f in %d steps (%d rejected), %d its",
+                    name, c1, phi, "converged" if result.converged else "FAILED", result.fraction,
+                    len(result.accepted), len(result.attempts) - len(result.accepted),
+                    result.total_iterations,
+                )
+    out = {
+        "mesh": str(mesh_path),
+        "dofs": runner.problem.num_dofs(),
+        "settings": settings.describe(runner.solver.options),
+        "schemes": {name: {"fixed_steps": s.fixed_steps, "initial_step": s.initial_step,
+                           "max_steps": s.max_steps, "min_step": s.min_step} for name, s in schemes.items()},
+        "C1_kPa": sorted(C1_kPa),
+        "phi_deg": list(phi_deg),
+        "records": records,
+        "lowest_converging": lowest_converging(records),
+    }
+    runner.solver.destroy()
+    return out
+
+
+def lowest_converging(records: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """Per scheme and Φ: the lowest C1 from which every C1 upwards converged.
+
+    Returns:
+        ``{scheme: {phi: {"lowest_C1": float | None, "failed_below": {C1, first_failure,
+        failure_kinds, load_fraction} | None}}}`` plus, per scheme, ``"all_phi"``: the
+        lowest C1 at which every Φ converged.
+    """
+    out: dict[str, dict[str, Any]] = {}
+    schemes = sorted({r["scheme"] for r in records})
+    for scheme in schemes:
+        rows = [r for r in records if r["scheme"] == scheme]
+        per_phi: dict[str, Any] = {}
+        for phi in sorted({r["phi"] for r in rows}):
+            column = sorted((r for r in rows if r["phi"] == phi), key=lambda r: -r["C1"])
+            lowest, below = None, None
+            for r in column:  # from stiff to soft
+                if not r["converged"]:
+                    below = {k: r[k] for k in ("C1", "first_failure", "failure_kinds", "load_fraction", "reason")}
+                    break
+                lowest = r["C1"]
+            per_phi[f"{phi:.1f}"] = {"lowest_C1": lowest, "failed_below": below}
+        values = [v["lowest_C1"] for v in per_phi.values()]
+        per_phi["all_phi"] = None if any(v is None for v in values) else max(values)
+        out[scheme] = per_phi
+    return out
+
+
+__all__ = ["loading_schemes", "lowest_converging", "stability_map"]

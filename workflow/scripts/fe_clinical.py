@@ -1,0 +1,28 @@
+"""Snakemake adapter: the clinical benchmark (time, factorisation equivalents, fixed-step
+baseline, accuracy against the reference) at the workflow's default discretisation."""
+
+import json
+import logging
+
+from fem.benchmark import clinical_benchmark, clinical_cases, limit_blas_threads, load_displacement
+from fem.parameters import SolverSettings
+
+logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
+logging.info("single-threaded BLAS: %s", limit_blas_threads(1))
+
+cases = clinical_cases(snakemake.params.clinical)
+references = {
+    case.id: load_displacement(path, snakemake.input.reference_mesh)
+    for case, path in zip(cases, snakemake.input.references)
+}
+result = clinical_benchmark(
+    snakemake.input.mesh,
+    SolverSettings.from_config(snakemake.params.config),
+    cases,
+    references,
+    baseline_steps=snakemake.params.study["baseline_fixed_steps"],
+    repeats=snakemake.params.study["repeats"],
+)
+result["labels"] = {case.id: c.get("label", case.id) for case, c in zip(cases, snakemake.params.clinical)}
+with open(snakemake.output[0], "w") as fh:
+    json.dump(result, fh, indent=2, default=float)

@@ -1,0 +1,19 @@
+"""Snakemake adapter: solve one clinical case on the reference discretisation and store the field."""
+
+import logging
+
+from fem.benchmark import MeshSpec, Variant, solve_reference
+from fem.parameters import SolverSettings
+from fem.sweep import Case
+
+logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
+
+ref = snakemake.params.reference
+variant = Variant(MeshSpec(**ref["mesh"]), ref["element"], ref["solver"], ref["quadrature_degree"])
+w = snakemake.wildcards
+solve_reference(
+    snakemake.input.mesh,
+    variant.settings(SolverSettings.from_config(snakemake.params.config)),
+    Case(float(w.c1), float(w.phi), float(w.theta)),
+    snakemake.output[0],
+)

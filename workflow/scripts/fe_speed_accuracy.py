@@ -1,0 +1,15 @@
+"""Snakemake adapter: gather the speed-accuracy variants, mark the Pareto front and the
+cheapest variant meeting the accuracy target."""
+
+import json
+import logging
+
+from fem.benchmark import summarise_variants
+
+logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
+
+records = [json.load(open(path)) for path in snakemake.input]
+summary = summarise_variants(records, target=snakemake.params.target)
+summary["default_variant"] = snakemake.params.default_variant
+with open(snakemake.output[0], "w") as fh:
+    json.dump(summary, fh, indent=2, default=float)

@@ -1,0 +1,21 @@
+"""Snakemake adapter: stability maps over (C1, Phi) for adaptive and fixed-step loading."""
+
+import json
+import logging
+
+from fem.parameters import SolverSettings
+from fem.stability import loading_schemes, stability_map
+
+logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
+
+study = snakemake.params.stability
+settings = SolverSettings.from_config(snakemake.params.config)
+result = stability_map(
+    snakemake.input.mesh,
+    settings,
+    study["C1_kPa"],
+    study["phi_deg"],
+    loading_schemes(settings.loading, study["fixed_steps"]),
+)
+with open(snakemake.output[0], "w") as fh:
+    json.dump(result, fh, indent=2, default=float)
