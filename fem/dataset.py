@@ -18,7 +18,7 @@ Layout (units in attributes; M cases, N material points)::
     /cases/max_disp_mm   (M,)   float64
     /displacement        (M, N, 3) float64  m; NaN for failed cases
     /splits/by_sample/{train,validation,test}   flat sample indices (case * N + point)
-    /splits/by_case/{train,validation,test}     case indices
+    /splits/by_case/{train,validation,test}     case indices (test includes the clinical cases)
 
 Root attributes hold a description, the creation time, the provenance (config
 sections, package versions, git commit) as JSON strings. This module imports
@@ -155,8 +155,14 @@ def build_dataset(
     split: SplitFractions = SplitFractions(),
     seed: int = 0,
     config: dict[str, Any] | None = None,
+    test_cases: Sequence[tuple[float, float, float]] = (),
 ) -> dict[str, Any]:
     """Gather case files into one HDF5 dataset, written atomically.
+
+    Args:
+        test_cases: (C1, Φ, θ) of setups the by-case split always holds out as test
+            (the clinical cases: a by-case model is then judged on setups it never saw);
+            the other converged cases are partitioned by ``split``.
 
     Raises:
         DatasetError: naming the case whose files are missing, truncated or whose
@@ -189,7 +195,12 @@ def build_dataset(
     good_cases = np.flatnonzero(converged)
     samples = (good_cases[:, None] * n_points + np.arange(n_points)[None, :]).ravel()
     by_sample = {k: samples[v] for k, v in split.partition(len(samples), rng).items()}
-    by_case = {k: good_cases[v] for k, v in split.partition(len(good_cases), rng).items()}
+    keys = [(float(s["C1"]), float(s["phi"]), float(s.get("theta", 0.0))) for s in summaries]
+    wanted = {tuple(float(v) for v in c) for c in test_cases}
+    forced = np.array([keys[i] in wanted for i in good_cases], dtype=bool)
+    free = good_cases[~forced]
+    by_case = {k: free[v] for k, v in split.partition(len(free), rng).items()}
+    by_case["test"] = np.sort(np.concatenate([by_case["test"], good_cases[forced]]))
 
     def column(key: str, default: Any = np.nan) -> np.ndarray:
         return np.array([s.get(key, default) if s.get(key) is not None else default for s in summaries])

@@ -8,6 +8,10 @@ from typing import Any
 
 ACTIVATIONS = ("tanh", "relu", "gelu", "silu")
 SPLIT_KINDS = ("by_sample", "by_case")
+BOUNDARY_MODES = ("network", "shared", "exact")
+LR_SCHEDULES = ("constant", "cosine", "exponential")
+C1_ENCODINGS = ("linear", "log", "inverse")
+OUTPUT_SCALINGS = ("none", "compliance")
 
 
 class SurrogateConfigError(ValueError):
@@ -23,12 +27,29 @@ class SurrogateConfig:
         width: neurons per hidden layer.
         activation: hidden activation.
         alpha: boundary penalisation α of the loss (paper Eq. 2).
+        boundary: how the clamped (Dirichlet) surface is treated: ``network`` (the
+            paper's pair: a separate boundary network trained towards zero with weight
+            α), ``shared`` (one network for both point sets, α-weighted boundary term:
+            weight sharing as in the authors' public code), or ``exact`` (one network
+            whose output is multiplied by a smooth function of the distance to the rib
+            points that is exactly 0 on them, so the condition holds by construction).
+        bc_length: length scale of that function, as a fraction of the largest
+            point-to-rib distance: φ = 1 − exp(−d / (bc_length · d_max)).
+        c1_encoding: network input for C1 before scaling to [-1, 1]: ``linear`` (C1),
+            ``log`` (ln C1) or ``inverse`` (1 / C1, the compliance).
+        output_scaling: ``none`` (the network predicts u) or ``compliance`` (it predicts
+            u · C1 / C1_ref and the output is divided by C1 / C1_ref, since gravity sag
+            scales roughly as 1 / C1).
         learning_rate: Adam step size (paper 0.01).
         beta1: Adam β1 (paper 0.5).
         beta2: Adam β2 (paper 0.9).
         batch_size: samples per step (paper 8000).
         max_epochs: epoch cap (paper 200).
         patience: early-stopping patience on the validation loss (paper 20).
+        lr_schedule: ``constant`` (the paper), ``cosine`` (decay to
+            ``lr_final · learning_rate`` at ``max_epochs``) or ``exponential`` (the same
+            end point, geometric per epoch, as the authors' public code).
+        lr_final: final learning rate as a fraction of ``learning_rate``.
         seed: the one seed of all randomness.
         split: ``by_sample`` (the paper's random 80/10/10 of points) or ``by_case``
             (whole setups held out).
@@ -38,12 +59,18 @@ class SurrogateConfig:
     width: int = 32
     activation: str = "tanh"
     alpha: float = 1.0
+    boundary: str = "network"
+    bc_length: float = 0.25
+    c1_encoding: str = "linear"
+    output_scaling: str = "none"
     learning_rate: float = 0.01
     beta1: float = 0.5
     beta2: float = 0.9
     batch_size: int = 8000
     max_epochs: int = 200
     patience: int = 20
+    lr_schedule: str = "constant"
+    lr_final: float = 0.01
     seed: int = 0
     split: str = "by_sample"
 
@@ -56,8 +83,21 @@ class SurrogateConfig:
             raise SurrogateConfigError(
                 f"surrogate.activation must be one of {ACTIVATIONS}, got {self.activation!r}"
             )
-        if self.split not in SPLIT_KINDS:
-            raise SurrogateConfigError(f"surrogate.split must be one of {SPLIT_KINDS}, got {self.split!r}")
+        for name, allowed in (
+            ("split", SPLIT_KINDS),
+            ("boundary", BOUNDARY_MODES),
+            ("lr_schedule", LR_SCHEDULES),
+            ("c1_encoding", C1_ENCODINGS),
+            ("output_scaling", OUTPUT_SCALINGS),
+        ):
+            if getattr(self, name) not in allowed:
+                raise SurrogateConfigError(
+                    f"surrogate.{name} must be one of {allowed}, got {getattr(self, name)!r}"
+                )
+        if not (isinstance(self.bc_length, (int, float)) and 0 < self.bc_length <= 100):
+            raise SurrogateConfigError(f"surrogate.bc_length must lie in (0, 100], got {self.bc_length!r}")
+        if not (isinstance(self.lr_final, (int, float)) and 0 < self.lr_final <= 1):
+            raise SurrogateConfigError(f"surrogate.lr_final must lie in (0, 1], got {self.lr_final!r}")
         if not (math.isfinite(self.alpha) and self.alpha >= 0):
             raise SurrogateConfigError(f"surrogate.alpha must be >= 0, got {self.alpha!r}")
         if not (math.isfinite(self.learning_rate) and self.learning_rate > 0):
@@ -89,3 +129,25 @@ class SurrogateConfig:
     def architecture(self) -> str:
         """The paper's notation, e.g. ``3x32``."""
         return f"{self.hidden_layers}x{self.width}"
+
+    def with_architecture(self, architecture: str) -> SurrogateConfig:
+        """A copy with the architecture given in the paper's notation (``"3x32"``)."""
+        layers, width = parse_architecture(architecture)
+        return self.replace(hidden_layers=layers, width=width)
+
+
+def parse_architecture(architecture: str) -> tuple[int, int]:
+    """``"3x32"`` -> ``(3, 32)``.
+
+    Raises:
+        SurrogateConfigError: if the text is not ``<layers>x<width>`` with positive integers.
+    """
+    try:
+        layers, width = (int(v) for v in str(architecture).lower().split("x"))
+    except ValueError:
+        raise SurrogateConfigError(
+            f"architecture {architecture!r} is not '<hidden layers>x<width>', e.g. '3x32'"
+        ) from None
+    if layers < 1 or width < 1:
+        raise SurrogateConfigError(f"architecture {architecture!r} needs positive layers and width")
+    return layers, width

@@ -40,6 +40,7 @@ class Dataset:
         converged: (M,) bool.
         splits: ``{"by_sample": {...}, "by_case": {...}}`` index arrays.
         ids: case identifiers (M,).
+        node_index: index of each point in the mesh file (N,), for writing fields.
     """
 
     X: np.ndarray
@@ -52,6 +53,7 @@ class Dataset:
     converged: np.ndarray
     splits: dict[str, dict[str, np.ndarray]]
     ids: np.ndarray
+    node_index: np.ndarray | None = None
 
     @property
     def n_points(self) -> int:
@@ -122,46 +124,84 @@ def load_dataset(path: str | Path) -> Dataset:
                 converged=h5["cases/converged"][...].astype(bool),
                 splits=splits,
                 ids=h5["cases/id"].asstr()[...],
+                node_index=h5["points/node_index"][...] if "points/node_index" in h5 else None,
             )
     except OSError as err:
         raise DatasetFormatError(f"dataset {path} is unreadable ({err})") from None
     if ds.X.shape[0] == 0 or ds.C1.shape[0] == 0:
         raise DatasetFormatError(f"dataset {path} is empty")
+    if ds.displacement.shape != (ds.C1.shape[0], ds.X.shape[0], 3):
+        raise DatasetFormatError(
+            f"dataset {path}: /displacement has shape {ds.displacement.shape}, expected "
+            f"({ds.C1.shape[0]}, {ds.X.shape[0]}, 3)"
+        )
     if not ds.converged.any():
         raise DatasetFormatError(f"dataset {path} has no converged case")
     if not np.all(np.isfinite(ds.displacement[ds.converged])):
         raise DatasetFormatError(f"dataset {path} has NaN or inf displacements in converged cases")
+    n_samples = {"by_sample": ds.C1.shape[0] * ds.X.shape[0], "by_case": ds.C1.shape[0]}
     for kind, parts in splits.items():
         if parts["train"].size == 0 or parts["validation"].size == 0:
             raise DatasetFormatError(f"dataset {path}: split {kind} has an empty train or validation part")
+        for part, idx in parts.items():
+            if idx.size and (idx.min() < 0 or idx.max() >= n_samples[kind]):
+                raise DatasetFormatError(f"dataset {path}: split {kind}/{part} has out-of-range indices")
+            cases = idx // ds.X.shape[0] if kind == "by_sample" else idx
+            if idx.size and not ds.converged[cases].all():
+                raise DatasetFormatError(f"dataset {path}: split {kind}/{part} includes failed cases")
     return ds
 
 
 @dataclass(frozen=True)
 class Normalisation:
-    """Affine maps of inputs and outputs, fitted on the training data and saved with the model."""
+    """Affine maps of inputs and outputs, fitted on the training data and saved with the model.
+
+    Attributes:
+        x_mean: mean of the material points (m).
+        x_std: largest per-axis standard deviation of the points (m): one scale keeps
+            the geometry's aspect ratio.
+        c1_min: smallest encoded C1 of the training cases (maps to -1).
+        c1_max: largest encoded C1 of the training cases (maps to +1).
+        u_scale: displacement unit of the network (mm): the RMS training displacement,
+            after the compliance scaling if any.
+        c1_encoding: ``linear``, ``log`` or ``inverse`` (see :class:`SurrogateConfig`).
+        output_scaling: ``none`` or ``compliance``.
+        c1_ref: reference C1 of the compliance scaling (kPa), the softest training case.
+    """
 
     x_mean: tuple[float, float, float]
     x_std: float
     c1_min: float
     c1_max: float
     u_scale: float
+    c1_encoding: str = "linear"
+    output_scaling: str = "none"
+    c1_ref: float = 1.0
 
     @classmethod
-    def fit(cls, ds: Dataset, cases: np.ndarray) -> Normalisation:
+    def fit(
+        cls, ds: Dataset, cases: np.ndarray, c1_encoding: str = "linear", output_scaling: str = "none"
+    ) -> Normalisation:
         """Fit on the given (training) cases."""
-        u = ds.displacement[cases]
-        scale = float(np.sqrt(np.nanmean(np.sum(u**2, axis=-1))))
         c1 = ds.C1[cases]
-        lo, hi = float(c1.min()), float(c1.max())
+        c1_ref = float(c1.min())
+        encoded = _encode_c1(c1, c1_encoding)
+        lo, hi = float(encoded.min()), float(encoded.max())
         if hi == lo:  # a single stiffness: map it to 0
             lo, hi = lo - 1.0, hi + 1.0
+        u = ds.displacement[cases]
+        if output_scaling == "compliance":
+            u = u * (c1 / c1_ref)[:, None, None]
+        scale = float(np.sqrt(np.nanmean(np.sum(u**2, axis=-1))))
         return cls(
             x_mean=tuple(float(v) for v in ds.X.mean(axis=0)),
             x_std=float(ds.X.std(axis=0).max()),
             c1_min=lo,
             c1_max=hi,
             u_scale=scale if scale > 0 else 1.0,
+            c1_encoding=c1_encoding,
+            output_scaling=output_scaling,
+            c1_ref=c1_ref,
         )
 
     def as_dict(self) -> dict[str, Any]:
@@ -178,21 +218,99 @@ class Normalisation:
         return (X - np.asarray(self.x_mean)) / self.x_std
 
     def case(self, C1: np.ndarray, direction: np.ndarray) -> np.ndarray:
-        """Case features (..., 4): scaled C1 and the gravity direction."""
-        c = 2.0 * (np.asarray(C1, dtype=float) - self.c1_min) / (self.c1_max - self.c1_min) - 1.0
-        return np.concatenate([c[..., None], direction], axis=-1)
+        """Case features (..., 4): encoded and scaled C1, and the gravity direction."""
+        encoded = _encode_c1(np.asarray(C1, dtype=float), self.c1_encoding)
+        c = 2.0 * (encoded - self.c1_min) / (self.c1_max - self.c1_min) - 1.0
+        return np.concatenate([np.asarray(c)[..., None], direction], axis=-1)
+
+    def gain(self, C1: np.ndarray | float) -> np.ndarray:
+        """Factor from network output to displacement in units of ``u_scale`` (per case)."""
+        C1 = np.asarray(C1, dtype=float)
+        if self.output_scaling == "compliance":
+            return self.c1_ref / C1
+        return np.ones_like(C1)
+
+
+def _encode_c1(C1: np.ndarray, encoding: str) -> np.ndarray:
+    if encoding == "log":
+        return np.log(C1)
+    if encoding == "inverse":
+        return 1.0 / C1
+    return C1
+
+
+def dirichlet_factor(X: np.ndarray, boundary: np.ndarray, length: float) -> np.ndarray:
+    """Smooth factor that vanishes exactly on the clamped points: φ = 1 − exp(−d / (length · d_max)).
+
+    ``d`` is each point's distance to the nearest clamped point and ``d_max`` its
+    largest value, so φ rises linearly off the rib (as the displacement does) and
+    levels off at 1 in the bulk of the breast. Multiplying a network's output by φ
+    enforces the homogeneous Dirichlet condition exactly.
+
+    Args:
+        X: material points (N, 3).
+        boundary: clamped flags (N,); at least one must be set.
+        length: length scale as a fraction of ``d_max``.
+
+    Raises:
+        DatasetFormatError: if no point is clamped.
+    """
+    from scipy.spatial import cKDTree
+
+    if not np.any(boundary):
+        raise DatasetFormatError("an exact Dirichlet condition needs clamped (boundary) points")
+    d, _ = cKDTree(X[boundary]).query(X)
+    d_max = float(d.max()) if d.max() > 0 else 1.0
+    phi = 1.0 - np.exp(-d / (length * d_max))
+    phi[boundary] = 0.0
+    return phi
+
+
+@dataclass
+class Samples:
+    """Training or evaluation samples as the network sees them.
+
+    Attributes:
+        x: inputs (n, 7), float32.
+        y: targets (n, 3), displacement / ``u_scale``, float32.
+        gain: per-sample output multiplier (n,), float32: the compliance gain times
+            φ (exact Dirichlet mode) or 1.
+        boundary: clamped flags (n,).
+    """
+
+    x: np.ndarray
+    y: np.ndarray
+    gain: np.ndarray
+    boundary: np.ndarray
+
+    def __len__(self) -> int:
+        return self.x.shape[0]
+
+    def subset(self, mask: np.ndarray) -> Samples:
+        """The samples where ``mask`` holds."""
+        return Samples(self.x[mask], self.y[mask], self.gain[mask], self.boundary[mask])
 
 
 def sample_arrays(
-    ds: Dataset, samples: np.ndarray, norm: Normalisation
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Inputs (n, 7), scaled targets (n, 3) and boundary flags (n,) of flat sample indices."""
+    ds: Dataset, samples: np.ndarray, norm: Normalisation, point_factor: np.ndarray | None = None
+) -> Samples:
+    """Network inputs, scaled targets, output gains and boundary flags of flat sample indices.
+
+    Args:
+        ds: the dataset.
+        samples: flat indices ``case * N + point``.
+        norm: the fitted normalisation.
+        point_factor: per-point output factor (N,), e.g. :func:`dirichlet_factor`; 1 if None.
+    """
     case, point = np.divmod(samples, ds.n_points)
     inputs = np.concatenate(
         [norm.points(ds.X)[point], norm.case(ds.C1[case], ds.direction[case])], axis=1
     ).astype(np.float32)
     targets = (ds.displacement[case, point] / norm.u_scale).astype(np.float32)
-    return inputs, targets, ds.boundary[point]
+    gain = norm.gain(ds.C1)[case]
+    if point_factor is not None:
+        gain = gain * point_factor[point]
+    return Samples(inputs, targets, gain.astype(np.float32), ds.boundary[point])
 
 
 def write_json(path: str | Path, payload: dict[str, Any]) -> None:

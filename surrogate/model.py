@@ -3,6 +3,21 @@
 Parameters are a plain pytree ``{"domain": [(W, b), ...], "boundary": [(W, b), ...]}``
 so that they save as named arrays (no pickle) and load by rebuilding the
 skeleton from the hyperparameters.
+
+How the clamped rib surface (the homogeneous Dirichlet condition) is learnt depends
+on ``SurrogateConfig.boundary``:
+
+* ``network`` — the paper's pair: the boundary network predicts the points on the
+  rib, trained towards zero with weight α; the domain network predicts all others.
+* ``shared`` — one network (``"domain"``) for both point sets; the α-weighted
+  boundary term pulls that same function to zero on the rib. This is weight sharing,
+  as in the authors' public training code.
+* ``exact`` — one network whose output is multiplied by a per-point factor φ that is
+  0 on the rib (:func:`surrogate.data.dirichlet_factor`): the condition holds by
+  construction and the boundary term of Eq. 2 vanishes.
+
+Every prediction is ``network(x) * gain``, where ``gain`` holds φ (exact mode) and
+the compliance scaling (``output_scaling``), both precomputed per sample.
 """
 
 from __future__ import annotations
@@ -17,10 +32,11 @@ import numpy as np
 from surrogate.config import SurrogateConfig
 from surrogate.data import N_INPUTS
 
-Params = dict[str, list[tuple[jax.Array, jax.Array]]]
+Layers = list[tuple[jax.Array, jax.Array]]
+Params = dict[str, Layers]
 NETWORKS = ("domain", "boundary")
 
-_ACTIVATIONS: dict[str, Callable[[jax.Array], jax.Array]] = {
+ACTIVATIONS: dict[str, Callable[[jax.Array], jax.Array]] = {
     "tanh": jnp.tanh,
     "relu": jax.nn.relu,
     "gelu": jax.nn.gelu,
@@ -28,12 +44,22 @@ _ACTIVATIONS: dict[str, Callable[[jax.Array], jax.Array]] = {
 }
 
 
+def network_names(config: SurrogateConfig) -> tuple[str, ...]:
+    """Networks a config has: both in ``network`` mode, only ``domain`` otherwise."""
+    return NETWORKS if config.boundary == "network" else ("domain",)
+
+
+def boundary_network(config: SurrogateConfig) -> str | None:
+    """Network that predicts the clamped points (None: they are exactly zero)."""
+    return {"network": "boundary", "shared": "domain", "exact": None}[config.boundary]
+
+
 def layer_sizes(config: SurrogateConfig) -> list[int]:
     """Input, hidden and output widths of one network."""
     return [N_INPUTS] + [config.width] * config.hidden_layers + [3]
 
 
-def init_mlp(key: jax.Array, sizes: list[int]) -> list[tuple[jax.Array, jax.Array]]:
+def init_mlp(key: jax.Array, sizes: list[int]) -> Layers:
     """Glorot-uniform weights and zero biases."""
     layers = []
     for k, (n_in, n_out) in zip(jax.random.split(key, len(sizes) - 1), zip(sizes[:-1], sizes[1:])):
@@ -44,26 +70,42 @@ def init_mlp(key: jax.Array, sizes: list[int]) -> list[tuple[jax.Array, jax.Arra
 
 
 def init_params(key: jax.Array, config: SurrogateConfig) -> Params:
-    """Independent initial weights of the two networks."""
-    k_domain, k_boundary = jax.random.split(key)
+    """Independent initial weights of the networks (split from one key)."""
+    keys = jax.random.split(key, len(NETWORKS))
     sizes = layer_sizes(config)
-    return {"domain": init_mlp(k_domain, sizes), "boundary": init_mlp(k_boundary, sizes)}
+    return {net: init_mlp(k, sizes) for net, k in zip(NETWORKS, keys) if net in network_names(config)}
 
 
-def mlp(layers: list[tuple[jax.Array, jax.Array]], x: jax.Array, activation: str) -> jax.Array:
+def mlp(layers: Layers, x: jax.Array, activation: str) -> jax.Array:
     """Dense layers with ``activation`` between them and a linear output."""
-    act = _ACTIVATIONS[activation]
+    act = ACTIVATIONS[activation]
     for W, b in layers[:-1]:
         x = act(x @ W + b)
     W, b = layers[-1]
     return x @ W + b
 
 
-def apply(params: Params, x: jax.Array, boundary: jax.Array, activation: str) -> jax.Array:
-    """Each sample through its network: boundary points through the boundary network."""
-    domain = mlp(params["domain"], x, activation)
-    bound = mlp(params["boundary"], x, activation)
-    return jnp.where(boundary[:, None], bound, domain)
+def apply(
+    params: Params, x: jax.Array, boundary: jax.Array, gain: jax.Array, config: SurrogateConfig
+) -> jax.Array:
+    """Prediction of mixed samples, each through the network its point belongs to.
+
+    Args:
+        params: the networks.
+        x: inputs (n, 7).
+        boundary: clamped flags (n,).
+        gain: output multipliers (n,) (see the module docstring).
+        config: architecture and boundary mode.
+    """
+    domain = mlp(params["domain"], x, config.activation)
+    net = boundary_network(config)
+    if net is None:
+        bound = jnp.zeros_like(domain)
+    elif net == "domain":
+        bound = domain
+    else:
+        bound = mlp(params[net], x, config.activation)
+    return jnp.where(boundary[:, None], bound, domain) * gain[:, None]
 
 
 def pointwise_error(prediction: jax.Array, target: jax.Array) -> jax.Array:
@@ -71,29 +113,51 @@ def pointwise_error(prediction: jax.Array, target: jax.Array) -> jax.Array:
     return jnp.sqrt(jnp.sum((prediction - target) ** 2, axis=-1) + 1e-12)
 
 
+def split_loss(
+    params: Params,
+    domain: tuple[jax.Array, jax.Array, jax.Array],
+    boundary: tuple[jax.Array, jax.Array, jax.Array] | None,
+    config: SurrogateConfig,
+) -> jax.Array:
+    """The paper's Eq. 2 averaged over a batch held as separate domain and boundary parts.
+
+    L = (Σ_domain ‖u − û‖₂ + α Σ_boundary ‖u − û‖₂) / (batch size). Each part is
+    ``(x, target, gain)``; only the network a part belongs to is evaluated on it,
+    which halves the cost of the paper's pair against evaluating both everywhere.
+    """
+    x, y, g = domain
+    total = jnp.sum(pointwise_error(mlp(params["domain"], x, config.activation) * g[:, None], y))
+    count = x.shape[0]
+    net = boundary_network(config)
+    if boundary is not None and net is not None:
+        xb, yb, gb = boundary
+        pred = mlp(params[net], xb, config.activation) * gb[:, None]
+        total = total + config.alpha * jnp.sum(pointwise_error(pred, yb))
+        count += xb.shape[0]
+    return total / count
+
+
 def loss(
     params: Params,
     x: jax.Array,
     target: jax.Array,
     boundary: jax.Array,
-    weight: jax.Array,
-    alpha: float,
-    activation: str,
+    gain: jax.Array,
+    config: SurrogateConfig,
+    weight: jax.Array | None = None,
 ) -> jax.Array:
-    """The paper's Eq. 2, averaged over the batch.
-
-    L = Σ_domain ‖u − û‖₂ + α Σ_boundary ‖u − û‖₂; ``weight`` masks padded samples.
-    """
-    err = pointwise_error(apply(params, x, boundary, activation), target)
-    scale = jnp.where(boundary, alpha, 1.0) * weight
-    return jnp.sum(scale * err) / jnp.maximum(jnp.sum(weight), 1.0)
+    """The paper's Eq. 2 averaged over mixed samples; ``weight`` masks padded samples."""
+    err = pointwise_error(apply(params, x, boundary, gain, config), target)
+    w = jnp.ones_like(err) if weight is None else weight
+    scale = jnp.where(boundary, config.alpha, 1.0) * w
+    return jnp.sum(scale * err) / jnp.maximum(jnp.sum(w), 1.0)
 
 
 def to_arrays(params: Params) -> dict[str, np.ndarray]:
     """Flatten to named numpy arrays, e.g. ``domain/0/W``."""
     out = {}
     for net in NETWORKS:
-        for i, (W, b) in enumerate(params[net]):
+        for i, (W, b) in enumerate(params.get(net, [])):
             out[f"{net}/{i}/W"] = np.asarray(W)
             out[f"{net}/{i}/b"] = np.asarray(b)
     return out
@@ -103,29 +167,28 @@ def from_arrays(arrays: dict[str, Any], config: SurrogateConfig) -> Params:
     """Rebuild parameters from named arrays, checking them against the architecture.
 
     Raises:
-        ValueError: if the arrays belong to another architecture.
+        ValueError: if the arrays belong to another architecture or boundary mode.
     """
     sizes = layer_sizes(config)
+    names = network_names(config)
+    what = f"a {config.architecture} network ({config.boundary} boundary)"
     params: Params = {}
-    for net in NETWORKS:
+    for net in names:
         layers = []
         for i, (n_in, n_out) in enumerate(zip(sizes[:-1], sizes[1:])):
             try:
                 W, b = arrays[f"{net}/{i}/W"], arrays[f"{net}/{i}/b"]
             except KeyError:
-                raise ValueError(
-                    f"model arrays lack {net} layer {i}: not a {config.architecture} network"
-                ) from None
+                raise ValueError(f"model arrays lack {net} layer {i}: not {what}") from None
             if W.shape != (n_in, n_out) or b.shape != (n_out,):
                 raise ValueError(
-                    f"{net} layer {i} has shape {W.shape}, expected {(n_in, n_out)} "
-                    f"for a {config.architecture} network"
+                    f"{net} layer {i} has shape {W.shape}, expected {(n_in, n_out)} for {what}"
                 )
-            layers.append((jnp.asarray(W), jnp.asarray(b)))
+            if not (np.all(np.isfinite(W)) and np.all(np.isfinite(b))):
+                raise ValueError(f"{net} layer {i} holds NaN or inf weights")
+            layers.append((jnp.asarray(W, jnp.float32), jnp.asarray(b, jnp.float32)))
         params[net] = layers
-    expected = 2 * len(NETWORKS) * (len(sizes) - 1)
+    expected = 2 * len(names) * (len(sizes) - 1)
     if len(arrays) != expected:
-        raise ValueError(
-            f"model has {len(arrays)} arrays, a {config.architecture} network has {expected}"
-        )
+        raise ValueError(f"model has {len(arrays)} weight arrays, {what} has {expected}")
     return params

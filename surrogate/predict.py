@@ -2,12 +2,20 @@
 
 A model folder holds ``model.json`` (hyperparameters, normalisation, training
 range, metrics) and ``params.npz`` (weights as named arrays, plus the material
-points). Nothing is pickled; loading rebuilds the network skeleton from the JSON
-first and checks every array against it.
+points, their boundary flags, mesh node indices and, in the exact Dirichlet mode,
+the factor φ). Nothing is pickled; loading rebuilds the network skeleton from the
+JSON first and checks every array against it.
+
+Prediction is built for speed: the first layer's point part ``X W_x + b`` does not
+depend on the query, so it is computed once per model; a query then costs one
+rank-one update, the remaining layers and one gather, in one jitted float32 call
+with static shapes. Points on the rib go through the boundary network (``network``
+mode), the shared network (``shared``) or are exactly zero (``exact``).
 
 Example::
 
-    python -m surrogate.predict results/surrogate/model --c1 1.0 --phi 180 --output u.npy
+    python -m surrogate.predict results/surrogate/model --c1 1.0 --phi 180 --output u.npy \\
+        --xdmf u.xdmf --mesh results/mesh/mesh.xdmf
 """
 
 from __future__ import annotations
@@ -25,16 +33,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from surrogate.config import SurrogateConfig
-from surrogate.data import Dataset, Normalisation, gravity_direction, write_json
-from surrogate.model import Params, apply, from_arrays, to_arrays
+from surrogate.config import SurrogateConfig, SurrogateConfigError
+from surrogate.data import Dataset, Normalisation, write_json
+from surrogate.model import ACTIVATIONS, Params, boundary_network, from_arrays, to_arrays
 from surrogate.train import TrainResult
 
 log = logging.getLogger(__name__)
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 MODEL_JSON = "model.json"
 PARAMS_NPZ = "params.npz"
+HISTORY_JSON = "history.json"
 
 
 class ModelFileError(ValueError):
@@ -45,29 +54,50 @@ class ExtrapolationWarning(UserWarning):
     """The query lies outside the parameter range the surrogate was trained on."""
 
 
+def training_range(ds: Dataset, cases: np.ndarray) -> dict[str, Any]:
+    """The C1, Φ and θ values of the given (training) cases."""
+    return {
+        "C1_kPa": [float(ds.C1[cases].min()), float(ds.C1[cases].max())],
+        "phi_deg": sorted({float(v) for v in ds.phi[cases]}),
+        "theta_deg": sorted({float(v) for v in ds.theta[cases]}),
+    }
+
+
 def save_model(folder: str | Path, result: TrainResult, ds: Dataset) -> Path:
-    """Write a trained surrogate to ``folder``; returns the path of ``model.json``."""
+    """Write a trained surrogate (and its training history) to ``folder``.
+
+    Returns:
+        The path of ``model.json``.
+    """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     cases = result.train_cases if result.train_cases is not None else np.flatnonzero(ds.converged)
-    arrays = to_arrays(result.params)
-    np.savez(folder / PARAMS_NPZ, points_X=ds.X, points_boundary=ds.boundary, **arrays)
+    extra = {}
+    if result.point_factor is not None:
+        extra["points_factor"] = result.point_factor
+    node_index = ds.node_index if ds.node_index is not None else np.arange(ds.n_points)
+    np.savez(
+        folder / PARAMS_NPZ,
+        points_X=ds.X,
+        points_boundary=ds.boundary,
+        points_node_index=node_index,
+        **extra,
+        **to_arrays(result.params),
+    )
     meta = {
         "format_version": FORMAT_VERSION,
         "config": result.config.as_dict(),
         "normalisation": result.normalisation.as_dict(),
         "n_points": int(ds.n_points),
-        "training_range": {
-            "C1_kPa": [float(ds.C1[cases].min()), float(ds.C1[cases].max())],
-            "phi_deg": sorted({float(v) for v in ds.phi[cases]}),
-            "theta_deg": sorted({float(v) for v in ds.theta[cases]}),
-        },
+        "training_range": training_range(ds, cases),
+        "held_out_cases": [str(ds.ids[c]) for c in (result.held_out_cases if result.held_out_cases is not None else [])],
         "metrics": result.summary(),
-        "inputs": ["x", "y", "z", "C1 (scaled)", "g_x/|g|", "g_y/|g|", "g_z/|g|"],
+        "inputs": ["x", "y", "z", "C1 (encoded, scaled)", "g_x/|g|", "g_y/|g|", "g_z/|g|"],
         "outputs": ["u_x", "u_y", "u_z (mm)"],
     }
     path = folder / MODEL_JSON
     write_json(path, meta)
+    write_json(folder / HISTORY_JSON, {"summary": result.summary(), "history": result.history})
     return path
 
 
@@ -81,6 +111,10 @@ class Surrogate:
         X: material points (N, 3), m.
         boundary: boundary flags (N,).
         training_range: the C1 / Φ / θ values it was trained on.
+        point_factor: per-point output factor φ (exact Dirichlet mode), else None.
+        node_index: index of each point in the mesh file (N,), for XDMF output.
+        metrics: training metrics as saved (optional).
+        held_out: ids of cases kept out of its training and validation.
     """
 
     def __init__(
@@ -91,25 +125,89 @@ class Surrogate:
         X: np.ndarray,
         boundary: np.ndarray,
         training_range: dict[str, Any],
+        point_factor: np.ndarray | None = None,
+        node_index: np.ndarray | None = None,
+        metrics: dict[str, Any] | None = None,
+        held_out: list[str] | None = None,
     ) -> None:
+        if config.boundary == "exact" and point_factor is None:
+            raise ModelFileError("an exact-Dirichlet model needs its point factor (points_factor)")
         self.config = config
         self.params = params
         self.normalisation = normalisation
-        self.X = X
-        self.boundary = boundary
+        self.X = np.asarray(X)
+        self.boundary = np.asarray(boundary, dtype=bool)
         self.training_range = training_range
-        self._points = jnp.asarray(normalisation.points(X), dtype=jnp.float32)
-        self._boundary = jnp.asarray(boundary)
-        activation, scale = config.activation, normalisation.u_scale
-        points, flags = self._points, self._boundary
+        self.point_factor = point_factor
+        self.node_index = np.arange(len(X)) if node_index is None else np.asarray(node_index)
+        self.metrics = metrics or {}
+        self.held_out = list(held_out or [])
+        self._build_range_checks()
+        self._build_predictor()
 
-        @jax.jit
-        def _predict(params: Params, case_features: jax.Array) -> jax.Array:
-            feats = jnp.broadcast_to(case_features, (points.shape[0], case_features.shape[0]))
-            x = jnp.concatenate([points, feats], axis=1)
-            return apply(params, x, flags, activation) * scale
+    # -- construction -----------------------------------------------------------------
+    def _build_predictor(self) -> None:
+        """Precompute the query-independent part of the first layer and jit the rest."""
+        config, norm = self.config, self.normalisation
+        pts = norm.points(self.X).astype(np.float32)
+        domain = np.flatnonzero(~self.boundary)
+        bound = np.flatnonzero(self.boundary)
+        inverse = np.argsort(np.concatenate([domain, bound]))
+        factor = np.ones(len(self.X), np.float32) if self.point_factor is None else self.point_factor
+        act = ACTIVATIONS[config.activation]
+        u_scale = np.float32(norm.u_scale)
 
-        self._predict = _predict
+        def split_first(layers, idx, gain):
+            W0, b0 = (np.asarray(a, np.float32) for a in layers[0])
+            pre = pts[idx] @ W0[:3] + b0  # point part of the first layer, once per mesh
+            return {
+                "pre": jnp.asarray(pre),
+                "Wc": jnp.asarray(W0[3:]),
+                "rest": [(jnp.asarray(W), jnp.asarray(b)) for W, b in layers[1:]],
+                "gain": jnp.asarray((gain * u_scale).astype(np.float32)[:, None]),
+            }
+
+        parts = {"domain": split_first(self.params["domain"], domain, factor[domain])}
+        net = boundary_network(config)
+        if net is not None and bound.size:
+            parts["boundary"] = split_first(self.params[net], bound, factor[bound])
+        n_bound = int(bound.size)
+        inverse_j = jnp.asarray(inverse.astype(np.int32))
+
+        def forward(part, c):
+            h = act(part["pre"] + c[:4] @ part["Wc"])
+            for W, b in part["rest"][:-1]:
+                h = act(h @ W + b)
+            W, b = part["rest"][-1]
+            return (h @ W + b) * (part["gain"] * c[4])
+
+        def run(parts, c):
+            out = [forward(parts["domain"], c)]
+            if "boundary" in parts:
+                out.append(forward(parts["boundary"], c))
+            elif n_bound:
+                out.append(jnp.zeros((n_bound, 3), jnp.float32))
+            return jnp.take(jnp.concatenate(out), inverse_j, axis=0)
+
+        self._parts = parts
+        self._run = jax.jit(run)
+
+    def _build_range_checks(self) -> None:
+        rng = self.training_range or {}
+        self._c1_range = tuple(rng.get("C1_kPa", (0.0, math.inf)))
+        phis = sorted({float(p) % 360.0 for p in rng.get("phi_deg", [])})
+        self._phi_gap: tuple[float, float] | None = None
+        if len(phis) > 1:
+            gaps = [(phis[i], (phis[(i + 1) % len(phis)] - phis[i]) % 360.0 or 360.0)
+                    for i in range(len(phis))]
+            start, widest = max(gaps, key=lambda g: g[1])
+            # An arc without training angles more than twice as wide as the typical spacing
+            # is outside the training range; elsewhere Φ is interpolated.
+            if widest > 2.0 * float(np.median([g[1] for g in gaps])):
+                self._phi_gap = (start, widest)
+        elif len(phis) == 1:
+            self._phi_gap = (phis[0], 360.0)
+        self._thetas = [float(t) for t in rng.get("theta_deg", [])]
 
     @classmethod
     def load(cls, folder: str | Path) -> Surrogate:
@@ -123,22 +221,29 @@ class Surrogate:
             folder = folder.parent
         try:
             meta = json.loads((folder / MODEL_JSON).read_text())
-            with np.load(folder / PARAMS_NPZ) as npz:
+            with np.load(folder / PARAMS_NPZ, allow_pickle=False) as npz:
                 arrays = {k: npz[k] for k in npz.files}
         except (OSError, json.JSONDecodeError, ValueError) as err:
             raise ModelFileError(f"cannot read a surrogate model from {folder}: {err}") from None
         try:
             config = SurrogateConfig.from_mapping(meta["config"])
-            X = arrays.pop("points_X")
-            boundary = arrays.pop("points_boundary")
+            points = {k: arrays.pop(k) for k in list(arrays) if k.startswith("points_")}
             params = from_arrays(arrays, config)
             norm = Normalisation.from_dict(meta["normalisation"])
-        except (KeyError, ValueError) as err:
+            X, boundary = points["points_X"], points["points_boundary"]
+        except (KeyError, TypeError, ValueError, SurrogateConfigError) as err:
             raise ModelFileError(f"{folder}: {err}") from None
-        return cls(config, params, norm, X, boundary, meta.get("training_range", {}))
+        if X.shape != (meta.get("n_points", X.shape[0]), 3) or boundary.shape != (X.shape[0],):
+            raise ModelFileError(f"{folder}: material points do not match n_points")
+        return cls(
+            config, params, norm, X, boundary, meta.get("training_range", {}),
+            point_factor=points.get("points_factor"), node_index=points.get("points_node_index"),
+            metrics=meta.get("metrics"), held_out=meta.get("held_out_cases"),
+        )
 
+    # -- queries ----------------------------------------------------------------------
     def predict(self, C1: float, phi: float, theta: float = 0.0) -> np.ndarray:
-        """Displacement (N, 3) in mm of every material point for one setup.
+        """Displacement (N, 3) in mm (float32) of every material point for one setup.
 
         Args:
             C1: neo-Hookean parameter, kPa.
@@ -147,53 +252,100 @@ class Surrogate:
 
         Raises:
             ValueError: if an input is not a finite number or C1 is not positive.
+
+        Warns:
+            ExtrapolationWarning: if (C1, Φ, θ) lies outside the training range.
         """
+        return np.asarray(self._run(self._parts, self.features(C1, phi, theta)))
+
+    def features(self, C1: float, phi: float, theta: float = 0.0) -> np.ndarray:
+        """Checked query features: scaled C1, gravity direction, output gain (5,), float32."""
         for name, value in (("C1", C1), ("phi", phi), ("theta", theta)):
-            if not isinstance(value, (int, float, np.floating, np.integer)) or not math.isfinite(value):
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
+                    or not math.isfinite(value):
                 raise ValueError(f"{name} must be a finite number, got {value!r}")
         if C1 <= 0:
             raise ValueError(f"C1 must be positive, got {C1} kPa")
         self._warn_if_outside(C1, phi, theta)
-        return np.asarray(self._predict(self.params, self.case_features(C1, phi, theta)))
-
-    def case_features(self, C1: float, phi: float, theta: float = 0.0) -> jax.Array:
-        """Normalised case inputs (4,) as the network sees them."""
-        direction = gravity_direction(np.asarray(phi, dtype=float), np.asarray(theta, dtype=float))
-        return jnp.asarray(self.normalisation.case(np.asarray(C1), direction), dtype=jnp.float32)
+        norm = self.normalisation
+        p, t = math.radians(phi), math.radians(theta)
+        if norm.c1_encoding == "log":
+            enc = math.log(C1)
+        elif norm.c1_encoding == "inverse":
+            enc = 1.0 / C1
+        else:
+            enc = float(C1)
+        c = 2.0 * (enc - norm.c1_min) / (norm.c1_max - norm.c1_min) - 1.0
+        gain = norm.c1_ref / C1 if norm.output_scaling == "compliance" else 1.0
+        return np.array(
+            [c, math.cos(p), math.sin(p) * math.cos(t), math.sin(p) * math.sin(t), gain], np.float32
+        )
 
     def _warn_if_outside(self, C1: float, phi: float, theta: float) -> None:
-        rng = self.training_range
-        if not rng:
-            return
-        lo, hi = rng["C1_kPa"]
         messages = []
+        lo, hi = self._c1_range
         if not lo - 1e-9 <= C1 <= hi + 1e-9:
             messages.append(f"C1 = {C1} kPa is outside the training range [{lo}, {hi}] kPa")
-        phis = np.asarray(rng["phi_deg"])
-        gap = np.min(np.abs((phis - phi + 180.0) % 360.0 - 180.0))
-        if len(phis) > 1:
-            spacing = np.max(np.diff(np.sort(np.concatenate([phis, phis[:1] + 360.0]))))
-            if gap > spacing:
-                messages.append(f"Φ = {phi}° is {gap:.0f}° from the nearest training angle")
-        if not any(np.isclose(theta, t) for t in rng["theta_deg"]) and len(rng["theta_deg"]) == 1:
-            messages.append(f"θ = {theta}° but the surrogate was trained at θ = {rng['theta_deg'][0]}° only")
+        if self._phi_gap is not None:
+            start, width = self._phi_gap
+            offset = (phi - start) % 360.0
+            if 1e-6 < offset < width - 1e-6:
+                messages.append(f"Φ = {phi}° lies in a {width:.0f}° arc without training angles")
+        if self._thetas and abs(math.sin(math.radians(phi))) > 1e-6 and \
+                min(abs(theta - t) for t in self._thetas) > 1e-6 and len(self._thetas) == 1:
+            messages.append(f"θ = {theta}° but the surrogate was trained at θ = {self._thetas[0]}° only")
         for message in messages:
-            warnings.warn(message + "; the prediction is an extrapolation", ExtrapolationWarning, stacklevel=3)
+            warnings.warn(message + "; the prediction is an extrapolation", ExtrapolationWarning, stacklevel=4)
 
 
-def write_prediction_xdmf(path: str | Path, mesh_xdmf: str | Path, X: np.ndarray, u_mm: np.ndarray) -> None:
-    """Write a predicted displacement on the mesh's tetrahedra as XDMF (via meshio)."""
+def read_mesh_vertices(mesh_xdmf: str | Path, node_index: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Tetrahedra of the mesh on the material points: ``(points (N, 3), cells (C, 4))``.
+
+    The material points are the mesh vertices, listed by ``node_index`` into the mesh
+    file's geometry; higher-order nodes are dropped.
+
+    Raises:
+        ModelFileError: if the mesh is not the one the points come from.
+    """
     import h5py
-    import meshio
+
+    from meshes.tags import MESH_NAME
 
     mesh_h5 = Path(mesh_xdmf).with_suffix(".h5")
-    with h5py.File(mesh_h5, "r") as h5:
-        geometry = h5["Mesh/mesh/geometry"][...]
-        topology = h5["Mesh/mesh/topology"][...]
-    if geometry.shape[0] != X.shape[0] or not np.allclose(geometry, X, atol=1e-9):
+    try:
+        with h5py.File(mesh_h5, "r") as h5:
+            geometry = h5[f"Mesh/{MESH_NAME}/geometry"][...]
+            topology = h5[f"Mesh/{MESH_NAME}/topology"][...]
+    except (OSError, KeyError) as err:
+        raise ModelFileError(f"cannot read the mesh {mesh_h5}: {err}") from None
+    if node_index.max() >= geometry.shape[0] or not np.allclose(geometry[node_index], X, atol=1e-9):
         raise ModelFileError(f"{mesh_xdmf} is not the mesh the surrogate was trained on")
-    mesh = meshio.Mesh(geometry, [("tetra", topology[:, :4])], point_data={"displacement_mm": u_mm})
+    lookup = np.full(geometry.shape[0], -1, np.int64)
+    lookup[node_index] = np.arange(node_index.size)
+    cells = lookup[topology[:, :4]]
+    if np.any(cells < 0):
+        raise ModelFileError(f"{mesh_xdmf}: a tetrahedron vertex is not a material point")
+    return X, cells
+
+
+def write_point_fields_xdmf(
+    path: str | Path, mesh_xdmf: str | Path, node_index: np.ndarray, X: np.ndarray,
+    fields: dict[str, np.ndarray],
+) -> None:
+    """Write per-point fields on the mesh's tetrahedra as XDMF + HDF5 (meshio), for ParaView."""
+    import meshio
+
+    points, cells = read_mesh_vertices(mesh_xdmf, node_index, X)
+    mesh = meshio.Mesh(points, [("tetra", cells)], point_data={k: np.asarray(v) for k, v in fields.items()})
     meshio.write(str(path), mesh)
+
+
+def write_prediction_xdmf(path: str | Path, mesh_xdmf: str | Path, model: Surrogate, u_mm: np.ndarray) -> None:
+    """Write a predicted displacement (mm) and its magnitude on the mesh as XDMF."""
+    write_point_fields_xdmf(
+        path, mesh_xdmf, model.node_index, model.X,
+        {"displacement_mm": u_mm, "displacement_magnitude_mm": np.linalg.norm(u_mm, axis=1)},
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -204,13 +356,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--phi", type=float, required=True, help="gravity elevation angle, degrees")
     parser.add_argument("--theta", type=float, default=0.0, help="gravity azimuth angle, degrees")
     parser.add_argument("--output", help="write the (N, 3) displacement in mm as .npy")
-    parser.add_argument("--xdmf", help="write the displacement on the mesh as XDMF")
+    parser.add_argument("--xdmf", help="write the displacement on the mesh as XDMF (ParaView)")
     parser.add_argument("--mesh", default="results/mesh/mesh.xdmf", help="mesh for --xdmf")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(message)s")
+    logging.captureWarnings(True)
     try:
         model = Surrogate.load(args.model)
         u = model.predict(args.c1, args.phi, args.theta)
+        if args.xdmf:
+            write_prediction_xdmf(args.xdmf, args.mesh, model, u)
     except (ModelFileError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
@@ -218,8 +373,6 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{u.shape[0]} points: max |u| = {norms.max():.3f} mm, mean |u| = {norms.mean():.3f} mm")
     if args.output:
         np.save(args.output, u)
-    if args.xdmf:
-        write_prediction_xdmf(args.xdmf, args.mesh, model.X, u)
     return 0
 
 

@@ -1,7 +1,14 @@
 """Training: Adam with the paper's settings, early stopping, best weights kept.
 
-One epoch is a single jitted ``lax.scan`` over shuffled mini-batches, so the
-Python loop runs once per epoch rather than once per step.
+The paper's protocol is the default: Adam (learning rate 0.01, β1 = 0.5, β2 = 0.9),
+batches of 8000 samples, at most 200 epochs, early stopping with patience 20 on the
+validation loss (Eq. 2), best weights kept. A learning-rate schedule is an option.
+
+Each batch holds domain and boundary samples in their training proportions, as the
+authors' code draws one batch from each set per step; every network is then
+evaluated only on its own samples (:func:`surrogate.model.split_loss`). One epoch is
+a single jitted ``lax.scan`` over :func:`train_step`, so Python runs once per epoch.
+All randomness (initial weights, shuffling) is split from ``config.seed``.
 """
 
 from __future__ import annotations
@@ -18,191 +25,319 @@ import numpy as np
 import optax
 
 from surrogate.config import SurrogateConfig
-from surrogate.data import Dataset, Normalisation, sample_arrays
-from surrogate.model import Params, apply, init_params, loss, pointwise_error
+from surrogate.data import Dataset, Normalisation, Samples, dirichlet_factor, sample_arrays
+from surrogate.model import Params, boundary_network, init_params, mlp, pointwise_error, split_loss
 
 log = logging.getLogger(__name__)
 
-EVAL_CHUNK = 65536
+EVAL_CHUNK = 32768
 
 
 @dataclass
 class TrainResult:
-    """A trained surrogate and how it got there."""
+    """A trained surrogate and how it got there.
+
+    Attributes:
+        params: the best weights (lowest validation loss).
+        config: hyperparameters.
+        normalisation: input/output maps fitted on the training cases.
+        point_factor: per-point output factor φ of the exact Dirichlet mode (None otherwise).
+        history: per-epoch losses, validation error (mm), learning rate and time.
+        best_epoch: epoch of the best weights.
+        best_validation_loss: Eq. 2 (batch mean, scaled units) at the best epoch.
+        validation_error_mm: mean per-point error norm over the validation samples, mm.
+        validation_error_domain_mm: the same over validation points off the rib only.
+        train_s: wall time of the whole training, compilation included.
+        compile_s: wall time of compiling the epoch.
+        train_cases: case indices the normalisation and training range come from.
+        held_out_cases: case indices excluded from training and validation.
+    """
 
     params: Params
     config: SurrogateConfig
     normalisation: Normalisation
+    point_factor: np.ndarray | None = None
     history: list[dict[str, float]] = field(default_factory=list)
     best_epoch: int = 0
     best_validation_loss: float = float("inf")
     validation_error_mm: float = float("nan")
+    validation_error_domain_mm: float = float("nan")
     train_s: float = 0.0
     compile_s: float = 0.0
     train_cases: np.ndarray | None = None
+    held_out_cases: np.ndarray | None = None
 
     def summary(self) -> dict[str, Any]:
         """JSON-friendly metrics."""
         return {
             "architecture": self.config.architecture,
+            "boundary": self.config.boundary,
+            "split": self.config.split,
+            "seed": self.config.seed,
             "epochs": len(self.history),
             "best_epoch": self.best_epoch,
             "best_validation_loss": self.best_validation_loss,
             "validation_error_mm": self.validation_error_mm,
+            "validation_error_domain_mm": self.validation_error_domain_mm,
             "train_s": self.train_s,
             "compile_s": self.compile_s,
+            "n_train_cases": 0 if self.train_cases is None else int(self.train_cases.size),
+            "held_out_cases": [] if self.held_out_cases is None else self.held_out_cases.tolist(),
         }
 
 
-def make_optimizer(config: SurrogateConfig) -> optax.GradientTransformation:
-    """Adam with the configured step size and moment decay rates."""
-    return optax.adam(config.learning_rate, b1=config.beta1, b2=config.beta2)
+def init(config: SurrogateConfig, steps_per_epoch: int) -> tuple[Params, optax.GradientTransformation, Any, jax.Array]:
+    """Initial weights, optimiser, its state, and the key of the shuffling.
+
+    Both the weights and the shuffling key are split from ``config.seed``.
+    """
+    key = jax.random.PRNGKey(config.seed)
+    key, init_key = jax.random.split(key)
+    params = init_params(init_key, config)
+    optimizer = make_optimizer(config, steps_per_epoch)
+    return params, optimizer, optimizer.init(params), key
 
 
-def _pad_to(n: int, multiple: int) -> int:
-    return -(-n // multiple) * multiple
+def learning_rate_schedule(config: SurrogateConfig, steps_per_epoch: int) -> optax.Schedule:
+    """Learning rate per optimisation step."""
+    if config.lr_schedule == "cosine":
+        return optax.cosine_decay_schedule(
+            config.learning_rate, decay_steps=config.max_epochs * steps_per_epoch, alpha=config.lr_final
+        )
+    if config.lr_schedule == "exponential":
+        return optax.exponential_decay(
+            config.learning_rate,
+            transition_steps=steps_per_epoch,
+            decay_rate=config.lr_final ** (1.0 / config.max_epochs),
+            staircase=True,
+        )
+    return optax.constant_schedule(config.learning_rate)
 
 
-@partial(jax.jit, static_argnames=("batch_size", "alpha", "activation", "optimizer"))
-def _epoch(
+def make_optimizer(config: SurrogateConfig, steps_per_epoch: int = 1) -> optax.GradientTransformation:
+    """Adam with the configured step size (or schedule) and moment decay rates."""
+    return optax.adam(learning_rate_schedule(config, steps_per_epoch), b1=config.beta1, b2=config.beta2)
+
+
+Part = tuple[jax.Array, jax.Array, jax.Array]
+
+
+def train_step(
+    params: Params,
+    opt_state: Any,
+    domain: Part,
+    boundary: Part | None,
+    *,
+    config: SurrogateConfig,
+    optimizer: optax.GradientTransformation,
+) -> tuple[Params, Any, jax.Array]:
+    """One Adam step on one batch (domain part and boundary part); returns the loss."""
+    value, grads = jax.value_and_grad(split_loss)(params, domain, boundary, config)
+    updates, opt_state = optimizer.update(grads, opt_state, params)
+    return optax.apply_updates(params, updates), opt_state, value
+
+
+def _batches(key: jax.Array, n: int, per_step: int, steps: int) -> jax.Array:
+    """Shuffled indices (steps, per_step), wrapping around so that every step has one shape."""
+    perm = jax.random.permutation(key, n)
+    reps = -(-steps * per_step // n)
+    return jnp.tile(perm, reps)[: steps * per_step].reshape(steps, per_step)
+
+
+@partial(jax.jit, static_argnames=("config", "optimizer", "per_step", "steps"))
+def train_epoch(
     params: Params,
     opt_state: Any,
     key: jax.Array,
-    x: jax.Array,
-    y: jax.Array,
-    b: jax.Array,
+    domain: Part,
+    boundary: Part | None,
     *,
-    batch_size: int,
-    alpha: float,
-    activation: str,
+    config: SurrogateConfig,
     optimizer: optax.GradientTransformation,
+    per_step: tuple[int, int],
+    steps: int,
 ) -> tuple[Params, Any, jax.Array]:
-    n = x.shape[0]
-    n_batches = -(-n // batch_size)
-    perm = jax.random.permutation(key, n)
-    # Fill the last batch by wrapping around the permutation: every step has one shape.
-    order = jnp.concatenate([perm, perm[: n_batches * batch_size - n]]).reshape(n_batches, batch_size)
+    """One pass over the training samples: a ``lax.scan`` of :func:`train_step`."""
+    k_domain, k_boundary = jax.random.split(key)
+    order_d = _batches(k_domain, domain[0].shape[0], per_step[0], steps)
+    if boundary is None:
+        order_b = jnp.zeros((steps, 0), jnp.int32)
+    else:
+        order_b = _batches(k_boundary, boundary[0].shape[0], per_step[1], steps)
 
     def step(carry, idx):
         params, opt_state = carry
-        value, grads = jax.value_and_grad(loss)(
-            params, x[idx], y[idx], b[idx], jnp.ones(batch_size), alpha, activation
+        i_d, i_b = idx
+        part_b = None if boundary is None else tuple(a[i_b] for a in boundary)
+        params, opt_state, value = train_step(
+            params, opt_state, tuple(a[i_d] for a in domain), part_b, config=config, optimizer=optimizer
         )
-        updates, opt_state = optimizer.update(grads, opt_state, params)
-        return (optax.apply_updates(params, updates), opt_state), value
+        return (params, opt_state), value
 
-    (params, opt_state), losses = jax.lax.scan(step, (params, opt_state), order)
+    (params, opt_state), losses = jax.lax.scan(step, (params, opt_state), (order_d, order_b))
     return params, opt_state, jnp.mean(losses)
 
 
-@partial(jax.jit, static_argnames=("alpha", "activation"))
-def _evaluate_chunk(params, x, y, b, w, u_scale, *, alpha, activation):
-    pred = apply(params, x, b, activation)
-    err = pointwise_error(pred, y)
-    scale = jnp.where(b, alpha, 1.0) * w
-    return jnp.sum(scale * err), jnp.sum(w * err * u_scale), jnp.sum(w)
+@partial(jax.jit, static_argnames=("net", "activation"))
+def _error_sum(layers, x, y, g, w, *, net, activation):
+    pred = jnp.zeros_like(y) if net is None else mlp(layers, x, activation) * g[:, None]
+    return jnp.sum(w * pointwise_error(pred, y))
+
+
+def error_sums(params: Params, samples: Samples, config: SurrogateConfig) -> tuple[float, float]:
+    """Sums of the error norm (scaled units) over the domain and the boundary samples.
+
+    Evaluated in fixed-size chunks (zero-weight padding) so that one compilation serves
+    every set.
+    """
+    sums = []
+    for on_boundary, net in ((False, "domain"), (True, boundary_network(config))):
+        part = samples.subset(samples.boundary == on_boundary)
+        total = 0.0
+        for start in range(0, len(part), EVAL_CHUNK):
+            stop = min(start + EVAL_CHUNK, len(part))
+            pad = EVAL_CHUNK - (stop - start)
+            chunk = [np.concatenate([a[start:stop], np.zeros((pad, *a.shape[1:]), a.dtype)])
+                     for a in (part.x, part.y, part.gain)]
+            w = np.concatenate([np.ones(stop - start, np.float32), np.zeros(pad, np.float32)])
+            layers = None if net is None else params[net]
+            total += float(_error_sum(layers, *chunk, w, net=net, activation=config.activation))
+        sums.append(total)
+    return sums[0], sums[1]
 
 
 def evaluate(
-    params: Params, arrays: tuple[np.ndarray, np.ndarray, np.ndarray], config: SurrogateConfig,
-    u_scale: float,
-) -> tuple[float, float]:
-    """Loss (Eq. 2, batch-mean) and mean per-point L2 error in mm over a sample set."""
-    x, y, b = arrays
-    n = x.shape[0]
-    total_loss = total_err = count = 0.0
-    for start in range(0, n, EVAL_CHUNK):
-        stop = min(start + EVAL_CHUNK, n)
-        pad = EVAL_CHUNK - (stop - start)
-        w = np.concatenate([np.ones(stop - start, np.float32), np.zeros(pad, np.float32)])
-        chunk = [np.concatenate([a[start:stop], np.repeat(a[:1], pad, axis=0)]) for a in (x, y, b)]
-        lsum, esum, c = _evaluate_chunk(
-            params, *chunk, w, u_scale, alpha=config.alpha, activation=config.activation
-        )
-        total_loss += float(lsum)
-        total_err += float(esum)
-        count += float(c)
-    return total_loss / count, total_err / count
+    params: Params, samples: Samples, config: SurrogateConfig, u_scale: float
+) -> dict[str, float]:
+    """Loss (Eq. 2, sample mean, scaled units) and mean per-point error norms in mm."""
+    domain, boundary = error_sums(params, samples, config)
+    n = max(len(samples), 1)
+    n_domain = max(int(np.sum(~samples.boundary)), 1)
+    return {
+        "loss": (domain + config.alpha * boundary) / n,
+        "error_mm": (domain + boundary) * u_scale / n,
+        "domain_error_mm": domain * u_scale / n_domain,
+    }
+
+
+def prepare(
+    ds: Dataset, config: SurrogateConfig, holdout: np.ndarray | None = None
+) -> tuple[Normalisation, np.ndarray | None, Samples, Samples, np.ndarray]:
+    """Normalisation, point factor φ, training and validation samples, training cases.
+
+    Args:
+        ds: the dataset.
+        config: hyperparameters (split, boundary mode, encodings).
+        holdout: case indices to keep out of training and validation (e.g. the
+            clinical cases of a by-case evaluation).
+
+    Raises:
+        ValueError: if the chosen split has no training or validation samples left.
+    """
+    train_idx = ds.sample_indices(config.split, "train")
+    val_idx = ds.sample_indices(config.split, "validation")
+    if holdout is not None and len(holdout):
+        keep = lambda idx: idx[~np.isin(idx // ds.n_points, holdout)]  # noqa: E731
+        train_idx, val_idx = keep(train_idx), keep(val_idx)
+    if train_idx.size == 0 or val_idx.size == 0:
+        raise ValueError(f"split {config.split!r} has no training or validation samples")
+    train_cases = np.unique(train_idx // ds.n_points)
+    norm = Normalisation.fit(ds, train_cases, config.c1_encoding, config.output_scaling)
+    phi = dirichlet_factor(ds.X, ds.boundary, config.bc_length) if config.boundary == "exact" else None
+    return norm, phi, sample_arrays(ds, train_idx, norm, phi), sample_arrays(ds, val_idx, norm, phi), train_cases
 
 
 def train_and_evaluate(
-    ds: Dataset, config: SurrogateConfig, progress: bool = True
+    ds: Dataset, config: SurrogateConfig, progress: bool = True, holdout: np.ndarray | None = None
 ) -> TrainResult:
-    """Train the Siamese MLP on ``ds`` following ``config``; returns the best weights.
+    """Train the surrogate on ``ds`` following ``config``; returns the best weights.
+
+    Args:
+        ds: the dataset.
+        config: hyperparameters and protocol.
+        progress: show a progress bar with the epoch losses.
+        holdout: case indices kept out of training and validation.
 
     Raises:
         ValueError: if the chosen split has no training or validation samples.
     """
-    train_idx = ds.sample_indices(config.split, "train")
-    val_idx = ds.sample_indices(config.split, "validation")
-    if train_idx.size == 0 or val_idx.size == 0:
-        raise ValueError(f"split {config.split!r} has no training or validation samples")
-    train_cases = np.unique(train_idx // ds.n_points)
-    norm = Normalisation.fit(ds, train_cases)
-    train = sample_arrays(ds, train_idx, norm)
-    val = sample_arrays(ds, val_idx, norm)
-    batch = min(config.batch_size, train_idx.size)
-
-    key = jax.random.PRNGKey(config.seed)
-    key, init_key = jax.random.split(key)
-    params = init_params(init_key, config)
-    optimizer = make_optimizer(config)
-    opt_state = optimizer.init(params)
-    x, y, b = (jnp.asarray(a) for a in train)
-
-    result = TrainResult(params=params, config=config, normalisation=norm, train_cases=train_cases)
-    best = (float("inf"), params, 0)
-    since_best = 0
-    bar = _progress(config.max_epochs, progress)
     start = time.perf_counter()
+    norm, phi, train, val, train_cases = prepare(ds, config, holdout)
+    domain = train.subset(~train.boundary)
+    bset = train.subset(train.boundary)
+    use_boundary = boundary_network(config) is not None and len(bset) > 0
+    n_used = len(domain) + (len(bset) if use_boundary else 0)
+    batch = min(config.batch_size, n_used)
+    steps = -(-n_used // batch)
+    per_b = max(1, round(batch * len(bset) / n_used)) if use_boundary else 0
+    per_step = (batch - per_b, per_b)
+
+    params, optimizer, opt_state, key = init(config, steps)
+    schedule = learning_rate_schedule(config, steps)
+    d_arrays = tuple(jnp.asarray(a) for a in (domain.x, domain.y, domain.gain))
+    b_arrays = tuple(jnp.asarray(a) for a in (bset.x, bset.y, bset.gain)) if use_boundary else None
+    kwargs = dict(config=config, optimizer=optimizer, per_step=per_step, steps=steps)
+
+    result = TrainResult(params=params, config=config, normalisation=norm, point_factor=phi,
+                         train_cases=train_cases,
+                         held_out_cases=None if holdout is None else np.asarray(holdout))
+    t0 = time.perf_counter()
+    epoch_fn = train_epoch.lower(params, opt_state, key, d_arrays, b_arrays, **kwargs).compile()
+    result.compile_s = time.perf_counter() - t0
+    log.info(
+        "%s (%s boundary): %d training samples (%d on the rib), %d steps of %s per epoch, "
+        "compiled in %.1f s", config.architecture, config.boundary, len(train), len(bset), steps,
+        per_step, result.compile_s,
+    )
+
+    best_loss, best_params, best_epoch, since_best = float("inf"), params, 0, 0
+    bar = _progress(config.max_epochs, progress, config.architecture)
     for epoch in range(1, config.max_epochs + 1):
         t0 = time.perf_counter()
         key, epoch_key = jax.random.split(key)
-        params, opt_state, train_loss = _epoch(
-            params, opt_state, epoch_key, x, y, b,
-            batch_size=batch, alpha=config.alpha, activation=config.activation, optimizer=optimizer,
-        )
+        params, opt_state, train_loss = epoch_fn(params, opt_state, epoch_key, d_arrays, b_arrays)
         train_loss = float(train_loss)
-        if epoch == 1:
-            result.compile_s = time.perf_counter() - t0
-        val_loss, val_err = evaluate(params, val, config, norm.u_scale)
-        result.history.append(
-            {
-                "epoch": epoch,
-                "train_loss": train_loss,
-                "validation_loss": val_loss,
-                "validation_error_mm": val_err,
-                "epoch_s": time.perf_counter() - t0,
-            }
-        )
+        metrics = evaluate(params, val, config, norm.u_scale)
+        result.history.append({
+            "epoch": epoch,
+            "train_loss": train_loss,
+            "validation_loss": metrics["loss"],
+            "validation_error_mm": metrics["error_mm"],
+            "learning_rate": float(schedule((epoch - 1) * steps)),
+            "epoch_s": time.perf_counter() - t0,
+        })
         if bar is not None:
-            bar.set_postfix(train=f"{train_loss:.4g}", val=f"{val_loss:.4g}", err_mm=f"{val_err:.3f}")
+            bar.set_postfix(train=f"{train_loss:.4g}", val=f"{metrics['loss']:.4g}",
+                            err_mm=f"{metrics['error_mm']:.4f}")
             bar.update(1)
         if not np.isfinite(train_loss):
             log.warning("training diverged at epoch %d (loss %s)", epoch, train_loss)
             break
-        if val_loss < best[0]:
-            best, since_best = (val_loss, params, epoch), 0
+        if metrics["loss"] < best_loss:
+            best_loss, best_params, best_epoch, since_best = metrics["loss"], params, epoch, 0
         else:
             since_best += 1
             if since_best >= config.patience:
-                log.info("early stop at epoch %d (best %d)", epoch, best[2])
+                log.info("early stop at epoch %d (best %d)", epoch, best_epoch)
                 break
     if bar is not None:
         bar.close()
     result.train_s = time.perf_counter() - start
-    result.best_validation_loss, result.params, result.best_epoch = best
-    result.validation_error_mm = evaluate(result.params, val, config, norm.u_scale)[1]
+    result.params, result.best_validation_loss, result.best_epoch = best_params, best_loss, best_epoch
+    final = evaluate(best_params, val, config, norm.u_scale)
+    result.validation_error_mm = final["error_mm"]
+    result.validation_error_domain_mm = final["domain_error_mm"]
     log.info(
-        "%s: best epoch %d, validation error %.4f mm, %.1f s",
-        config.architecture, result.best_epoch, result.validation_error_mm, result.train_s,
+        "%s: best epoch %d of %d, validation error %.4f mm (%.4f mm off the rib), %.1f s",
+        config.architecture, best_epoch, len(result.history), result.validation_error_mm,
+        result.validation_error_domain_mm, result.train_s,
     )
     return result
 
 
-def _progress(total: int, enabled: bool) -> Any:
+def _progress(total: int, enabled: bool, label: str) -> Any:
     if not enabled:
         return None
     from tqdm import tqdm
 
-    return tqdm(total=total, desc="epochs", unit="epoch", mininterval=1.0)
+    return tqdm(total=total, desc=f"{label} epochs", unit="epoch", mininterval=1.0)

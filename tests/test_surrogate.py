@@ -55,7 +55,8 @@ def test_loss_is_eq2() -> None:
 
     from surrogate.model import init_params, loss
 
-    params = init_params(__import__("jax").random.PRNGKey(0), SurrogateConfig(hidden_layers=1, width=4))
+    config = SurrogateConfig(hidden_layers=1, width=4, alpha=10.0, activation="tanh")
+    params = init_params(__import__("jax").random.PRNGKey(0), config)
     # zero the output layers: predictions are 0, so the loss is the weighted mean target norm
     for net in params:
         W, b = params[net][-1]
@@ -63,7 +64,7 @@ def test_loss_is_eq2() -> None:
     x = jnp.zeros((3, 7))
     y = jnp.array([[3.0, 4.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
     b = jnp.array([False, False, True])
-    value = loss(params, x, y, b, jnp.ones(3), 10.0, "tanh")
+    value = loss(params, x, y, b, jnp.ones(3), config)
     assert float(value) == pytest.approx((5.0 + 1.0 + 10.0 * 1.0) / 3, rel=1e-5)
 
 

@@ -6,6 +6,8 @@ rule aggregate:
         DATASET,
     params:
         dataset=config["dataset"],
+        # the by-case split holds these setups out as test cases
+        clinical=config["clinical"],
         # Provenance: only the sections the data depend on, so that e.g. a surrogate
         # setting does not rebuild the dataset.
         provenance={key: config[key] for key in ("mesh", "material", "fe", "sweep", "dataset")},

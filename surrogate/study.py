@@ -1,0 +1,143 @@
+"""The architecture study (the paper's Table 2), model selection and variant comparisons.
+
+Each training run is a model folder (see :mod:`surrogate.predict`) whose
+``model.json`` holds its metrics. This module only reads those folders: it groups
+runs by architecture, gives mean ± SD of validation error, training time and
+epochs, selects the architecture with the lowest mean validation error (the
+paper's rule), and within it the run with the lowest validation error, which
+becomes the model used downstream.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from surrogate import reference
+from surrogate.config import parse_architecture
+from surrogate.predict import HISTORY_JSON, MODEL_JSON, PARAMS_NPZ
+
+
+class StudyError(ValueError):
+    """The study's runs are missing or inconsistent."""
+
+
+def read_run(folder: str | Path) -> dict[str, Any]:
+    """Metrics and settings of one training run (its ``model.json``).
+
+    Raises:
+        StudyError: if the run has no readable ``model.json``.
+    """
+    folder = Path(folder)
+    if folder.name == MODEL_JSON:
+        folder = folder.parent
+    try:
+        meta = json.loads((folder / MODEL_JSON).read_text())
+    except (OSError, json.JSONDecodeError) as err:
+        raise StudyError(f"run {folder} has no readable {MODEL_JSON}: {err}") from None
+    cfg = meta["config"]
+    return {
+        "folder": str(folder),
+        "architecture": f"{cfg['hidden_layers']}x{cfg['width']}",
+        "seed": cfg["seed"],
+        "boundary": cfg.get("boundary", "network"),
+        "split": cfg.get("split", "by_sample"),
+        **{k: meta["metrics"].get(k) for k in (
+            "validation_error_mm", "validation_error_domain_mm", "train_s", "compile_s",
+            "epochs", "best_epoch")},
+        "parameters": _count_parameters(cfg),
+    }
+
+
+def _count_parameters(cfg: dict[str, Any]) -> int:
+    sizes = [7] + [cfg["width"]] * cfg["hidden_layers"] + [3]
+    per_net = sum(a * b + b for a, b in zip(sizes[:-1], sizes[1:]))
+    return per_net * (2 if cfg.get("boundary", "network") == "network" else 1)
+
+
+def _mean_sd(values: Sequence[float]) -> dict[str, float]:
+    arr = np.asarray(values, dtype=float)
+    return {"mean": float(arr.mean()), "sd": float(arr.std(ddof=1)) if arr.size > 1 else 0.0,
+            "min": float(arr.min()), "max": float(arr.max())}
+
+
+def summarise(runs: Iterable[dict[str, Any]]) -> dict[str, Any]:
+    """Mean ± SD (sample SD, n − 1) of a group of runs' error, time and epochs."""
+    runs = list(runs)
+    if not runs:
+        raise StudyError("no runs to summarise")
+    best = min(runs, key=lambda r: r["validation_error_mm"])
+    return {
+        "runs": len(runs),
+        "validation_error_mm": _mean_sd([r["validation_error_mm"] for r in runs]),
+        "validation_error_domain_mm": _mean_sd([r["validation_error_domain_mm"] for r in runs]),
+        "train_s": _mean_sd([r["train_s"] for r in runs]),
+        "epochs": _mean_sd([r["epochs"] for r in runs]),
+        "best_run": best["folder"],
+        "best_validation_error_mm": best["validation_error_mm"],
+        "parameters": runs[0]["parameters"],
+    }
+
+
+def architecture_table(runs: Iterable[dict[str, Any]]) -> dict[str, Any]:
+    """Table 2: one row per architecture, the paper's figures beside ours, and the selection.
+
+    Raises:
+        StudyError: if there are no runs or a run's validation error is not finite.
+    """
+    groups: dict[str, list[dict[str, Any]]] = {}
+    for run in runs:
+        if not np.isfinite(run["validation_error_mm"]):
+            raise StudyError(f"run {run['folder']} has a non-finite validation error")
+        groups.setdefault(run["architecture"], []).append(run)
+    if not groups:
+        raise StudyError("the architecture study has no runs")
+    order = sorted(groups, key=parse_architecture)
+    rows = {arch: {**summarise(groups[arch]), "paper": _paper_row(arch)} for arch in order}
+    selected = min(order, key=lambda a: (rows[a]["validation_error_mm"]["mean"], parse_architecture(a)))
+    return {
+        "rows": rows,
+        "selected_architecture": selected,
+        "selected_run": rows[selected]["best_run"],
+        "rule": "lowest mean validation error over the repeats (the paper's rule); "
+                "within it the run with the lowest validation error",
+        "paper_selected_architecture": reference.BEST_ARCHITECTURE,
+    }
+
+
+def _paper_row(arch: str) -> dict[str, Any] | None:
+    row = reference.TABLE2.get(arch)
+    if row is None:
+        return None
+    return {k: {"mean": v[0], "sd": v[1]} for k, v in row.items()}
+
+
+def compare_variants(
+    baseline: Sequence[dict[str, Any]], variants: dict[str, Sequence[dict[str, Any]]]
+) -> dict[str, Any]:
+    """Variants of the settings at one architecture against the baseline runs (same seeds).
+
+    ``ratio`` is the variant's mean validation error over the baseline's (< 1: better).
+    """
+    base = summarise(baseline)
+    out = {"baseline": base, "variants": {}}
+    for name, runs in variants.items():
+        s = summarise(runs)
+        s["error_ratio_to_baseline"] = s["validation_error_mm"]["mean"] / base["validation_error_mm"]["mean"]
+        s["time_ratio_to_baseline"] = s["train_s"]["mean"] / base["train_s"]["mean"]
+        s["boundary"] = runs[0]["boundary"]
+        out["variants"][name] = s
+    return out
+
+
+def copy_model(source: str | Path, target: str | Path) -> None:
+    """Copy a model folder's files (model.json, params.npz, history.json) to ``target``."""
+    source, target = Path(source), Path(target)
+    target.mkdir(parents=True, exist_ok=True)
+    for name in (PARAMS_NPZ, HISTORY_JSON, MODEL_JSON):  # model.json last: it marks completion
+        shutil.copyfile(source / name, target / name)

@@ -1,0 +1,19 @@
+"""Snakemake adapter: the surrogate's error on FE cases outside its training range."""
+
+import logging
+
+from surrogate.runtime import configure_cpu
+
+configure_cpu()
+
+from surrogate.data import load_dataset, write_json  # noqa: E402
+from surrogate.evaluate import evaluate_extrapolation  # noqa: E402
+from surrogate.predict import Surrogate  # noqa: E402
+
+logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
+
+dataset = load_dataset(snakemake.input.dataset)
+models = {"by_sample": Surrogate.load(snakemake.input.model),
+          "by_case": Surrogate.load(snakemake.input.model_by_case)}
+cases = list(zip(snakemake.input.summaries, snakemake.input.points))
+write_json(snakemake.output[0], evaluate_extrapolation(models, dataset, cases))

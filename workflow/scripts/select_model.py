@@ -1,0 +1,14 @@
+"""Snakemake adapter: the model used downstream is the study's selected run (copied, not retrained)."""
+
+import json
+import logging
+from pathlib import Path
+
+from surrogate.study import copy_model
+
+logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
+
+table = json.loads(Path(snakemake.input.table).read_text())
+copy_model(table["selected_run"], Path(snakemake.output.model).parent)
+logging.getLogger("select_model").info(
+    "selected %s: %s", table["selected_architecture"], table["selected_run"])

@@ -1,0 +1,22 @@
+"""Snakemake adapter: each variant of the surrogate settings against the selected architecture's runs."""
+
+import json
+import logging
+from pathlib import Path
+
+from surrogate.data import write_json
+from surrogate.study import compare_variants, read_run
+
+logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
+
+table = json.loads(Path(snakemake.input.table).read_text())
+selected = table["selected_architecture"]
+baseline = [read_run(p) for p in snakemake.input.study_runs]
+baseline = [r for r in baseline if r["architecture"] == selected]
+variants = {}
+for path in snakemake.input.variant_runs:
+    name = Path(path).parent.parent.name
+    variants.setdefault(name, []).append(read_run(path))
+result = compare_variants(baseline, variants)
+result["architecture"] = selected
+write_json(snakemake.output[0], result)
