@@ -261,6 +261,23 @@ def load_displacement(path: str | Path, mesh_path: str | Path) -> tuple[Any, dic
     return u, meta
 
 
+def load_references(
+    clinical: list[dict[str, Any]], paths: list[str], mesh_path: str | Path
+) -> tuple[list[Case], dict[str, tuple[Any, dict[str, Any]]]]:
+    """The clinical cases and their stored reference fields, in the config's order.
+
+    Args:
+        clinical: the config's ``clinical`` entries.
+        paths: one file of :func:`save_displacement` per entry, in the same order.
+        mesh_path: the reference mesh.
+
+    Returns:
+        ``(cases, {case id: (function, meta)})``.
+    """
+    cases = clinical_cases(clinical)
+    return cases, {case.id: load_displacement(path, mesh_path) for case, path in zip(cases, paths, strict=True)}
+
+
 # -- timing one case ------------------------------------------------------------------------------
 def timed_solve(runner: Any, case: Case, loading: Loading | None = None) -> dict[str, Any]:
     """Solve ``case`` from rest with ``runner`` and return its timing record.
@@ -563,6 +580,7 @@ __all__ = [
     "machine_state",
     "pareto_front",
     "load_displacement",
+    "load_references",
     "save_displacement",
     "vertex_displacement",
     "accuracy_at_vertices",

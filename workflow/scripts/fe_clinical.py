@@ -4,17 +4,15 @@ baseline, accuracy against the reference) at the workflow's default discretisati
 import json
 import logging
 
-from fem.benchmark import clinical_benchmark, clinical_cases, limit_blas_threads, load_displacement
+from fem.benchmark import clinical_benchmark, limit_blas_threads, load_references
 from fem.parameters import SolverSettings
 
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
 logging.info("single-threaded BLAS: %s", limit_blas_threads(1))
 
-cases = clinical_cases(snakemake.params.clinical)
-references = {
-    case.id: load_displacement(path, snakemake.input.reference_mesh)
-    for case, path in zip(cases, snakemake.input.references)
-}
+cases, references = load_references(
+    snakemake.params.clinical, snakemake.input.references, snakemake.input.reference_mesh
+)
 result = clinical_benchmark(
     snakemake.input.mesh,
     SolverSettings.from_config(snakemake.params.config),

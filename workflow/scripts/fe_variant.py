@@ -3,17 +3,15 @@
 import json
 import logging
 
-from fem.benchmark import Variant, clinical_cases, limit_blas_threads, load_displacement, run_variant
+from fem.benchmark import Variant, limit_blas_threads, load_references, run_variant
 from fem.parameters import SolverSettings
 
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
 logging.info("single-threaded BLAS: %s", limit_blas_threads(1))
 
-cases = clinical_cases(snakemake.params.clinical)
-references = {
-    case.id: load_displacement(path, snakemake.input.reference_mesh)
-    for case, path in zip(cases, snakemake.input.references)
-}
+cases, references = load_references(
+    snakemake.params.clinical, snakemake.input.references, snakemake.input.reference_mesh
+)
 record = run_variant(
     snakemake.input.mesh,
     Variant.from_id(snakemake.wildcards.variant),
