@@ -1,8 +1,9 @@
 # FE study (issue 4): the clinical benchmark (time, factorisation equivalents, a fixed-step
 # baseline, accuracy against a refined reference), speed against accuracy over mesh sizes x
 # elements x solver presets, and stability maps over (C1, Phi) for adaptive and fixed-step
-# loading. Benchmarks, not tests: `snakemake -j2 fe_study`. The library code is fem.benchmark
-# and fem.stability; JSON results land in results/fe_study/.
+# loading. Benchmarks, not tests: `snakemake -j2 fe_study` runs them alone; the report needs
+# them. The library code is fem.benchmark and fem.stability; JSON results land in
+# results/fe_study/.
 from fem.benchmark import MESH_ID_PATTERN, VARIANT_ID_PATTERN, MeshSpec, clinical_cases, expand_variants
 from fem.exceptions import FEError
 

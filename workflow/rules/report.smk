@@ -1,9 +1,24 @@
+# The report: one HTML page with its PNG figures beside it (surrogate.report). It reads every
+# result of the workflow, so `rule all`, which asks for it, pulls in the FE sweep, the FE study
+# and the surrogate's study, models and benchmarks.
+
+
 rule report:
     input:
         dataset=DATASET,
-        model=MODEL,
-        history="results/surrogate/model/history.json",
         quality="results/mesh/quality.json",
+        mesh_png="results/mesh/mesh.png",
+        model=MODEL,
+        history=f"{SURROGATE_DIR}/model/history.json",
+        table2=STUDY_TABLE,
+        variants=VARIANTS_JSON,
+        clinical=CLINICAL_JSON,
+        extrapolation=EXTRAPOLATION_JSON,
+        benchmark=BENCHMARK_JSON,
+        clinical_fields=clinical_fields(),
+        fe_clinical=FE_CLINICAL_JSON,
+        fe_speed_accuracy=FE_SPEED_ACCURACY_JSON,
+        fe_stability=FE_STABILITY_JSON,
     output:
         html=REPORT,
     params:
