@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import json
 import os
+import re
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -26,3 +29,26 @@ def coarse_mesh(tmp_path_factory: pytest.TempPathFactory) -> Path:
     report = write_parametric_mesh(BreastGeometry(), MeshSize(**COARSE), path)
     (folder / "quality.json").write_text(json.dumps(report))
     return path
+
+
+def snakemake(workdir: Path, *args: str, config: Path = REPO / "tests" / "config.yaml") -> subprocess.CompletedProcess:
+    """Run the project's Snakefile in ``workdir`` with the venv's Snakemake."""
+    cmd = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-d", str(workdir),
+           "--configfile", str(config), *args]
+    return subprocess.run(cmd, capture_output=True, text=True, cwd=workdir)
+
+
+def job_counts(output: str) -> dict[str, int]:
+    """Parse Snakemake's 'Job stats' table."""
+    table = output.split("Job stats:")[1]
+    return {m[1]: int(m[2]) for m in re.finditer(r"^(\w+)\s+(\d+)\s*$", table, re.M)}
+
+
+@pytest.fixture(scope="session")
+def small_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The whole workflow (``all``: sweep, dataset, FE study, surrogate study, report) run once
+    on tests/config.yaml; tests only read it."""
+    workdir = tmp_path_factory.mktemp("workflow")
+    run = snakemake(workdir, "-j2")
+    assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
+    return workdir

@@ -10,11 +10,9 @@ from pathlib import Path
 
 import h5py
 import numpy as np
-import pytest
 import yaml
 
-from tests.conftest import REPO
-from tests.test_workflow import job_counts, snakemake
+from tests.conftest import REPO, job_counts, snakemake
 
 # Twelve quick cases on the coarse test mesh.
 KILL_CONFIG = {
@@ -68,14 +66,6 @@ def test_sigkill_mid_sweep_resumes_without_recomputing(tmp_path: Path) -> None:
         assert np.all(np.isfinite(h5["displacement"][...]))
 
 
-@pytest.fixture(scope="module")
-def finished_small_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    workdir = tmp_path_factory.mktemp("rerun")
-    run = snakemake(workdir, "-j2")
-    assert run.returncode == 0, run.stderr[-3000:]
-    return workdir
-
-
 def _planned(workdir: Path, change: dict) -> dict[str, int]:
     config = yaml.safe_load((REPO / "tests" / "config.yaml").read_text())
     for dotted, value in change.items():
@@ -92,22 +82,22 @@ def _planned(workdir: Path, change: dict) -> dict[str, int]:
     return job_counts(text) if "Job stats:" in text else {}
 
 
-def test_nothing_to_do_when_nothing_changed(finished_small_run: Path) -> None:
-    assert _planned(finished_small_run, {}) == {}
+def test_nothing_to_do_when_nothing_changed(small_run: Path) -> None:
+    assert _planned(small_run, {}) == {}
 
 
-def test_surrogate_change_reruns_training_only(finished_small_run: Path) -> None:
-    planned = _planned(finished_small_run, {"surrogate.width": 16})
+def test_surrogate_change_reruns_training_only(small_run: Path) -> None:
+    planned = _planned(small_run, {"surrogate.width": 16})
     assert "train" in planned
     assert {"mesh", "solve", "aggregate"}.isdisjoint(planned)
 
 
-def test_new_stiffness_solves_only_the_new_cases(finished_small_run: Path) -> None:
-    planned = _planned(finished_small_run, {"sweep.C1_kPa": [1.0, 5.0, 2.5]})
+def test_new_stiffness_solves_only_the_new_cases(small_run: Path) -> None:
+    planned = _planned(small_run, {"sweep.C1_kPa": [1.0, 5.0, 2.5]})
     assert planned["solve"] == 3  # 1 new C1 x 3 angles
     assert "mesh" not in planned and planned["aggregate"] == 1
 
 
-def test_solver_change_resolves_every_case_but_keeps_the_mesh(finished_small_run: Path) -> None:
-    planned = _planned(finished_small_run, {"fe.loading.initial_step": 0.5})
+def test_solver_change_resolves_every_case_but_keeps_the_mesh(small_run: Path) -> None:
+    planned = _planned(small_run, {"fe.loading.initial_step": 0.5})
     assert planned["solve"] == 6 and "mesh" not in planned

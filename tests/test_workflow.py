@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
+import json
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import h5py
@@ -12,20 +11,7 @@ import numpy as np
 import pytest
 import yaml
 
-from tests.conftest import REPO
-
-
-def snakemake(workdir: Path, *args: str, config: Path = REPO / "tests" / "config.yaml") -> subprocess.CompletedProcess:
-    """Run the project's Snakefile in ``workdir`` with the venv's Snakemake."""
-    cmd = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-d", str(workdir),
-           "--configfile", str(config), *args]
-    return subprocess.run(cmd, capture_output=True, text=True, cwd=workdir)
-
-
-def job_counts(output: str) -> dict[str, int]:
-    """Parse Snakemake's 'Job stats' table."""
-    table = output.split("Job stats:")[1]
-    return {m[1]: int(m[2]) for m in re.finditer(r"^(\w+)\s+(\d+)\s*$", table, re.M)}
+from tests.conftest import REPO, job_counts, snakemake
 
 
 def test_full_config_plans_688_solves(tmp_path: Path) -> None:
@@ -74,14 +60,6 @@ def test_inconsistent_geometry_stops_before_any_job(tmp_path: Path) -> None:
     assert not (tmp_path / "results").exists()
 
 
-@pytest.fixture(scope="module")
-def small_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    workdir = tmp_path_factory.mktemp("workflow")
-    run = snakemake(workdir, "-j2")
-    assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
-    return workdir
-
-
 def test_small_sweep_dataset_content(small_run: Path) -> None:
     config = yaml.safe_load((REPO / "tests" / "config.yaml").read_text())
     n_cases = len(config["sweep"]["C1_kPa"]) * len(config["sweep"]["phi_deg"])
@@ -125,8 +103,69 @@ def test_small_sweep_surrogate_predicts_the_fe(small_run: Path) -> None:
     assert total_err < 0.15 * total_norm
 
 
+REPORT_SECTIONS = (
+    "Mesh",
+    "FE speed against accuracy",
+    "Surrogate speed against accuracy",
+    "Model no more than a scene needs",
+    "Stability",
+    "The paper side by side",
+    "Sweep cost",
+    "Surrogate training",
+)
+
+
+def html_table(page: str, table_id: str) -> str:
+    """The HTML of the report's table with this id."""
+    match = re.search(rf'<table id="{table_id}">(.*?)</table>', page, re.S)
+    assert match, f"the report has no table {table_id!r}"
+    return match[1]
+
+
+def png_size(path: Path) -> tuple[int, int]:
+    """Width and height of a PNG, from its header."""
+    data = path.read_bytes()[:24]
+    assert data[:8] == b"\x89PNG\r\n\x1a\n", f"{path.name} is not a PNG"
+    return int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
+
+
 def test_small_sweep_report(small_run: Path) -> None:
-    page = (small_run / "results/report/index.html").read_text()
-    assert "<img" in page and "Clinical cases" in page
-    for img in re.findall(r'src="([^"]+\.png)"', page):
-        assert (small_run / "results/report" / img).stat().st_size > 1000
+    results = small_run / "results"
+    report = results / "report"
+    page = (report / "index.html").read_text()
+    for heading in REPORT_SECTIONS:
+        assert f"<h2>{heading}</h2>" in page, heading
+    assert "could not be built" not in page
+    # every figure is a PNG beside the page, referenced relatively, and has content
+    images = re.findall(r'<img[^>]*src="([^"]+)"', page)
+    config = yaml.safe_load((REPO / "tests" / "config.yaml").read_text())
+    fig5 = [img for img in images if img.startswith("fig5_")]
+    assert len(fig5) == len(config["clinical"])
+    assert {"fe_speed_accuracy.png", "surrogate_speed_accuracy.png", "c1_effect.png",
+            "stability_maps.png", "extrapolation.png", "sweep_cost.png",
+            "training_history.png"} <= set(images)
+    for img in images:
+        assert img.endswith(".png") and "/" not in img, img
+        assert (report / img).stat().st_size > 5000, img
+        width, height = png_size(report / img)
+        assert width >= 400 and height >= 300, img
+    # numbers from the result files appear in their tables
+    table2 = json.loads((results / "surrogate/study/table2.json").read_text())
+    selected = table2["selected_architecture"]
+    ours = html_table(page, "table2")
+    assert f'<tr class="highlight"><td>{selected}</td>' in ours
+    assert f"{table2['rows'][selected]['validation_error_mm']['mean']:.3f}" in ours
+    speed_accuracy = json.loads((results / "fe_study/speed_accuracy.json").read_text())
+    variants = html_table(page, "fe-variants")
+    for variant in speed_accuracy["variants"]:
+        assert f"<td>{variant['dofs']}</td>" in variants
+    clinical = json.loads((results / "surrogate/clinical.json").read_text())
+    table3 = html_table(page, "table3-by_sample")
+    for row in clinical["by_sample"]["rows"]:
+        assert f"{row['rmse_mm']:.3g} ± {row['sd_mm']:.3g}" in table3
+    stability = json.loads((results / "fe_study/stability.json").read_text())
+    lowest = html_table(page, "lowest-converging")
+    for scheme, per_phi in stability["lowest_converging"].items():
+        assert f"{scheme}: lowest converging C1" in lowest
+        if per_phi["all_phi"] is not None:
+            assert f"<td>{per_phi['all_phi']:g}</td>" in lowest
