@@ -3,7 +3,6 @@
 # and 4), extrapolation outside the sweep, and the benchmark of the goals.
 from snakemake.exceptions import WorkflowError
 
-from fem.sweep import Case
 from surrogate.config import SurrogateConfig, SurrogateConfigError, parse_architecture
 
 STUDY = config["surrogate_study"]
@@ -56,8 +55,8 @@ EXTRA_CASES = extrapolation_cases()
 
 
 def clinical_ids():
-    """Case folder names of the clinical cases."""
-    return [Case(c["C1"], c["phi"], c.get("theta", 0.0)).id for c in config["clinical"]]
+    """Case folder names of the clinical cases (FE_CLINICAL_CASES: fe_study.smk)."""
+    return [case.id for case in FE_CLINICAL_CASES]
 
 
 def study_runs(name="model.json"):

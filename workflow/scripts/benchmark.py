@@ -4,8 +4,8 @@ import json
 import logging
 from pathlib import Path
 
+from fem.benchmark import clinical_cases
 from fem.parameters import SolverSettings
-from fem.sweep import Case
 from surrogate.benchmark import format_benchmark, run_benchmark
 from surrogate.data import write_json
 
@@ -15,7 +15,7 @@ settings = SolverSettings.from_config(
     {"fe": snakemake.params.fe, "material": snakemake.params.material,
      "mesh": {"fixed": snakemake.params.fixed}}
 )
-cases = [Case(c["C1"], c["phi"], c.get("theta", 0.0)) for c in snakemake.params.clinical]
+cases = clinical_cases(snakemake.params.clinical)
 bench = run_benchmark(
     Path(snakemake.input.model).parent, snakemake.input.mesh, cases, settings,
     json.loads(Path(snakemake.input.table).read_text()),

@@ -1,8 +1,6 @@
 """Snakemake adapter: the architecture study's Table 2, the selection, and one-core prediction times."""
 
-import json
 import logging
-from pathlib import Path
 
 from surrogate.data import write_json
 from surrogate.study import architecture_table, read_run
