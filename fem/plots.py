@@ -38,7 +38,8 @@ plt.rcParams.update({"font.size": FONT_SIZE, "axes.titlesize": FONT_SIZE + 1,
                      "axes.labelsize": FONT_SIZE, "legend.fontsize": FONT_SIZE - 1})
 
 
-def _save(fig: plt.Figure, path: str | Path) -> None:
+def save_figure(fig: plt.Figure, path: str | Path) -> None:
+    """Write ``fig`` as PNG at the report's resolution and close it."""
     fig.savefig(path, dpi=DPI)
     plt.close(fig)
     log.info("wrote %s", path)
@@ -101,7 +102,7 @@ def plot_sweep_map(
     ax.set_ylabel("C1 (kPa)")
     if title:
         ax.set_title(title)
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def plot_speed_accuracy(
@@ -167,7 +168,7 @@ def plot_speed_accuracy(
                               markeredgewidth=2, label="default configuration"))
     ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.02, 1.0))
     ax.set_title("FE speed against accuracy (clinical cases)")
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def _failure_kind(record: Mapping[str, Any]) -> str:
@@ -281,7 +282,7 @@ def plot_stability_maps(
     handles.append(Line2D([], [], linestyle="", marker="s", markersize=9, color="lightgrey",
                           label="not run"))
     fig.legend(handles=handles, loc="outside lower center", ncol=min(len(handles), 4))
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def plot_c1_effect(
@@ -330,7 +331,7 @@ def plot_c1_effect(
     ax2.grid(True, alpha=0.3)
     if C1_range is not None:
         fig.suptitle(f"Effect of C1 over the sweep's range {C1_range[0]:g}–{C1_range[1]:g} kPa")
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 __all__ = ["plot_c1_effect", "plot_speed_accuracy", "plot_stability_maps", "plot_sweep_map"]

@@ -6,7 +6,6 @@ which numbers go in is decided by the caller (:mod:`surrogate.report`).
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -18,21 +17,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 
-from fem.plots import plain_log_ticks  # noqa: E402
-
-log = logging.getLogger(__name__)
-
-DPI = 110
-FONT_SIZE = 10
-
-plt.rcParams.update({"font.size": FONT_SIZE, "axes.titlesize": FONT_SIZE + 1,
-                     "axes.labelsize": FONT_SIZE, "legend.fontsize": FONT_SIZE - 1})
-
-
-def _save(fig: plt.Figure, path: str | Path) -> None:
-    fig.savefig(path, dpi=DPI)
-    plt.close(fig)
-    log.info("wrote %s", path)
+from fem.plots import FONT_SIZE, plain_log_ticks, save_figure  # noqa: E402
 
 
 def plot_history(
@@ -63,7 +48,7 @@ def plot_history(
     ax1.legend()
     if title:
         fig.suptitle(title)
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def plot_speed_accuracy(
@@ -127,7 +112,7 @@ def plot_speed_accuracy(
     axes[0].set_title("error against training time")
     axes[1].set_title("error against prediction time")
     fig.legend(handles=handles, loc="outside lower center", ncol=min(len(handles), 5))
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def plot_extrapolation(
@@ -166,7 +151,7 @@ def plot_extrapolation(
     ax.set_xlabel(xlabel)
     ax.grid(True, axis="x", which="both", alpha=0.3)
     fig.legend(loc="outside lower center", ncol=2)
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def plot_point_fields(
@@ -201,7 +186,7 @@ def plot_point_fields(
     axes[0, 0].set_ylabel("z, caudal → cranial (mm)")
     if title:
         fig.suptitle(title)
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 __all__ = ["plot_extrapolation", "plot_history", "plot_point_fields", "plot_speed_accuracy"]
