@@ -41,13 +41,17 @@ def fe_default_variant():
     from fem.benchmark import Variant
 
     size, disc = config["mesh"]["size"], config["fe"]["discretisation"]
-    element = {"p1-penalty": "p1-penalty"}.get(disc["element"], f"p{disc['degree']}p{disc['degree'] - 1}")
+    degree = disc["degree"]
+    element = "p1-penalty" if disc["element"] == "p1-penalty" else f"p{degree}p{degree - 1}"
     spec = MeshSpec(size["global_size"], size["mound_size"], size.get("order", 1))
     return Variant(spec, element, config["fe"]["solver"], disc["quadrature_degree"]).id
 
 
 def fe_variant_mesh(wildcards):
-    return fe_study_mesh(MeshSpec.from_id(wildcards.variant.split("_el=")[0]))
+    """The study mesh of the variant in ``wildcards``."""
+    from fem.benchmark import Variant
+
+    return fe_study_mesh(Variant.from_id(wildcards.variant).mesh)
 
 
 wildcard_constraints:
