@@ -44,8 +44,8 @@ def test_two_processes_give_the_serial_displacement(coarse_mesh: Path, tmp_path:
     assert np.array_equal(a["fixed"], b["fixed"])
     assert np.allclose(a["X"], b["X"], rtol=0, atol=1e-15)
     scale = np.abs(a["u"]).max()
-    # Newton stops at a relative residual of 1e-9: the two runs differ only in round-off
-    # and in where each stops, far below that
+    # Newton stops at a relative residual of 1e-7 after the same iterations: the two runs
+    # differ only in round-off and in where each stops, far below that
     assert np.max(np.abs(a["u"] - b["u"])) <= 1e-7 * scale
     assert summary["max_disp_mm"] == pytest.approx(serial["max_disp_mm"], rel=1e-7)
     assert summary["volume_change"] == pytest.approx(0.0, abs=1e-10)
