@@ -4,8 +4,9 @@ Each training run is a model folder (see :mod:`surrogate.predict`) whose
 ``model.json`` holds its metrics. This module only reads those folders: it groups
 runs by architecture, gives mean ± SD of validation error, training time and
 epochs, selects the architecture with the lowest mean validation error (the
-paper's rule), and within it the run with the lowest validation error, which
-becomes the model used downstream.
+paper's rule; optionally only among those that predict within a time budget),
+and within it the run with the lowest validation error, which becomes the model
+used downstream.
 """
 
 from __future__ import annotations
@@ -99,15 +100,52 @@ def architecture_table(runs: Iterable[dict[str, Any]]) -> dict[str, Any]:
         raise StudyError("the architecture study has no runs")
     order = sorted(groups, key=parse_architecture)
     rows = {arch: {**summarise(groups[arch]), "paper": _paper_row(arch)} for arch in order}
-    selected = min(order, key=lambda a: (rows[a]["validation_error_mm"]["mean"], parse_architecture(a)))
-    return {
-        "rows": rows,
-        "selected_architecture": selected,
-        "selected_run": rows[selected]["best_run"],
-        "rule": "lowest mean validation error over the repeats (the paper's rule); "
-                "within it the run with the lowest validation error",
-        "paper_selected_architecture": reference.BEST_ARCHITECTURE,
-    }
+    table = {"rows": rows, "paper_selected_architecture": reference.BEST_ARCHITECTURE}
+    return select_architecture(table)
+
+
+def select_architecture(table: dict[str, Any], budget_ms: float | None = None) -> dict[str, Any]:
+    """Select the architecture used downstream, in place, and return the table.
+
+    Without a budget: the lowest mean validation error (the paper's rule). With
+    ``budget_ms``: the lowest mean validation error among the architectures whose
+    one-core prediction time (``predict_one_core.api.median_ms`` of each row, see
+    :func:`surrogate.timing.time_on_one_core`) is within the budget: a larger network
+    that is a little more accurate but too slow for the view it serves is not chosen.
+    If none is within the budget, the fastest is chosen and the table says so.
+    Within the architecture, the run with the lowest validation error is the model.
+
+    Raises:
+        StudyError: if a budget is given and a row has no prediction time.
+    """
+    rows = table["rows"]
+    error = lambda a: (rows[a]["validation_error_mm"]["mean"], parse_architecture(a))  # noqa: E731
+    rule = "lowest mean validation error over the repeats (the paper's rule)"
+    candidates = list(rows)
+    if budget_ms is not None:
+        missing = [a for a in rows if "predict_one_core" not in rows[a]]
+        if missing:
+            raise StudyError(f"no prediction time for {', '.join(missing)}: cannot apply the budget")
+        speed = {a: rows[a]["predict_one_core"]["api"]["median_ms"] for a in rows}
+        within = [a for a in rows if speed[a] <= budget_ms]
+        for a in rows:
+            rows[a]["within_prediction_budget"] = a in within
+        if within:
+            candidates = within
+            rule = (f"lowest mean validation error among the architectures that predict a case "
+                    f"within {budget_ms:g} ms on one core")
+        else:
+            candidates = [min(rows, key=lambda a: speed[a])]
+            rule = f"no architecture predicts within {budget_ms:g} ms on one core: the fastest"
+    selected = min(candidates, key=error)
+    table.update(
+        selected_architecture=selected,
+        selected_run=rows[selected]["best_run"],
+        most_accurate_architecture=min(rows, key=error),
+        prediction_budget_ms=budget_ms,
+        rule=rule + "; within it the run with the lowest validation error",
+    )
+    return table
 
 
 def _paper_row(arch: str) -> dict[str, Any] | None:

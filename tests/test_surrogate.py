@@ -124,3 +124,27 @@ def test_bad_inputs_are_named(dataset_path: Path, tmp_path: Path) -> None:
         del h5["splits/by_case/validation"]
     with pytest.raises(DatasetFormatError, match="by_case/validation"):
         load_dataset(broken)
+
+
+def test_selection_takes_the_most_accurate_architecture_within_the_prediction_budget() -> None:
+    from surrogate.study import StudyError, architecture_table, select_architecture
+
+    runs = [
+        {"folder": f"{arch}/r{r}", "architecture": arch, "seed": r, "boundary": "network",
+         "split": "by_sample", "validation_error_mm": err + 0.01 * r, "validation_error_domain_mm": err,
+         "train_s": 1.0, "compile_s": 0.1, "epochs": 10, "best_epoch": 9, "parameters": 1}
+        for arch, err in (("2x32", 0.3), ("3x32", 0.2), ("3x128", 0.1)) for r in (0, 1)
+    ]
+    table = architecture_table(runs)
+    assert table["selected_architecture"] == "3x128" and table["prediction_budget_ms"] is None
+    for arch, ms in (("2x32", 0.2), ("3x32", 0.4), ("3x128", 2.0)):
+        table["rows"][arch]["predict_one_core"] = {"api": {"median_ms": ms}}
+    select_architecture(table, 0.5)
+    assert table["selected_architecture"] == "3x32" and table["selected_run"] == "3x32/r0"
+    assert table["most_accurate_architecture"] == "3x128"
+    assert not table["rows"]["3x128"]["within_prediction_budget"]
+    select_architecture(table, 0.1)  # nothing fits: the fastest, and the rule says so
+    assert table["selected_architecture"] == "2x32" and "no architecture" in table["rule"]
+    del table["rows"]["2x32"]["predict_one_core"]
+    with pytest.raises(StudyError, match="2x32"):
+        select_architecture(table, 0.5)

@@ -109,7 +109,7 @@ rule study_run:
         "../scripts/train_run.py"
 
 
-# Table 2 and the selection; times each architecture's best model on one pinned core
+# Table 2 and the selection (within surrogate_study.prediction_budget_ms); times each architecture's best model on one pinned core
 # (two threads reserved so that no other job of the workflow runs beside the timing).
 rule architecture_study:
     input:
@@ -119,6 +119,7 @@ rule architecture_study:
     params:
         clinical=config["clinical"],
         repeats=STUDY["timing_repeats"],
+        budget_ms=STUDY["prediction_budget_ms"],
     log:
         "results/logs/surrogate/architecture_study.log",
     threads: 2

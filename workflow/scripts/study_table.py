@@ -3,7 +3,7 @@
 import logging
 
 from surrogate.data import write_json
-from surrogate.study import architecture_table, read_run
+from surrogate.study import architecture_table, read_run, select_architecture
 from surrogate.timing import time_on_one_core
 
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
@@ -16,6 +16,7 @@ timing = time_on_one_core(list(best_runs.values()), queries, repeats=snakemake.p
 for arch, folder in best_runs.items():
     table["rows"][arch]["predict_one_core"] = timing["models"][folder]
 table["timing"] = {k: v for k, v in timing.items() if k != "models"}
+select_architecture(table, snakemake.params.budget_ms)
 write_json(snakemake.output.table, table)
 for arch, row in table["rows"].items():
     log.info("%s: %.4f ± %.4f mm, %.0f ± %.0f s, predict %.3f ms", arch,
