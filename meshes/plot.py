@@ -58,7 +58,7 @@ def plot_boundaries(
     present = [(b, t) for b, t in facets.items() if len(t)]
     tris = np.concatenate([t for _, t in present])
     colours = np.concatenate([[COLOURS[b]] * len(t) for b, t in present])
-    fig = plt.figure(figsize=(15, 5.5), dpi=110)
+    fig = plt.figure(figsize=(15, 6.5), dpi=110)
     for i, (view, elev, azim, proj) in enumerate(VIEWS):
         ax = fig.add_subplot(1, len(VIEWS), i + 1, projection="3d")
         # One collection for all surfaces: matplotlib depth-sorts faces within a
@@ -85,8 +85,10 @@ def plot_boundaries(
         if elev == 90.0:  # looking along z: its ticks would pile up on one spot
             ax.set_zticks([])
             ax.set_zlabel("")
-        # below the panel: a camera from caudal puts tick labels where a title would go
-        ax.text2D(0.5, 0.0, view, transform=ax.transAxes, ha="center", va="top", fontsize=10)
+            ax.yaxis.labelpad = 14  # clear of the tick labels
+        # below the panel and its axis labels: a camera from caudal puts tick labels
+        # where a title would go
+        ax.text2D(0.5, -0.1, view, transform=ax.transAxes, ha="center", va="top", fontsize=10)
     handles = [
         Patch(
             facecolor=COLOURS[b],
@@ -97,8 +99,9 @@ def plot_boundaries(
     ]
     fig.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=9, frameon=False)
     if title:
-        fig.suptitle(title, fontsize=11)
-    fig.subplots_adjust(left=0.0, right=1.0, top=0.92, bottom=0.12, wspace=0.05)
+        fig.suptitle(title, fontsize=11, y=0.99)
+    # room above for the title and the caudal view's tick labels, below for the captions
+    fig.subplots_adjust(left=0.02, right=0.98, top=0.84, bottom=0.2, wspace=0.12)
     target = Path(png_path)
     target.parent.mkdir(parents=True, exist_ok=True)
     # a temporary name beside the target (created with the usual permissions, unlike
