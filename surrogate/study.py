@@ -52,6 +52,7 @@ def read_run(folder: str | Path) -> dict[str, Any]:
             "validation_error_mm", "validation_error_domain_mm", "train_s", "compile_s",
             "epochs", "best_epoch")},
         "parameters": _count_parameters(cfg),
+        "config": cfg,
     }
 
 
@@ -163,12 +164,16 @@ def compare_variants(
     ``ratio`` is the variant's mean validation error over the baseline's (< 1: better).
     """
     base = summarise(baseline)
+    base_config = baseline[0].get("config") or {}
     out = {"baseline": base, "variants": {}}
     for name, runs in variants.items():
         s = summarise(runs)
         s["error_ratio_to_baseline"] = s["validation_error_mm"]["mean"] / base["validation_error_mm"]["mean"]
         s["time_ratio_to_baseline"] = s["train_s"]["mean"] / base["train_s"]["mean"]
         s["boundary"] = runs[0]["boundary"]
+        # what the variant changes (the seed differs between repeats, not between variants)
+        s["changed"] = {k: v for k, v in (runs[0].get("config") or {}).items()
+                        if k != "seed" and base_config.get(k) != v}
         out["variants"][name] = s
     return out
 
