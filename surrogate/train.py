@@ -341,3 +341,61 @@ def _progress(total: int, enabled: bool, label: str) -> Any:
     from tqdm import tqdm
 
     return tqdm(total=total, desc=f"{label} epochs", unit="epoch", mininterval=1.0)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command-line entry point: train one model outside the workflow and print its figures.
+
+    ``python -m surrogate.train results/dataset/dataset.h5 --config config.yaml
+    --set activation=tanh --set max_epochs=50 --out /tmp/model`` trains the config's
+    ``surrogate`` settings with the overrides on one core and prints one JSON line
+    (validation error, best epoch, training time).
+    """
+    import argparse
+    import json
+    import sys
+
+    import yaml
+
+    from surrogate.runtime import configure_cpu
+
+    parser = argparse.ArgumentParser(description=main.__doc__.splitlines()[0])
+    parser.add_argument("dataset", help="the sweep's HDF5 dataset")
+    parser.add_argument("--config", default="config.yaml", help="config whose `surrogate` section is the base")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="override one surrogate setting (YAML value), e.g. lr_schedule=cosine")
+    parser.add_argument("--out", help="save the model in this folder")
+    parser.add_argument("--progress", action="store_true", help="show a progress bar")
+    args = parser.parse_args(argv)
+    configure_cpu(single_thread=True)  # before JAX's first computation: one core
+    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    from surrogate.config import SurrogateConfigError
+    from surrogate.data import DatasetFormatError, load_dataset
+    from surrogate.predict import save_model
+
+    try:
+        overrides = {}
+        for item in args.set:
+            key, sep, value = item.partition("=")
+            if not sep:
+                raise SurrogateConfigError(f"--set {item!r} is not KEY=VALUE")
+            overrides[key.strip()] = yaml.safe_load(value)
+        with open(args.config) as fh:
+            base = (yaml.safe_load(fh) or {}).get("surrogate") or {}
+        config = SurrogateConfig.from_mapping({**base, **overrides})
+        dataset = load_dataset(args.dataset)
+        result = train_and_evaluate(dataset, config, progress=args.progress)
+    except (OSError, SurrogateConfigError, DatasetFormatError, ValueError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    if args.out:
+        save_model(args.out, result, dataset)
+    print(json.dumps({"overrides": overrides, "architecture": config.architecture,
+                      "validation_error_mm": result.validation_error_mm,
+                      "best_epoch": result.best_epoch, "epochs": len(result.history),
+                      "train_s": result.train_s}))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

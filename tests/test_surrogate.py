@@ -148,3 +148,25 @@ def test_selection_takes_the_most_accurate_architecture_within_the_prediction_bu
     del table["rows"]["2x32"]["predict_one_core"]
     with pytest.raises(StudyError, match="2x32"):
         select_architecture(table, 0.5)
+
+
+def test_train_command_line_trains_saves_and_names_bad_settings(
+    dataset_path: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
+) -> None:
+    from surrogate.predict import Surrogate
+    from surrogate.train import main
+
+    monkeypatch.setenv("XLA_FLAGS", "")  # main() sets its one-core flags; keep them to this test
+    config = tmp_path / "config.yaml"
+    config.write_text("surrogate: {hidden_layers: 1, width: 4, batch_size: 64}\n")
+    args = [str(dataset_path), "--config", str(config), "--set", "max_epochs=2", "--set", "activation=silu"]
+    assert main([*args, "--out", str(tmp_path / "m")]) == 0
+    printed = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert printed["architecture"] == "1x4" and printed["epochs"] == 2
+    assert printed["overrides"] == {"max_epochs": 2, "activation": "silu"}
+    assert np.isfinite(printed["validation_error_mm"])
+    assert Surrogate.load(tmp_path / "m").predict(2.0, 90.0).shape == (N, 3)
+    assert main([*args, "--set", "activation=sigmoid"]) == 2
+    assert "surrogate.activation must be one of" in capsys.readouterr().err
+    assert main([*args, "--set", "widthx"]) == 2
+    assert "not KEY=VALUE" in capsys.readouterr().err
