@@ -884,10 +884,10 @@ def _table2(ctx: _Context) -> str:
         p_err, p_train = paper.get("validation_error_mm"), paper.get("train_s")
         mark = []
         if name == selected:
-            mark.append("by us")
+            mark.append("selected by us")
             highlight.append(i)
         if name == reference.BEST_ARCHITECTURE:
-            mark.append("by the paper")
+            mark.append("selected by the paper")
         if name == table.get("most_accurate_architecture") and name != selected:
             mark.append("most accurate, over the prediction budget")
         rows.append([name, _fmt(row.get("parameters"), "d"), _fmt(row.get("runs"), "d"),
@@ -897,7 +897,7 @@ def _table2(ctx: _Context) -> str:
                      _pm(*p_train, ".0f") if p_train else "n/a",
                      _fmt((row.get("epochs") or {}).get("mean"), ".0f"),
                      _fmt(1e3 * _predict_s(row) if _predict_s(row) is not None else None, ".3g"),
-                     "; ".join(("selected " + m) if m.startswith("by") else m for m in mark)])
+                     "; ".join(mark)])
     return "".join([
         _h3("Table 2: architecture study"),
         _p("Validation error (mean |u − û| over the validation points, mean ± SD over the "

@@ -109,8 +109,9 @@ rule study_run:
         "../scripts/train_run.py"
 
 
-# Table 2 and the selection (within surrogate_study.prediction_budget_ms); times each architecture's best model on one pinned core
-# (two threads reserved so that no other job of the workflow runs beside the timing).
+# Table 2 and the selection (within surrogate_study.prediction_budget_ms); times each
+# architecture's best model on one pinned core (two threads reserved so that no other job of
+# the workflow runs beside the timing).
 rule architecture_study:
     input:
         runs=study_runs(),
