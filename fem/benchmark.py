@@ -25,6 +25,8 @@ import os
 import platform
 import statistics
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -54,7 +56,7 @@ ELEMENTS: dict[str, dict[str, Any]] = {
 
 # -- environment ------------------------------------------------------------------------------
 def limit_blas_threads(n: int = 1) -> list[str]:
-    """Set OpenBLAS to ``n`` threads in every OpenBLAS this process has loaded.
+    """Set OpenBLAS (in every copy this process has loaded) and OpenMP to ``n`` threads.
 
     MUMPS calls BLAS through ``libblas.so.3``, which Debian's ``openblas-pthread``
     provides as a second copy of OpenBLAS beside ``libopenblas.so.0``; each has its own
@@ -64,15 +66,52 @@ def limit_blas_threads(n: int = 1) -> list[str]:
         The libraries that were set.
     """
     os.environ["OPENBLAS_NUM_THREADS"] = str(n)
+    os.environ["OMP_NUM_THREADS"] = str(n)
     done = []
-    for name in ("libopenblas.so.0", "libblas.so.3"):
+    for name, setter in (
+        ("libopenblas.so.0", "openblas_set_num_threads"),
+        ("libblas.so.3", "openblas_set_num_threads"),
+        ("libgomp.so.1", "omp_set_num_threads"),  # MUMPS' OpenMP regions
+    ):
         try:
-            lib = ctypes.CDLL(name, mode=ctypes.RTLD_NOLOAD | ctypes.RTLD_GLOBAL)
-            lib.openblas_set_num_threads(ctypes.c_int(n))
+            lib = ctypes.CDLL(name, mode=os.RTLD_NOLOAD | os.RTLD_GLOBAL)
+            getattr(lib, setter)(ctypes.c_int(n))
         except (OSError, AttributeError):
             continue
         done.append(name)
     return done
+
+
+@contextmanager
+def one_core(core: int | None = None) -> Iterator[int]:
+    """Run the body on one CPU core: every thread of this process is pinned to ``core``.
+
+    The targets are per core, and some libraries start thread pools of their own (the
+    OpenMP build of MUMPS, a second OpenBLAS), so capping thread counts alone does not
+    guarantee one core; pinning does. Threads started inside the body inherit the pin.
+    The process's previous affinity is restored afterwards.
+
+    Args:
+        core: the CPU (default: the lowest this process may use).
+
+    Yields:
+        The core pinned to.
+    """
+    allowed = os.sched_getaffinity(0)
+    core = min(allowed) if core is None else core
+
+    def pin(cpus: set[int]) -> None:
+        for tid in os.listdir("/proc/self/task"):
+            try:
+                os.sched_setaffinity(int(tid), cpus)
+            except (ProcessLookupError, PermissionError):  # a thread that just ended
+                continue
+
+    pin({core})
+    try:
+        yield core
+    finally:
+        pin(allowed)
 
 
 def machine_state() -> dict[str, Any]:
@@ -405,8 +444,23 @@ def clinical_benchmark(
         repeats: solves per case; the median wall time is reported.
 
     Returns:
-        Per-case records (timings, baseline, accuracy) and a summary against :data:`TARGETS`.
+        Per-case records (timings, baseline, accuracy) and a summary against :data:`TARGETS`,
+        all measured on one pinned core (:func:`one_core`).
     """
+    with one_core() as core:
+        out = _clinical_benchmark(mesh_path, settings, cases, references, baseline_steps, repeats)
+    out["machine"]["pinned_core"] = core
+    return out
+
+
+def _clinical_benchmark(
+    mesh_path: str | Path,
+    settings: SolverSettings,
+    cases: list[Case],
+    references: dict[str, tuple[Any, dict[str, Any]]],
+    baseline_steps: int,
+    repeats: int,
+) -> dict[str, Any]:
     from fem.case import CaseRunner
 
     state_before = machine_state()
@@ -485,8 +539,22 @@ def run_variant(
 
     The material points of a variant are its own mesh's vertices (as the dataset's are
     the default mesh's); the reference is evaluated there. A variant above ``max_dofs``
-    is recorded as skipped (with its DOF count), not solved.
+    is recorded as skipped (with its DOF count), not solved. Timed on one pinned core.
     """
+    with one_core() as core:
+        record = _run_variant(mesh_path, variant, base, cases, references, max_dofs)
+    record["machine"]["pinned_core"] = core
+    return record
+
+
+def _run_variant(
+    mesh_path: str | Path,
+    variant: Variant,
+    base: SolverSettings,
+    cases: list[Case],
+    references: dict[str, tuple[Any, dict[str, Any]]],
+    max_dofs: int | None,
+) -> dict[str, Any]:
     from fem.case import CaseRunner
 
     settings = variant.settings(base)
@@ -578,6 +646,7 @@ __all__ = [
     "expand_variants",
     "limit_blas_threads",
     "machine_state",
+    "one_core",
     "pareto_front",
     "load_displacement",
     "load_references",

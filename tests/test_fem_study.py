@@ -74,6 +74,48 @@ def test_stored_reference_is_rebuilt_exactly(coarse_mesh: Path, tmp_path: Path) 
     assert np.allclose(values, at_vertices, rtol=0, atol=1e-12)
 
 
+def test_point_location_fallback_finds_the_containing_cell(coarse_mesh: Path) -> None:
+    # the fallback for points dolfinx's GJK test fails on must agree with it where it works
+    from dolfinx import geometry
+    from mpi4py import MPI
+
+    from fem.evaluation import _colliding_cells, _most_inside_cell
+    from meshes.io import read_mesh
+
+    mesh, _, _ = read_mesh(coarse_mesh, MPI.COMM_SELF)
+    tree = geometry.BoundingBoxTree(mesh, 3)
+    cells = np.arange(0, mesh.topology.index_map(3).size_local, 7)
+    nodes = mesh.geometry.x
+    centroids = np.array([nodes[mesh.geometry.dofmap.links(c)[:4]].mean(axis=0) for c in cells])
+    assert np.array_equal(_colliding_cells(mesh, tree, centroids), cells)
+    assert [_most_inside_cell(mesh, tree, x) for x in centroids] == cells.tolist()
+
+
+def test_blas_and_openmp_threads_are_limited_in_the_loaded_libraries() -> None:
+    import ctypes
+    import os
+
+    from fem.benchmark import limit_blas_threads
+
+    done = limit_blas_threads(1)  # numpy has loaded OpenBLAS; dolfinx's import loads libgomp
+    assert {"libblas.so.3", "libopenblas.so.0"} & set(done)
+    for name in {"libblas.so.3", "libopenblas.so.0"} & set(done):
+        assert ctypes.CDLL(name, mode=os.RTLD_NOLOAD).openblas_get_num_threads() == 1
+
+
+def test_one_core_pins_every_thread_and_restores_the_affinity() -> None:
+    import os
+
+    from fem.benchmark import one_core
+
+    allowed = os.sched_getaffinity(0)
+    with one_core() as core:
+        assert core == min(allowed)
+        for tid in os.listdir("/proc/self/task"):
+            assert os.sched_getaffinity(int(tid)) == {core}
+    assert os.sched_getaffinity(0) == allowed
+
+
 @pytest.fixture(scope="module")
 def mesh_ladder(tmp_path_factory: pytest.TempPathFactory) -> dict[float, Path]:
     """The default geometry at four element sizes (uniform, curved cells)."""
