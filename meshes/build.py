@@ -17,7 +17,10 @@ from meshes.parametric import (
     ANATOMICAL_BREAST_VOLUME_ML,
     ANATOMICAL_MAX_PROJECTION_M,
     BreastGeometry,
+    add_elliptic_cylinder,
+    add_mound_ellipsoid,
     build_occ_model,
+    round_fold,
 )
 from meshes.quality import quality_report
 from meshes.sizing import MeshSize, add_size_field
@@ -224,32 +227,22 @@ def cad_measures(model: Any, groups: dict[Boundary, list[int]]) -> dict[str, Any
 
 
 def mound_volume(geometry: BreastGeometry) -> float:
-    """Volume of the mound, m³: the part of the ellipsoid outside the skin layer.
+    """Volume of the mound, m³: the ellipsoid and the rounded fold outside the skin layer.
 
     This is the "breast volume" the report quotes: the tissue that stands out
     beyond the layer over the chest wall, not the layer under it.
     """
     with gmsh_session("mound") as model:
-        occ = model.occ
         g = geometry
-        base, axis = g.mound_frame()
-        sphere = occ.addSphere(0.0, 0.0, 0.0, 1.0)
-        occ.dilate(
-            [(3, sphere)], 0, 0, 0, g.mound_length, g.mound_radius_lateral, g.mound_radius_cranial
-        )
-        occ.rotate([(3, sphere)], 0, 0, 0, 0, 0, 1, math.atan2(axis[1], axis[0]))
-        occ.translate([(3, sphere)], *(base + g.mound_offset * axis))
-        a, b = g.rib_depth + g.layer_thickness, g.rib_half_width + g.layer_thickness
+        # The layer cylinder, long enough to hold the whole mound, fused with the
+        # ellipsoid and the fold rounded as in the mesh: the mound is what it added.
         z0 = g.mound_z - 2 * (g.mound_length + g.mound_radius_cranial)
-        if b >= a:
-            curve = occ.addEllipse(g.rib_depth, 0, z0, b, a, zAxis=[0, 0, 1], xAxis=[0, 1, 0])
-        else:
-            curve = occ.addEllipse(g.rib_depth, 0, z0, a, b, zAxis=[0, 0, 1], xAxis=[1, 0, 0])
-        disk = occ.addPlaneSurface([occ.addCurveLoop([curve])])
-        cylinder = [e for e in occ.extrude([(2, disk)], 0, 0, -2 * z0) if e[0] == 3]
-        mound, _ = occ.cut([(3, sphere)], cylinder)
-        occ.synchronize()
-        return float(sum(occ.getMass(3, tag) for dim, tag in mound if dim == 3))
+        cylinder = add_elliptic_cylinder(model, g, g.layer_thickness, z0, 2 * (g.mound_z - z0))
+        layer = model.occ.getMass(3, cylinder)
+        body, _ = model.occ.fuse([(3, cylinder)], [(3, add_mound_ellipsoid(model, g))])
+        body = round_fold(model, g, body[0][1])
+        model.occ.synchronize()
+        return float(model.occ.getMass(3, body) - layer)
 
 
 def anatomy(geometry: BreastGeometry, x: np.ndarray) -> dict[str, Any]:
@@ -277,7 +270,8 @@ def anatomy(geometry: BreastGeometry, x: np.ndarray) -> dict[str, Any]:
         "breast_volume_ml": volume_ml,
         "breast_volume_definition": (
             "mound only: the tissue outside the skin layer's outer surface (the ellipsoid "
-            "minus the layer cylinder); the layer over the chest wall is not counted"
+            "and the rounded fold, minus the layer cylinder); the layer over the chest wall "
+            "is not counted"
         ),
         "projection_from_chest_wall_m": projection,
         "projection_definition": "largest distance of a mesh node from the rib-cage surface",

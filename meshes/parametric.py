@@ -18,6 +18,14 @@ ellipsoid standing on the layer along the local outward normal at
 (``mound_angle``, ``mound_z``). With ``mound_offset > 0`` the ellipsoid's
 centre lies outside the skin layer, so the mound is wider than its base: the
 pendulous shape of a breast imaged prone.
+
+Where the mound meets the layer the two surfaces would form a sharp re-entrant
+crease (the inframammary fold); with ``mound_offset > 0`` the tissue's interior
+angle there is about 290°. Linear and nonlinear elasticity are singular at such
+an edge (stresses grow without bound, displacement gradients like r^(-1/2)), so
+the displacement error near the fold converges slowly under refinement and
+pollutes the mound's hinge-like motion. Real skin is smooth there: the crease is
+rounded by a fillet of radius ``fold_radius``.
 """
 
 from __future__ import annotations
@@ -30,7 +38,16 @@ import numpy as np
 
 from meshes.exceptions import GeometryError
 
-__all__ = ["BreastGeometry", "GeometryError", "build_occ_model", "rib_cage_surface"]
+__all__ = [
+    "BreastGeometry",
+    "GeometryError",
+    "add_elliptic_cylinder",
+    "add_mound_ellipsoid",
+    "build_occ_model",
+    "fold_curves",
+    "rib_cage_surface",
+    "round_fold",
+]
 
 ANATOMICAL_BREAST_VOLUME_ML = (300.0, 1500.0)
 """Plausible range of the mound (breast) volume, millilitres."""
@@ -57,6 +74,8 @@ class BreastGeometry:
         mound_radius_cranial: semi-axis across the axis, along z.
         mound_offset: distance of the ellipsoid centre outward from the skin
             layer along the axis (0 gives a dome, > 0 a pendulous mound).
+        fold_radius: radius of the fillet that rounds the crease where the mound
+            meets the skin layer (0 leaves the crease sharp).
     """
 
     rib_depth: float = 0.10
@@ -72,6 +91,7 @@ class BreastGeometry:
     mound_radius_lateral: float = 0.065
     mound_radius_cranial: float = 0.06
     mound_offset: float = 0.03
+    fold_radius: float = 0.0
 
     def __post_init__(self) -> None:
         positive = (
@@ -101,6 +121,11 @@ class BreastGeometry:
             )
         if self.mound_offset < 0 or self.mound_offset >= self.mound_length:
             raise GeometryError("geometry.mound_offset must lie in [0, mound_length)")
+        if self.fold_radius < 0 or self.fold_radius >= 0.5 * min(self.mound_base_radii()):
+            raise GeometryError(
+                "geometry.fold_radius must lie in [0, half the mound's base radius "
+                f"{0.5 * min(self.mound_base_radii()):.4g} m), got {self.fold_radius!r}"
+            )
         if self.layer_thickness >= min(self.rib_depth, self.rib_half_width):
             raise GeometryError("geometry.layer_thickness must be smaller than the rib semi-axes")
         # The mound must stand clear of the four cut planes, or it would be sliced.
@@ -233,6 +258,84 @@ class BreastGeometry:
         return float(np.sum(np.linalg.norm(np.diff(pts, axis=0), axis=1)))
 
 
+def add_elliptic_cylinder(
+    model: Any, geometry: BreastGeometry, offset: float, z_from: float, height: float
+) -> int:
+    """Add the rib-cage ellipse grown by ``offset`` (semi-axes a + offset, b + offset),
+    extruded along z from ``z_from`` over ``height``; returns the volume tag."""
+    occ, g = model.occ, geometry
+    a, b = g.rib_depth + offset, g.rib_half_width + offset
+    # gmsh's addEllipse needs r1 >= r2; orient the major axis explicitly.
+    if b >= a:
+        curve = occ.addEllipse(g.rib_depth, 0.0, z_from, b, a, zAxis=[0, 0, 1], xAxis=[0, 1, 0])
+    else:
+        curve = occ.addEllipse(g.rib_depth, 0.0, z_from, a, b, zAxis=[0, 0, 1], xAxis=[1, 0, 0])
+    disk = occ.addPlaneSurface([occ.addCurveLoop([curve])])
+    return next(tag for dim, tag in occ.extrude([(2, disk)], 0, 0, height) if dim == 3)
+
+
+def add_mound_ellipsoid(model: Any, geometry: BreastGeometry) -> int:
+    """Add the mound ellipsoid, aligned with the local normal at the mound base; returns its tag."""
+    occ, g = model.occ, geometry
+    base, axis = g.mound_frame()
+    sphere = occ.addSphere(0.0, 0.0, 0.0, 1.0)
+    occ.dilate(
+        [(3, sphere)], 0, 0, 0, g.mound_length, g.mound_radius_lateral, g.mound_radius_cranial
+    )
+    # Rotate the ellipsoid's x axis onto the mound axis (rotation about z).
+    occ.rotate([(3, sphere)], 0, 0, 0, 0, 0, 1, math.atan2(axis[1], axis[0]))
+    occ.translate([(3, sphere)], *(base + g.mound_offset * axis))
+    return sphere
+
+
+def fold_curves(model: Any, geometry: BreastGeometry, volume: int) -> list[int]:
+    """Curves of ``volume`` (synchronised) that lie on both the mound ellipsoid and the
+    skin layer's outer cylinder: the crease of the inframammary fold."""
+    g = geometry
+    base, axis = g.mound_frame()
+    centre = base + g.mound_offset * axis
+    across = np.array([-axis[1], axis[0], 0.0])
+    a, b = g.rib_depth + g.layer_thickness, g.rib_half_width + g.layer_thickness
+    tol = 1e-6
+    found = set()
+    for _, face in model.getBoundary([(3, volume)], oriented=False):
+        for _, curve in model.getBoundary([(2, face)], oriented=False):
+            lo, hi = model.getParametrizationBounds(1, abs(curve))
+            x = np.reshape(model.getValue(1, abs(curve), list(np.linspace(lo[0], hi[0], 9))), (-1, 3))
+            rel = x - centre
+            q = (rel @ axis / g.mound_length) ** 2 + (rel @ across / g.mound_radius_lateral) ** 2
+            q += (rel[:, 2] / g.mound_radius_cranial) ** 2
+            layer = ((x[:, 0] - g.rib_depth) / a) ** 2 + (x[:, 1] / b) ** 2
+            if np.all(np.abs(q - 1) < tol) and np.all(np.abs(layer - 1) < tol):
+                found.add(abs(curve))
+    return sorted(found)
+
+
+def round_fold(model: Any, geometry: BreastGeometry, volume: int) -> int:
+    """Fillet the crease between the mound and the skin layer of ``volume`` with
+    ``geometry.fold_radius`` (nothing to do at 0); returns the new volume's tag.
+
+    Raises:
+        GeometryError: if the crease is not found or OpenCASCADE cannot round it.
+    """
+    if geometry.fold_radius == 0:
+        return volume
+    model.occ.synchronize()
+    curves = fold_curves(model, geometry, volume)
+    if not curves:
+        raise GeometryError("the crease between the mound and the skin layer was not found")
+    try:
+        out = model.occ.fillet([volume], curves, [geometry.fold_radius], removeVolume=True)
+    except Exception as err:  # gmsh raises a bare Exception with OpenCASCADE's message
+        raise GeometryError(
+            f"geometry.fold_radius = {geometry.fold_radius} m cannot round the mound's base: {err}"
+        ) from err
+    volumes = [tag for dim, tag in out if dim == 3]
+    if len(volumes) != 1:
+        raise GeometryError(f"rounding the fold produced {len(volumes)} volumes, expected one")
+    return volumes[0]
+
+
 def build_occ_model(model: Any, geometry: BreastGeometry) -> int:
     """Add the breast volume to a gmsh model with the OpenCASCADE kernel.
 
@@ -245,31 +348,13 @@ def build_occ_model(model: Any, geometry: BreastGeometry) -> int:
     """
     occ = model.occ
     g = geometry
-    a, b, t = g.rib_depth, g.rib_half_width, g.layer_thickness
     z0, z1 = g.z_caudal, g.z_cranial
     pad = 0.05 * (z1 - z0)
-    height = (z1 - z0) + 2 * pad
-
-    def elliptic_cylinder(semi_x: float, semi_y: float) -> int:
-        # gmsh's addEllipse needs r1 >= r2; orient the major axis explicitly.
-        if semi_y >= semi_x:
-            curve = occ.addEllipse(
-                a, 0.0, z0 - pad, semi_y, semi_x, zAxis=[0, 0, 1], xAxis=[0, 1, 0]
-            )
-        else:
-            curve = occ.addEllipse(
-                a, 0.0, z0 - pad, semi_x, semi_y, zAxis=[0, 0, 1], xAxis=[1, 0, 0]
-            )
-        loop = occ.addCurveLoop([curve])
-        disk = occ.addPlaneSurface([loop])
-        out = occ.extrude([(2, disk)], 0, 0, height)
-        return next(tag for dim, tag in out if dim == 3)
-
-    inner = elliptic_cylinder(a, b)
-    outer = elliptic_cylinder(a + t, b + t)
+    inner = add_elliptic_cylinder(model, g, 0.0, z0 - pad, (z1 - z0) + 2 * pad)
+    outer = add_elliptic_cylinder(model, g, g.layer_thickness, z0 - pad, (z1 - z0) + 2 * pad)
 
     # Wedge between the sternal (ψ = 0) and axilla (ψ = axilla_angle) planes through the axis.
-    far = 4.0 * (a + b + t + g.mound_projection)
+    far = 4.0 * (g.rib_depth + g.rib_half_width + g.layer_thickness + g.mound_projection)
     centre = g.axis_centre
     psis = np.linspace(0.0, g.axilla_angle, 7)
     ring = [centre + far * g.radial_direction(p) for p in psis]
@@ -279,19 +364,8 @@ def build_occ_model(model: Any, geometry: BreastGeometry) -> int:
     wedge_face = occ.addPlaneSurface([occ.addCurveLoop(lines)])
     wedge = next(tag for dim, tag in occ.extrude([(2, wedge_face)], 0, 0, z1 - z0) if dim == 3)
 
-    # Mound: an ellipsoid aligned with the local normal at the mound base.
-    base, axis = g.mound_frame()
-    centre3 = base + g.mound_offset * axis
-    sphere = occ.addSphere(0.0, 0.0, 0.0, 1.0)
-    occ.dilate(
-        [(3, sphere)], 0, 0, 0, g.mound_length, g.mound_radius_lateral, g.mound_radius_cranial
-    )
-    # Rotate the ellipsoid's x axis onto the mound axis (rotation about z).
-    angle = math.atan2(axis[1], axis[0])
-    occ.rotate([(3, sphere)], 0, 0, 0, 0, 0, 1, angle)
-    occ.translate([(3, sphere)], *centre3)
-
-    body, _ = occ.fuse([(3, outer)], [(3, sphere)])
+    body, _ = occ.fuse([(3, outer)], [(3, add_mound_ellipsoid(model, g))])
+    body = [(3, round_fold(model, g, body[0][1]))] if len(body) == 1 else body
     body, _ = occ.intersect(body, [(3, wedge)])
     body, _ = occ.cut(body, [(3, inner)])
     occ.synchronize()

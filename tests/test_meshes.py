@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +23,31 @@ def test_geometry_rejects_bad_values_by_name() -> None:
         BreastGeometry(mound_offset=0.2)
     with pytest.raises(GeometryError, match="unknown geometry parameter"):
         BreastGeometry.from_mapping({"mound_lenght": 0.1})
+
+
+def test_fold_radius_is_validated_by_name() -> None:
+    with pytest.raises(GeometryError, match="fold_radius"):
+        BreastGeometry(fold_radius=-0.001)
+    with pytest.raises(GeometryError, match="fold_radius"):
+        BreastGeometry(fold_radius=0.05)  # more than half the mound's base radius
+
+
+def test_the_fold_between_mound_and_layer_is_rounded() -> None:
+    from meshes.build import gmsh_session, mound_volume
+    from meshes.parametric import build_occ_model, fold_curves
+
+    sharp = BreastGeometry()
+    rounded = replace(sharp, fold_radius=0.025)
+    # sharp: a crease curve lies on both the ellipsoid and the layer's outer cylinder;
+    # rounded: the fillet's faces meet each of them along its own curve, none on both
+    for geometry, crease in ((sharp, True), (rounded, False)):
+        with gmsh_session() as model:
+            volume = build_occ_model(model, geometry)
+            assert bool(fold_curves(model, geometry, volume)) is crease
+    # the fillet fills the fold: less than an R x R square swept around the base
+    added = mound_volume(rounded) - mound_volume(sharp)
+    R = rounded.fold_radius
+    assert 0 < added < R**2 * 2 * np.pi * (max(rounded.mound_base_radii()) + R)
 
 
 def test_mound_may_not_reach_a_cut_plane() -> None:
