@@ -20,12 +20,13 @@ that a reader can tell a busy machine from a slow solver.
 from __future__ import annotations
 
 import ctypes
+import functools
 import logging
 import os
 import platform
 import statistics
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -112,6 +113,20 @@ def one_core(core: int | None = None) -> Iterator[int]:
         yield core
     finally:
         pin(allowed)
+
+
+def timed_on_one_core(func: Callable[..., dict[str, Any]]) -> Callable[..., dict[str, Any]]:
+    """Run a benchmark returning a record with a ``machine`` mapping under :func:`one_core`,
+    and record the core there as ``pinned_core``."""
+
+    @functools.wraps(func)
+    def wrapper(*args: Any, **kwargs: Any) -> dict[str, Any]:
+        with one_core() as core:
+            record = func(*args, **kwargs)
+        record["machine"]["pinned_core"] = core
+        return record
+
+    return wrapper
 
 
 def machine_state() -> dict[str, Any]:
@@ -425,6 +440,7 @@ def accuracy_at_vertices(runner: Any, reference: Any | None) -> dict[str, Any] |
     return {**displacement_errors(u, u_ref), "max_outside_m": float(distance.max())}
 
 
+@timed_on_one_core
 def clinical_benchmark(
     mesh_path: str | Path,
     settings: SolverSettings,
@@ -447,20 +463,6 @@ def clinical_benchmark(
         Per-case records (timings, baseline, accuracy) and a summary against :data:`TARGETS`,
         all measured on one pinned core (:func:`one_core`).
     """
-    with one_core() as core:
-        out = _clinical_benchmark(mesh_path, settings, cases, references, baseline_steps, repeats)
-    out["machine"]["pinned_core"] = core
-    return out
-
-
-def _clinical_benchmark(
-    mesh_path: str | Path,
-    settings: SolverSettings,
-    cases: list[Case],
-    references: dict[str, tuple[Any, dict[str, Any]]],
-    baseline_steps: int,
-    repeats: int,
-) -> dict[str, Any]:
     from fem.case import CaseRunner
 
     state_before = machine_state()
@@ -527,6 +529,7 @@ def _clinical_benchmark(
 
 
 # -- speed against accuracy ------------------------------------------------------------------
+@timed_on_one_core
 def run_variant(
     mesh_path: str | Path,
     variant: Variant,
@@ -541,20 +544,6 @@ def run_variant(
     the default mesh's); the reference is evaluated there. A variant above ``max_dofs``
     is recorded as skipped (with its DOF count), not solved. Timed on one pinned core.
     """
-    with one_core() as core:
-        record = _run_variant(mesh_path, variant, base, cases, references, max_dofs)
-    record["machine"]["pinned_core"] = core
-    return record
-
-
-def _run_variant(
-    mesh_path: str | Path,
-    variant: Variant,
-    base: SolverSettings,
-    cases: list[Case],
-    references: dict[str, tuple[Any, dict[str, Any]]],
-    max_dofs: int | None,
-) -> dict[str, Any]:
     from fem.case import CaseRunner
 
     settings = variant.settings(base)
@@ -656,5 +645,6 @@ __all__ = [
     "run_variant",
     "solve_reference",
     "summarise_variants",
+    "timed_on_one_core",
     "timed_solve",
 ]
