@@ -6,6 +6,7 @@ import os
 import signal
 import subprocess
 import time
+from base64 import urlsafe_b64decode
 from pathlib import Path
 
 import h5py
@@ -26,7 +27,8 @@ def make_reproduce(workdir: Path, config: Path, *targets: str, **popen) -> subpr
     """Start the README's reproduce command on ``workdir``."""
     cmd = ["make", "-s", "-C", str(REPO), "reproduce", f"WORKDIR={workdir}", f"CONFIG={config}",
            f"SNAKEMAKE_ARGS={' '.join(targets)}"]
-    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, **popen)
+    popen.setdefault("stdout", subprocess.PIPE)
+    return subprocess.Popen(cmd, stderr=subprocess.STDOUT, text=True, **popen)
 
 
 def finished_cases(workdir: Path) -> dict[Path, tuple[int, int]]:
@@ -35,20 +37,54 @@ def finished_cases(workdir: Path) -> dict[Path, tuple[int, int]]:
             for p in (workdir / "results/cases").glob("*/summary.json")}
 
 
+def incomplete_outputs(workdir: Path) -> set[str]:
+    """Outputs Snakemake has marked incomplete: jobs started and not yet recorded as finished.
+
+    Snakemake marks every output of a job when it starts it and unmarks them only after it has
+    written their metadata, so an output without a marker is one a resumed run keeps. The marker
+    files are named by the urlsafe base64 of the output path (long names split into '@' chunks).
+    """
+    root = workdir / ".snakemake" / "incomplete"
+    marked = set()
+    for path in root.rglob("*"):
+        if path.is_file() and path.name != "migration_underway":
+            b64 = "".join(part.lstrip("@") for part in path.relative_to(root).parts)
+            marked.add(urlsafe_b64decode(b64).decode())
+    return marked
+
+
+def recorded_cases(workdir: Path) -> tuple[dict[Path, tuple[int, int]], set[str]]:
+    """Finished cases Snakemake has recorded as complete, and the outputs still marked incomplete.
+
+    A case whose script has written its summary but whose job Snakemake had not yet recorded
+    when it was killed is, rightly, redone on resume; only recorded cases must be kept.
+    """
+    marked = incomplete_outputs(workdir)
+    running = {Path(m).parent.name for m in marked}
+    recorded = {p: stamp for p, stamp in finished_cases(workdir).items()
+                if p.parent.name not in running}
+    return recorded, marked
+
+
 def test_sigkill_mid_sweep_resumes_without_recomputing(tmp_path: Path) -> None:
     config = tmp_path / "config.yaml"
     config.write_text(yaml.safe_dump(KILL_CONFIG))
     target = "results/dataset/dataset.h5"
-    run = make_reproduce(tmp_path, config, target, start_new_session=True)
+    log = (tmp_path / "killed_run.log").open("w")
+    run = make_reproduce(tmp_path, config, target, start_new_session=True, stdout=log)
     deadline = time.monotonic() + 300
-    while len(finished_cases(tmp_path)) < 3 and time.monotonic() < deadline and run.poll() is None:
+    seen_running = set()  # the markers must be read right, or every case would count as recorded
+    while time.monotonic() < deadline and run.poll() is None:
+        recorded, marked = recorded_cases(tmp_path)
+        seen_running |= {m for m in marked if m.endswith("/summary.json")}
+        if len(recorded) >= 3:
+            break
         time.sleep(0.2)
-    # cases that finished well before the kill: Snakemake has recorded them as complete
-    time.sleep(2.0)
-    done_early = finished_cases(tmp_path)
-    time.sleep(1.0)
     os.killpg(run.pid, signal.SIGKILL)
     run.wait()
+    log.close()
+    done_early, _ = recorded_cases(tmp_path)
+    assert seen_running, "Snakemake marks a running case's outputs incomplete; none was seen"
     assert 3 <= len(done_early) < 12, "the kill must land mid-sweep"
     assert not (tmp_path / target).exists()
 
