@@ -371,6 +371,7 @@ def timed_solve(runner: Any, case: Case, loading: Loading | None = None) -> dict
         "total_newton_iterations": result.total_iterations,
         "linear_iterations": result.linear_iterations,
         "jacobian_evaluations": timings["jacobian_evaluations"],
+        "preconditioner_builds": timings["preconditioner_builds"],
         "residual_evaluations": timings["residual_evaluations"],
         "first_failure": result.first_failure,
     }

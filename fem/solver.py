@@ -1,10 +1,11 @@
 """PETSc SNES Newton solver for :class:`fem.problem.GravityProblem`.
 
 The options (Newton settings and the named linear-solver presets ``direct``,
-``direct-lu``, ``iterative``) live in :func:`fem.options.default_parameters`;
-this module applies them to a SNES, sets up what the presets need beyond
-options (the field split of the mixed space, the rigid-body near-nullspace,
-the preconditioning matrix) and times the solver's phases.
+``direct-refactor``, ``direct-lu``, ``iterative``) live in
+:func:`fem.options.default_parameters`; this module applies them to a SNES, sets
+up what the presets need beyond options (the field split of the mixed space, the
+rigid-body near-nullspace, the preconditioning matrix, the kept factorisation of
+``direct``) and times the solver's phases.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import numpy as np
 from dolfinx.fem import petsc as fem_petsc
 from petsc4py import PETSc
 
-from fem.options import LINE_SEARCHES, SOLVER_PRESETS, default_parameters, solver_options
+from fem.options import LINE_SEARCHES, SOLVER_KEYS, SOLVER_PRESETS, default_parameters, solver_options
 from fem.problem import GravityProblem
 
 log = logging.getLogger(__name__)
@@ -36,6 +37,7 @@ class Timings:
     snes: float = 0.0
     residual_evaluations: int = 0
     jacobian_evaluations: int = 0
+    preconditioner_builds: int = 0
 
     @property
     def assembly(self) -> float:
@@ -91,12 +93,19 @@ class NewtonSolver:
         if self.options.get("pc_type") == "fieldsplit" and not problem.mixed:
             self.options = _single_field(self.options)
         self.timings = Timings()
+        #: Re-factorise when the previous Krylov solve took more iterations (0: always).
+        self.refactor_above_its = int(self.options.get("refactor_above_its", 0))
         comm = problem.mesh.comm
         self.A = fem_petsc.create_matrix(problem.tangent)
         self.A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
         self.P = None
         if self._fieldsplit:
             self.P = fem_petsc.create_matrix(problem.preconditioner)
+        elif self.refactor_above_its:
+            # The factorised copy of the tangent. PCSetUp re-factorises only when this
+            # matrix changes, so leaving it untouched keeps the factors.
+            self.P = fem_petsc.create_matrix(problem.tangent)
+            self.P.setOption(PETSc.Mat.Option.SYMMETRIC, True)
         self.b = fem_petsc.create_vector(problem.residual)
         self.x = problem.w.vector.duplicate()
         self._split, self._u_order = self._split_index_sets() if self._fieldsplit else (None, None)
@@ -112,7 +121,7 @@ class NewtonSolver:
         # destroy(): fieldsplit creates its sub-solvers, and reads their options, only at
         # the first PCSetUp.
         opts = PETSc.Options()
-        for key, value in self.options.items():
+        for key, value in self._petsc_options.items():
             opts[f"{self.prefix}{key}"] = value
         self.snes.setFunction(self._residual, self.b)
         self.snes.setJacobian(self._jacobian, self.A, self.P if self.P is not None else self.A)
@@ -121,6 +130,10 @@ class NewtonSolver:
         self.snes.setConvergenceHistory(reset=True)
 
     # -- set-up ---------------------------------------------------------------------------
+    @property
+    def _petsc_options(self) -> dict[str, Any]:
+        return {k: v for k, v in self.options.items() if k not in SOLVER_KEYS}
+
     @property
     def _fieldsplit(self) -> bool:
         return self.options.get("pc_type") == "fieldsplit"
@@ -228,8 +241,30 @@ class NewtonSolver:
     def _jacobian(self, snes: PETSc.SNES, x: PETSc.Vec, A: PETSc.Mat, P: PETSc.Mat) -> None:
         start = time.perf_counter()
         self._assemble_operators(A, P)
+        if not self.refactor_above_its:
+            self.timings.preconditioner_builds += 1
+        elif self._factorisation_stale(snes):
+            self._keep_for_factorisation(A)
+            self.timings.preconditioner_builds += 1
         self.timings.jacobian += time.perf_counter() - start
         self.timings.jacobian_evaluations += 1
+
+    def _factorisation_stale(self, snes: PETSc.SNES) -> bool:
+        """Re-factorise at a load step's first iteration, or after a slow or failed Krylov solve."""
+        ksp = snes.getKSP()
+        return (
+            snes.getIterationNumber() == 0
+            or ksp.getIterationNumber() > self.refactor_above_its
+            or ksp.getConvergedReason() < 0
+        )
+
+    def _keep_for_factorisation(self, A: PETSc.Mat) -> None:
+        """Copy the fresh tangent into P, so that the next PCSetUp factorises it."""
+        if self.P.isAssembled():
+            A.copy(self.P, PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+        else:  # the first time: MatCopy needs an assembled target, so assemble it once
+            fem_petsc.assemble_matrix(self.P, self.problem.tangent, bcs=self.problem.bcs)
+            self.P.assemble()
 
     # -- driver ---------------------------------------------------------------------------------
     def solve(self) -> SolveResult:
@@ -270,6 +305,8 @@ class NewtonSolver:
         This is the unit of cost of a Newton solve, measured in the same process with
         the same options (a fresh KSP, so the symbolic analysis or AMG set-up is
         included), so that `nonlinear time / this` is a machine-independent ratio.
+        With ``direct`` the fresh factorisation makes the Krylov solve converge in
+        one or two iterations.
         """
         A = fem_petsc.create_matrix(self.problem.tangent)
         A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
@@ -310,7 +347,7 @@ class NewtonSolver:
     def destroy(self) -> None:
         """Free PETSc objects and this solver's entries in the options database."""
         opts = PETSc.Options()
-        for key in self.options:
+        for key in self._petsc_options:
             opts.delValue(f"{self.prefix}{key}")
         self.snes.destroy()
         for obj in (self.A, self.P, self.b, self.x):

@@ -31,13 +31,14 @@ def _displacement(mesh: Path, **settings) -> tuple[np.ndarray, object]:
 
 @pytest.fixture(scope="module")
 def reference(coarse_mesh: Path) -> np.ndarray:
-    """Default settings (P2/P1, MUMPS LDLᵀ, bt line search)."""
+    """Default settings (P2/P1, GMRES on a kept MUMPS LDLᵀ factorisation, bt line search)."""
     return _displacement(coarse_mesh)[0]
 
 
 @pytest.mark.parametrize(
     "solver, options",
     [
+        ("direct-refactor", {}),
         ("direct-lu", {}),
         ("iterative", {}),
         ("direct", {"snes_linesearch_type": "l2"}),
@@ -51,6 +52,25 @@ def test_solver_options_agree(coarse_mesh: Path, reference: np.ndarray, solver: 
     if solver == "iterative":
         # Krylov iterations were really spent (not a direct solve in disguise)
         assert result.attempts and result.newton_iterations[0] >= 3
+
+
+def test_default_keeps_its_factorisation_across_newton_iterations(coarse_mesh: Path) -> None:
+    from fem.case import CaseRunner
+
+    counts = {}
+    for preset in ("direct", "direct-refactor"):
+        runner = CaseRunner(coarse_mesh, SolverSettings(solver=preset))
+        result, timings = runner.solve(CASE)
+        assert result.converged, result.reason
+        counts[preset] = (timings["preconditioner_builds"], timings["jacobian_evaluations"],
+                          result.linear_iterations, result.total_iterations)
+        runner.solver.destroy()
+    builds, jacobians, krylov, newton = counts["direct"]
+    # a tangent at every Newton iteration, factorised fewer times, GMRES doing the rest
+    assert jacobians == newton and 1 <= builds < jacobians and krylov > newton
+    # exact Newton factorises every tangent; the Krylov tolerance leaves Newton's path intact
+    assert counts["direct-refactor"][0] == counts["direct-refactor"][1] == counts["direct-refactor"][3]
+    assert counts["direct-refactor"][3] == newton
 
 
 def test_ldlt_is_a_symmetric_factorisation(coarse_mesh: Path) -> None:
@@ -94,6 +114,11 @@ def test_higher_order_and_quadrature_change_the_answer_only_slightly(
     [
         ({"solver": "cg-please"}, "unknown solver preset 'cg-please'"),
         ({"petsc_options": {"snes_linesearch_type": "wolfe"}}, "unknown line search 'wolfe'"),
+        ({"petsc_options": {"refactor_above_its": -1}}, "non-negative integer, got -1"),
+        ({"petsc_options": {"refactor_above_its": 2.5}}, "non-negative integer, got 2.5"),
+        ({"petsc_options": {"ksp_type": "preonly"}}, "needs pc_type lu or cholesky and a Krylov"),
+        ({"solver": "iterative", "petsc_options": {"refactor_above_its": 5}},
+         "not pc_type 'fieldsplit'"),
     ],
 )
 def test_unknown_solver_options_are_named(settings: dict, message: str) -> None:
