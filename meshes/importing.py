@@ -564,7 +564,7 @@ def write_imported_mesh(
     model to place curved nodes on, so it is refused here).
 
     Raises:
-        GeometryError: if ``size.order`` is 2.
+        GeometryError: if ``size.order`` is 2 or ``size.fold_size`` is set.
         MeshInputError: (a subclass naming the problem) for any broken input.
     """
     from meshes.build import gmsh_quality, gmsh_session
@@ -574,6 +574,11 @@ def write_imported_mesh(
         raise GeometryError(
             "mesh.size.order 2 needs the parametric CAD to curve elements on; imported "
             "meshes are linear: set mesh.size.order: 1"
+        )
+    if size.fold_size is not None:
+        raise GeometryError(
+            "mesh.size.fold_size refines the parametric breast's crease, which an imported "
+            "geometry does not have: set mesh.size.fold_size: null"
         )
     start = time.perf_counter()
     x, tets, facets, info = prepare_input(spec, size)

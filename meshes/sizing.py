@@ -1,23 +1,28 @@
 """Element-size control of the parametric breast.
 
-The target size at a point is the smallest of three analytic laws, capped by
+The target size at a point is the smallest of up to four laws, capped by
 ``global_size``::
 
     h(x) = min(global_size,
                mound_size + grading * d_mound(x),
-               rib_size   + grading * d_rib(x))        (the last only if rib_size is set)
+               rib_size   + grading * d_rib(x),        (only if rib_size is set)
+               fold_size  + grading * d_fold(x))       (only if fold_size is set)
 
-``d_mound`` is an approximate distance outside the mound ellipsoid (0 inside it)
-and ``d_rib`` the distance from the rib-cage surface. Displacements peak at the
-tip of the mound and their gradients at its base, so refining the mound pays
-most; ``rib_size`` refines the clamped chest wall, where the stress
-concentrates, if a convergence study says it is worth it. ``grading`` bounds how
-fast the size may grow (metres of size per metre of distance), which keeps
-neighbouring elements of similar size.
+``d_mound`` is an approximate distance outside the mound ellipsoid (0 inside it),
+``d_rib`` the distance from the rib-cage surface and ``d_fold`` the distance from
+the crease where the mound meets the skin layer (the inframammary fold).
+Displacements peak at the tip of the mound and their gradients at its base, so
+refining the mound pays most; the sharp crease is a re-entrant edge where the
+displacement gradient is singular, so a mesh graded towards it (``fold_size``)
+recovers the convergence rate a uniform mesh loses there; ``rib_size`` refines
+the clamped chest wall. ``grading`` bounds how fast the size may grow (metres of
+size per metre of distance), which keeps neighbouring elements of similar size.
 
-The laws are gmsh ``MathEval`` fields: written once as expressions, evaluated
-in compiled code while gmsh meshes, and exact for the analytic surfaces (no
-sampling of CAD faces as a ``Distance`` field would need).
+The mound and rib laws are gmsh ``MathEval`` fields: written once as
+expressions, evaluated in compiled code while gmsh meshes, and exact for the
+analytic surfaces. The crease has no closed-form distance, so the fold law is a
+``Distance`` field sampled along the crease's CAD curves, finer than
+``fold_size``.
 """
 
 from __future__ import annotations
@@ -29,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from meshes.exceptions import GeometryError
-from meshes.parametric import BreastGeometry
+from meshes.parametric import BreastGeometry, fold_curves
 
 
 @dataclass(frozen=True, slots=True)
@@ -43,6 +48,9 @@ class MeshSize:
         grading: growth of the size with distance from a refined region (m per m).
         rib_size: element size on the rib (chest-wall) surface; ``None`` leaves it to
             the other laws.
+        fold_size: element size at the crease where the mound meets the skin layer;
+            ``None`` leaves it to the other laws. Needs the sharp crease
+            (``BreastGeometry.fold_radius == 0``).
     """
 
     global_size: float = 0.015
@@ -50,16 +58,19 @@ class MeshSize:
     order: int = 1
     grading: float = 0.3
     rib_size: float | None = None
+    fold_size: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("global_size", "mound_size", "grading"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise GeometryError(f"mesh.size.{name} must be positive, got {value!r}")
-        if self.rib_size is not None and not (math.isfinite(self.rib_size) and self.rib_size > 0):
-            raise GeometryError(
-                f"mesh.size.rib_size must be positive or null, got {self.rib_size!r}"
-            )
+        for name in ("rib_size", "fold_size"):
+            value = getattr(self, name)
+            if value is not None and not (
+                isinstance(value, (int, float)) and math.isfinite(value) and value > 0
+            ):
+                raise GeometryError(f"mesh.size.{name} must be positive or null, got {value!r}")
         if self.order not in (1, 2):
             raise GeometryError(f"mesh.size.order must be 1 or 2, got {self.order!r}")
         if self.mound_size > self.global_size:
@@ -71,7 +82,7 @@ class MeshSize:
     @classmethod
     def from_mapping(cls, values: dict[str, Any]) -> MeshSize:
         """Build from the ``mesh.size`` config mapping, rejecting unknown keys by name."""
-        known = {"global_size", "mound_size", "order", "grading", "rib_size"}
+        known = {"global_size", "mound_size", "order", "grading", "rib_size", "fold_size"}
         unknown = sorted(set(values) - known)
         if unknown:
             raise GeometryError(f"unknown mesh.size parameter(s): {', '.join(unknown)}")
@@ -129,8 +140,40 @@ def rib_distance_expression(geometry: BreastGeometry) -> str:
     return f"Fabs({f} / {grad})"
 
 
-def add_size_field(model: Any, geometry: BreastGeometry, size: MeshSize) -> int:
+def fold_distance_field(model: Any, geometry: BreastGeometry, volume: int, spacing: float) -> int:
+    """A gmsh ``Distance`` field to the crease curves of ``volume``; returns its tag.
+
+    The curves are sampled every ``spacing`` metres (at least 20 points each).
+
+    Raises:
+        GeometryError: if ``volume`` has no sharp crease (e.g. a rounded fold).
+    """
+    model.occ.synchronize()
+    curves = fold_curves(model, geometry, volume)
+    if not curves:
+        raise GeometryError(
+            "mesh.size.fold_size refines the sharp crease where the mound meets the skin layer, "
+            f"and this geometry has none (geometry.fold_radius = {geometry.fold_radius}); "
+            "set fold_size to null"
+        )
+    length = sum(model.occ.getMass(1, c) for c in curves)
+    tag = model.mesh.field.add("Distance")
+    model.mesh.field.setNumbers(tag, "CurvesList", curves)
+    samples = max(20, int(math.ceil(length / len(curves) / spacing)))
+    model.mesh.field.setNumber(tag, "Sampling", samples)
+    return tag
+
+
+def add_size_field(
+    model: Any, geometry: BreastGeometry, size: MeshSize, volume: int | None = None
+) -> int:
     """Install the size laws of :class:`MeshSize` as the background field of ``model``.
+
+    Args:
+        model: ``gmsh.model`` holding the breast.
+        geometry: its shape parameters.
+        size: the size laws.
+        volume: the breast's volume tag; needed only when ``size.fold_size`` is set.
 
     Returns:
         The tag of the background field.
@@ -139,6 +182,11 @@ def add_size_field(model: Any, geometry: BreastGeometry, size: MeshSize) -> int:
     laws = [(size.mound_size, mound_distance_expression(geometry))]
     if size.rib_size is not None:
         laws.append((size.rib_size, rib_distance_expression(geometry)))
+    if size.fold_size is not None:
+        if volume is None:
+            raise ValueError("add_size_field needs the volume tag to refine the crease")
+        distance = fold_distance_field(model, geometry, volume, size.fold_size / 4)
+        laws.append((size.fold_size, f"F{distance}"))
     tags = []
     for h0, distance in laws:
         tag = field.add("MathEval")

@@ -297,6 +297,8 @@ def test_unreadable_or_unsupported_input(tmp_path: Path) -> None:
         write_imported_mesh(spec(garbage), SIZE, tmp_path / "m.xdmf")
     with pytest.raises(GeometryError, match="order 2"):
         write_imported_mesh(spec(garbage), MeshSize(order=2), tmp_path / "m.xdmf")
+    with pytest.raises(GeometryError, match="fold_size"):
+        write_imported_mesh(spec(garbage), MeshSize(fold_size=0.004), tmp_path / "m.xdmf")
     with pytest.raises(GeometryError, match="rule for the rib"):
         ImportSpec.from_mapping({"path": "a.stl", "surfaces": {"cranial": RIB_PLANE}})
 

@@ -64,6 +64,10 @@ def test_mesh_size_rejects_bad_values_by_name() -> None:
         MeshSize(order=3)
     with pytest.raises(GeometryError, match="unknown mesh.size"):
         MeshSize.from_mapping({"globl_size": 0.01})
+    with pytest.raises(GeometryError, match="fold_size"):
+        MeshSize(fold_size=0.0)
+    with pytest.raises(GeometryError, match="fold_size"):
+        MeshSize(fold_size=float("nan"))
 
 
 def test_config_geometry_is_the_code_default() -> None:
@@ -223,6 +227,38 @@ def test_size_field_refines_the_mound_and_optionally_the_rib(tmp_path: Path) -> 
     assert mound[0] < 0.6 * uniform[0]  # finer at the tip ...
     assert mound[1] == pytest.approx(uniform[1], rel=0.15)  # ... not far from it
     assert rib[2] < 0.6 * mound[2]  # rib_size refines the chest wall far from the mound too
+
+
+def test_fold_size_refines_the_crease_and_needs_one() -> None:
+    from meshes.build import gmsh_session, mesh_arrays, mesh_parametric
+    from meshes.parametric import build_occ_model, fold_curves
+    from meshes.quality import tet_volumes
+
+    g = BreastGeometry()
+    with gmsh_session() as model:
+        volume = build_occ_model(model, g)
+        crease = []
+        for c in fold_curves(model, g, volume):
+            lo, hi = model.getParametrizationBounds(1, c)
+            crease.append(np.reshape(model.getValue(1, c, list(np.linspace(lo[0], hi[0], 200))), (-1, 3)))
+    crease = np.vstack(crease)
+
+    def sizes(size: MeshSize) -> tuple[int, float, float]:
+        with gmsh_session() as model:
+            x, tets, _ = mesh_arrays(model, mesh_parametric(model, g, size))
+        h = np.cbrt(6 * np.sqrt(2) * np.abs(tet_volumes(x, tets)))
+        d = np.min(np.linalg.norm(x[tets].mean(axis=1)[:, None] - crease[None], axis=2), axis=1)
+        return len(tets), float(np.median(h[d < 0.008])), float(np.median(h[d > 0.04]))
+
+    plain = sizes(MeshSize(global_size=0.03, mound_size=0.02))
+    fold = sizes(MeshSize(global_size=0.03, mound_size=0.02, fold_size=0.005))
+    assert fold[1] < 0.5 * plain[1]  # much finer at the crease ...
+    assert fold[2] == pytest.approx(plain[2], rel=0.15)  # ... not far from it
+    assert fold[0] > plain[0]
+
+    rounded = replace(g, fold_radius=0.02)
+    with gmsh_session() as model, pytest.raises(GeometryError, match="fold_size"):
+        mesh_parametric(model, rounded, MeshSize(global_size=0.03, mound_size=0.02, fold_size=0.005))
 
 
 def test_png_shows_the_named_surfaces(tmp_path: Path) -> None:
