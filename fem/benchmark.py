@@ -152,42 +152,67 @@ def machine_state() -> dict[str, Any]:
 
 
 # -- the study's variants -----------------------------------------------------------------------
-@dataclass(frozen=True, slots=True, order=True)
+@dataclass(frozen=True, slots=True)
 class MeshSpec:
     """Element sizes (m) and geometric order of a study mesh; the rest of the mesh
-    configuration (geometry, grading) is the workflow's."""
+    configuration (geometry, grading) is the workflow's.
+
+    ``fold_size`` is the element size at the inframammary crease (``None``: no
+    refinement there, whatever the workflow's own mesh asks for).
+    """
 
     global_size: float
     mound_size: float
     order: int = 1
+    fold_size: float | None = None
 
     def __post_init__(self) -> None:
         if not (0 < self.mound_size <= self.global_size):
             raise InvalidParameterError(f"need 0 < mound_size <= global_size, got {self}")
         if self.order not in (1, 2):
             raise InvalidParameterError(f"mesh order must be 1 or 2, got {self.order}")
+        if self.fold_size is not None and not 0 < self.fold_size <= self.global_size:
+            raise InvalidParameterError(f"need 0 < fold_size <= global_size, got {self}")
 
     @property
     def id(self) -> str:
-        """Folder name, e.g. ``g=0.0150_m=0.0100_o=1``."""
-        return f"g={self.global_size:.4f}_m={self.mound_size:.4f}_o={self.order}"
+        """Folder name, e.g. ``g=0.0150_m=0.0100_o=1`` or ``g=0.0150_m=0.0100_f=0.0040_o=1``."""
+        fold = "" if self.fold_size is None else f"_f={self.fold_size:.4f}"
+        return f"g={self.global_size:.4f}_m={self.mound_size:.4f}{fold}_o={self.order}"
 
     @classmethod
     def from_id(cls, mesh_id: str) -> MeshSpec:
         """Parse :attr:`id`."""
         parts = dict(p.split("=") for p in mesh_id.split("_"))
-        return cls(float(parts["g"]), float(parts["m"]), int(parts["o"]))
+        fold = float(parts["f"]) if "f" in parts else None
+        return cls(float(parts["g"]), float(parts["m"]), int(parts["o"]), fold)
+
+    @classmethod
+    def from_mapping(cls, values: dict[str, Any]) -> MeshSpec:
+        """From a config mapping ``{global_size, mound_size[, order][, fold_size]}``."""
+        fold = values.get("fold_size")
+        return cls(
+            float(values["global_size"]),
+            float(values["mound_size"]),
+            int(values.get("order", 1)),
+            None if fold is None else float(fold),
+        )
 
     def size_mapping(self) -> dict[str, Any]:
-        """The ``mesh.size`` entries this spec sets."""
-        return {"global_size": self.global_size, "mound_size": self.mound_size, "order": self.order}
+        """The ``mesh.size`` entries this spec sets (``fold_size`` always, even if null)."""
+        return {
+            "global_size": self.global_size,
+            "mound_size": self.mound_size,
+            "order": self.order,
+            "fold_size": self.fold_size,
+        }
 
 
-MESH_ID_PATTERN = r"g=[0-9]+\.[0-9]{4}_m=[0-9]+\.[0-9]{4}_o=[12]"
+MESH_ID_PATTERN = r"g=[0-9]+\.[0-9]{4}_m=[0-9]+\.[0-9]{4}(?:_f=[0-9]+\.[0-9]{4})?_o=[12]"
 VARIANT_ID_PATTERN = MESH_ID_PATTERN + r"_el=(p1-penalty|p2p1|p3p2)_solver=[a-z-]+_q=[0-9]+"
 
 
-@dataclass(frozen=True, slots=True, order=True)
+@dataclass(frozen=True, slots=True)
 class Variant:
     """One point of the speed-accuracy study.
 
@@ -236,17 +261,22 @@ def expand_variants(entries: list[dict[str, Any]]) -> list[Variant]:
     """Cross products of the config's ``fe_study.speed_accuracy.variants`` entries.
 
     Each entry has ``element`` (one name), ``mesh`` (list of ``{global_size,
-    mound_size, order}``), ``solver`` (list of presets, default ``[direct]``) and
+    mound_size, order, fold_size}``), ``solver`` (list of presets, default ``[direct]``) and
     ``quadrature_degree`` (list, default ``[0]``).
     """
     out: set[Variant] = set()
     for entry in entries:
         for mesh in entry["mesh"]:
-            spec = MeshSpec(float(mesh["global_size"]), float(mesh["mound_size"]), int(mesh.get("order", 1)))
+            spec = MeshSpec.from_mapping(mesh)
             for solver in entry.get("solver", ["direct"]):
                 for q in entry.get("quadrature_degree", [0]):
                     out.add(Variant(spec, entry["element"], solver, int(q)))
-    return sorted(out)
+    def key(v: Variant) -> tuple:
+        m = v.mesh
+        return (m.global_size, m.mound_size, m.order, m.fold_size or 0.0, v.element, v.solver,
+                v.quadrature_degree)
+
+    return sorted(out, key=key)
 
 
 def clinical_cases(clinical: list[dict[str, Any]]) -> list[Case]:

@@ -76,7 +76,7 @@ COST_LABELS = {
     "median_wall_s": "median wall time per clinical case (s)",
 }
 _VARIANT_ID = re.compile(
-    r"g=(?P<g>[0-9.]+)_m=(?P<m>[0-9.]+)_o=(?P<o>[12])_el=(?P<el>[a-z0-9-]+)"
+    r"g=(?P<g>[0-9.]+)_m=(?P<m>[0-9.]+)(?:_f=(?P<f>[0-9.]+))?_o=(?P<o>[12])_el=(?P<el>[a-z0-9-]+)"
     r"_solver=(?P<solver>[a-z-]+)_q=(?P<q>[0-9]+)$"
 )
 
@@ -183,12 +183,14 @@ def _missing(what: str) -> str:
 
 
 def variant_label(variant_id: str) -> str:
-    """A short, readable name of an FE study variant, e.g. ``P2/P1, h 15/10 mm, direct``."""
+    """A short, readable name of an FE study variant, e.g. ``P2/P1, h 15/10 mm, direct``
+    (``h 15/10/4 mm`` with 4 mm elements at the crease)."""
     match = _VARIANT_ID.match(str(variant_id))
     if match is None:
         return str(variant_id)
     g, m = 1e3 * float(match["g"]), 1e3 * float(match["m"])
-    label = f"{fem_plots.ELEMENT_NAMES.get(match['el'], match['el'])}, h {g:.3g}/{m:.3g} mm"
+    sizes = f"{g:.3g}/{m:.3g}" + (f"/{1e3 * float(match['f']):.3g}" if match["f"] else "")
+    label = f"{fem_plots.ELEMENT_NAMES.get(match['el'], match['el'])}, h {sizes} mm"
     if match["o"] == "2":
         label += " curved"
     label += f", {match['solver']}"

@@ -4,14 +4,24 @@ storage, convergence rate) and its workflow rules end to end on tests/config.yam
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
 
-from fem.benchmark import MeshSpec, Variant, expand_variants, pareto_front, summarise_variants
+from fem.benchmark import (
+    VARIANT_ID_PATTERN,
+    MeshSpec,
+    Variant,
+    expand_variants,
+    pareto_front,
+    summarise_variants,
+)
+from fem.exceptions import InvalidParameterError
 from fem.stability import lowest_converging
+from surrogate.report import variant_label
 from tests.conftest import REPO
 
 
@@ -26,6 +36,15 @@ def test_variant_ids_round_trip_and_expand() -> None:
          {"element": "p2p1", "mesh": [{"global_size": 0.03, "mound_size": 0.02}]}]
     )
     assert len(variants) == 4  # the second entry repeats one of the first's
+    graded = Variant(MeshSpec.from_mapping({"global_size": 0.015, "mound_size": 0.01, "fold_size": 0.004}))
+    assert graded.id == "g=0.0150_m=0.0100_f=0.0040_o=1_el=p2p1_solver=direct_q=0"
+    assert Variant.from_id(graded.id) == graded
+    assert re.fullmatch(VARIANT_ID_PATTERN, graded.id) and re.fullmatch(VARIANT_ID_PATTERN, v.id)
+    assert graded.mesh.size_mapping()["fold_size"] == 0.004
+    assert MeshSpec(0.015, 0.01).size_mapping()["fold_size"] is None  # overrides the workflow's
+    assert variant_label(graded.id) == "P2/P1, h 15/10/4 mm, direct"
+    with pytest.raises(InvalidParameterError, match="fold_size"):
+        MeshSpec(0.015, 0.01, 1, 0.0)
     settings = variants[0].settings(__import__("fem.parameters").parameters.SolverSettings())
     assert settings.discretisation.element == "taylor-hood" and settings.discretisation.degree == 2
 

@@ -16,9 +16,9 @@ FE_STUDY_RESULTS = [FE_CLINICAL_JSON, FE_SPEED_ACCURACY_JSON, FE_STABILITY_JSON]
 
 try:
     FE_CLINICAL_CASES = clinical_cases(config["clinical"])
-    FE_REFERENCE_MESH = MeshSpec(**FE_STUDY["reference"]["mesh"])
+    FE_REFERENCE_MESH = MeshSpec.from_mapping(FE_STUDY["reference"]["mesh"])
     FE_VARIANTS = expand_variants(FE_STUDY["speed_accuracy"]["variants"])
-    FE_STABILITY_MESH = MeshSpec(**FE_STUDY["stability"]["mesh"])
+    FE_STABILITY_MESH = MeshSpec.from_mapping(FE_STUDY["stability"]["mesh"])
 except (FEError, KeyError, TypeError, ValueError) as err:
     raise WorkflowError(f"invalid configuration: fe_study: {err}") from None
 
@@ -43,7 +43,7 @@ def fe_default_variant():
     size, disc = config["mesh"]["size"], config["fe"]["discretisation"]
     degree = disc["degree"]
     element = "p1-penalty" if disc["element"] == "p1-penalty" else f"p{degree}p{degree - 1}"
-    spec = MeshSpec(size["global_size"], size["mound_size"], size.get("order", 1))
+    spec = MeshSpec.from_mapping(size)
     return Variant(spec, element, config["fe"]["solver"], disc["quadrature_degree"]).id
 
 

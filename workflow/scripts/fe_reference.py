@@ -9,7 +9,7 @@ from fem.sweep import Case
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
 
 ref = snakemake.params.reference
-variant = Variant(MeshSpec(**ref["mesh"]), ref["element"], ref["solver"], ref["quadrature_degree"])
+variant = Variant(MeshSpec.from_mapping(ref["mesh"]), ref["element"], ref["solver"], ref["quadrature_degree"])
 w = snakemake.wildcards
 solve_reference(
     snakemake.input.mesh,
