@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from fem.exceptions import InvalidParameterError
+from fem.overlap import self_overlap
 from fem.parameters import Discretisation, Loading, SolverSettings
 from fem.sweep import Case
 
@@ -442,6 +443,7 @@ def solve_reference(mesh_path: str | Path, settings: SolverSettings, case: Case,
         dofs=runner.problem.num_dofs(),
         setup_s=runner.setup_s,
         max_disp_mm=1e3 * float(np.linalg.norm(u, axis=1).max()),
+        self_overlap=self_overlap(runner.mesh, runner.problem.displacement()),
         settings=settings.describe(runner.solver.options),
         mesh=str(mesh_path),
     )
@@ -491,7 +493,8 @@ def clinical_benchmark(
         repeats: solves per case; the median wall time is reported.
 
     Returns:
-        Per-case records (timings, baseline, accuracy) and a summary against :data:`TARGETS`,
+        Per-case records (timings, baseline, accuracy, :func:`fem.overlap.self_overlap`) and
+        a summary against :data:`TARGETS`,
         all measured on one pinned core (:func:`one_core`).
     """
     from fem.case import CaseRunner
@@ -509,6 +512,7 @@ def clinical_benchmark(
         record["mean_disp_mm"] = 1e3 * float(np.linalg.norm(u, axis=1).mean())
         reference = references.get(case.id)
         record["accuracy"] = accuracy_at_vertices(runner, reference[0] if reference else None)
+        record["self_overlap"] = self_overlap(runner.mesh, runner.problem.displacement())
         baseline = timed_solve(runner, case, baseline_loading)
         _, _, u_base = vertex_displacement(runner)
         baseline["max_difference_from_adaptive_mm"] = 1e3 * float(np.abs(u_base - u).max())
@@ -600,8 +604,10 @@ def run_variant(
     for case in cases:
         row = timed_solve(runner, case)
         reference = references.get(case.id)
-        if row["converged"] and reference is not None:
-            row["accuracy"] = accuracy_at_vertices(runner, reference[0])
+        if row["converged"]:
+            row["self_overlap"] = self_overlap(runner.mesh, runner.problem.displacement())
+            if reference is not None:
+                row["accuracy"] = accuracy_at_vertices(runner, reference[0])
         rows.append(row)
         log.info("%s %s: %.2f s, error %s", variant.id, case.id, row["wall_s"],
                  row.get("accuracy", {}).get("relative_max_error") if row.get("accuracy") else "n/a")
@@ -612,6 +618,9 @@ def run_variant(
     record["max_factorization_equivalents"] = max(r["factorization_equivalents"] for r in rows)
     record["max_relative_error"] = max(r["accuracy"]["relative_max_error"] for r in ok) if len(ok) == len(rows) else None
     record["max_error_mm"] = max(r["accuracy"]["max_error_mm"] for r in ok) if len(ok) == len(rows) else None
+    record["max_overlapping_vertices"] = max(
+        (r["self_overlap"]["overlapping_vertices"] for r in rows if "self_overlap" in r), default=None
+    )
     runner.solver.destroy()
     return record
 

@@ -226,3 +226,29 @@ def test_volume_is_conserved_to_solver_tolerance(coarse_problem) -> None:
     assert abs(problem.volume_change()) < 1e-10
     # the deformation is large, so this is not trivially satisfied
     assert problem.min_detF() < 0.99
+
+
+# -- self-overlap of the deformed body -------------------------------------------------------------
+def test_self_overlap_finds_a_fold_not_a_rigid_motion_or_a_solution(coarse_problem) -> None:
+    from fem.overlap import self_overlap
+
+    problem, solver = coarse_problem
+    msh = problem.mesh
+    x0 = msh.geometry.x.copy()
+    V = fem.VectorFunctionSpace(msh, ("Lagrange", 2))
+    u = fem.Function(V)
+    untouched = self_overlap(msh, u)
+    assert untouched["overlapping_vertices"] == 0 and untouched["boundary_vertices"] > 100
+    u.interpolate(lambda x: np.vstack([0.05 + 0 * x[0], 0.02 + 0 * x[1], -0.01 + 0 * x[2]]))
+    assert self_overlap(msh, u)["overlapping_vertices"] == 0  # a translation
+    # fold the body about a plane: the part x < c is mirrored onto the part x > c
+    c = 0.5 * (x0[:, 0].min() + x0[:, 0].max())
+    u.interpolate(lambda x: np.vstack([2 * np.maximum(c - x[0], 0.0), 0 * x[1], 0 * x[2]]))
+    folded = self_overlap(msh, u)
+    assert folded["overlapping_vertices"] > 0.1 * folded["boundary_vertices"]
+    # reported where they start from: points of the undeformed mesh
+    assert all(np.linalg.norm(x0 - p, axis=1).min() < 1e-12 for p in folded["examples_m"])
+    assert np.array_equal(msh.geometry.x, x0)  # the mesh is restored
+    # a converged prone case on this coarse mesh does not overlap itself
+    _solve(problem, solver, Material(C1=1000.0), Gravity(phi=180.0))
+    assert self_overlap(msh, problem.displacement())["overlapping_vertices"] == 0
