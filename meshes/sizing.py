@@ -13,8 +13,8 @@ The target size at a point is the smallest of up to four laws, capped by
 the crease where the mound meets the skin layer (the inframammary fold).
 Displacements peak at the tip of the mound and their gradients at its base, so
 refining the mound pays most; the sharp crease is a re-entrant edge where the
-displacement gradient is singular, so a mesh graded towards it (``fold_size``)
-recovers the convergence rate a uniform mesh loses there; ``rib_size`` refines
+displacement gradient is singular and whose under-resolution pollutes the error
+everywhere, so a mesh graded towards it (``fold_size``) pays; ``rib_size`` refines
 the clamped chest wall. ``grading`` bounds how fast the size may grow (metres of
 size per metre of distance), which keeps neighbouring elements of similar size.
 
