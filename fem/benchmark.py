@@ -272,6 +272,7 @@ def expand_variants(entries: list[dict[str, Any]]) -> list[Variant]:
             for solver in entry.get("solver", ["direct"]):
                 for q in entry.get("quadrature_degree", [0]):
                     out.add(Variant(spec, entry["element"], solver, int(q)))
+
     def key(v: Variant) -> tuple:
         m = v.mesh
         return (m.global_size, m.mound_size, m.order, m.fold_size or 0.0, v.element, v.solver,
