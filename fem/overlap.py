@@ -15,6 +15,8 @@ from typing import Any
 
 import numpy as np
 
+from meshes.io import geometry_nodes
+
 log = logging.getLogger(__name__)
 
 __all__ = ["self_overlap"]
@@ -35,9 +37,8 @@ def _geometry_displacement(mesh: Any, displacement: Any) -> np.ndarray:
     V = fem.VectorFunctionSpace(mesh, ("Lagrange", degree))
     w = fem.Function(V)
     w.interpolate(displacement)
-    n_cells = mesh.topology.index_map(mesh.topology.dim).size_local
-    dofs = V.dofmap.list.array.reshape(-1, V.dofmap.dof_layout.num_dofs)[:n_cells]
-    nodes = mesh.geometry.dofmap.array.reshape(dofs.shape[0], -1)[:n_cells]
+    nodes = geometry_nodes(mesh)
+    dofs = V.dofmap.list.array.reshape(nodes.shape[0], -1)
     x = mesh.geometry.x
     if nodes.shape != dofs.shape or not np.allclose(
         V.tabulate_dof_coordinates()[dofs], x[nodes], rtol=0, atol=1e-12
@@ -72,38 +73,31 @@ def self_overlap(mesh: Any, displacement: Any) -> dict[str, Any]:
     """
     from dolfinx import geometry
     from dolfinx import mesh as dmesh
+    from dolfinx.cpp.mesh import entities_to_geometry
 
     if mesh.comm.size > 1:
         raise ValueError("self_overlap() is serial only")
     tdim = mesh.topology.dim
     mesh.topology.create_connectivity(tdim - 1, tdim)
-    mesh.topology.create_connectivity(0, tdim)
-    boundary = np.unique(
-        dmesh.compute_incident_entities(mesh, dmesh.exterior_facet_indices(mesh.topology), tdim - 1, 0)
-    )
-    n_cells = mesh.topology.index_map(tdim).size_local
-    cell_vertices = mesh.topology.connectivity(tdim, 0).array.reshape(-1, tdim + 1)[:n_cells]
-    cell_nodes = mesh.geometry.dofmap.array.reshape(n_cells, -1)[:, : tdim + 1]
-    vertex_node = np.empty(mesh.topology.index_map(0).size_local, dtype=np.int64)
-    vertex_node[cell_vertices] = cell_nodes  # the first nodes of a cell are its vertices
-    vertex_cells = mesh.topology.connectivity(0, tdim)
+    facets = dmesh.exterior_facet_indices(mesh.topology)
+    boundary = np.unique(entities_to_geometry(mesh._mesh, tdim - 1, facets, False)[:, :tdim])
+    cell_vertices = geometry_nodes(mesh)[:, : tdim + 1]  # a cell's vertices are its first nodes
 
     x0 = mesh.geometry.x.copy()
     x = x0 + _geometry_displacement(mesh, displacement)
-    points = np.ascontiguousarray(x[vertex_node[boundary]])
+    points = np.ascontiguousarray(x[boundary])
     try:  # the bounding boxes of the deformed cells
         mesh.geometry.x[:] = x
         candidates = geometry.compute_collisions(geometry.BoundingBoxTree(mesh, tdim), points)
     finally:
         mesh.geometry.x[:] = x0
     # every (boundary vertex, candidate cell) pair, minus the cells the vertex belongs to
-    counts = np.diff(candidates.offsets)
-    point = np.repeat(np.arange(len(boundary)), counts)
+    point = np.repeat(np.arange(len(boundary)), np.diff(candidates.offsets))
     cell = candidates.array.astype(np.int64)
-    own = np.array([c in vertex_cells.links(boundary[i]) for i, c in zip(point, cell)], dtype=bool)
+    own = np.any(cell_vertices[cell] == boundary[point][:, None], axis=1)
     point, cell = point[~own], cell[~own]
     # barycentric coordinates in the straight tetrahedron through the cell's deformed vertices
-    corners = x[cell_nodes[cell]]  # (pairs, 4, 3)
+    corners = x[cell_vertices[cell]]  # (pairs, 4, 3)
     edges = np.transpose(corners[:, 1:] - corners[:, :1], (0, 2, 1))  # columns x1-x0, x2-x0, x3-x0
     ok = np.abs(np.linalg.det(edges)) > 0
     lam = np.zeros((len(cell), 3))
@@ -119,5 +113,5 @@ def self_overlap(mesh: Any, displacement: Any) -> dict[str, Any]:
     return {
         "boundary_vertices": int(len(boundary)),
         "overlapping_vertices": int(len(overlapping)),
-        "examples_m": [x0[vertex_node[v]].tolist() for v in overlapping[:5]],
+        "examples_m": [x0[v].tolist() for v in overlapping[:5]],
     }
