@@ -44,6 +44,7 @@ __all__ = [
     "add_elliptic_cylinder",
     "add_mound_ellipsoid",
     "build_occ_model",
+    "curve_points",
     "fold_curves",
     "rib_cage_surface",
     "round_fold",
@@ -288,6 +289,12 @@ def add_mound_ellipsoid(model: Any, geometry: BreastGeometry) -> int:
     return sphere
 
 
+def curve_points(model: Any, curve: int, n: int) -> np.ndarray:
+    """``n`` points of a (synchronised) model curve, evenly spaced in its parameter, (n, 3)."""
+    lo, hi = model.getParametrizationBounds(1, abs(curve))
+    return np.reshape(model.getValue(1, abs(curve), list(np.linspace(lo[0], hi[0], n))), (-1, 3))
+
+
 def fold_curves(model: Any, geometry: BreastGeometry, volume: int) -> list[int]:
     """Curves of ``volume`` (synchronised) that lie on both the mound ellipsoid and the
     skin layer's outer cylinder: the crease of the inframammary fold."""
@@ -300,8 +307,7 @@ def fold_curves(model: Any, geometry: BreastGeometry, volume: int) -> list[int]:
     found = set()
     for _, face in model.getBoundary([(3, volume)], oriented=False):
         for _, curve in model.getBoundary([(2, face)], oriented=False):
-            lo, hi = model.getParametrizationBounds(1, abs(curve))
-            x = np.reshape(model.getValue(1, abs(curve), list(np.linspace(lo[0], hi[0], 9))), (-1, 3))
+            x = curve_points(model, curve, 9)
             rel = x - centre
             q = (rel @ axis / g.mound_length) ** 2 + (rel @ across / g.mound_radius_lateral) ** 2
             q += (rel[:, 2] / g.mound_radius_cranial) ** 2

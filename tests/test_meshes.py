@@ -231,17 +231,13 @@ def test_size_field_refines_the_mound_and_optionally_the_rib(tmp_path: Path) -> 
 
 def test_fold_size_refines_the_crease_and_needs_one() -> None:
     from meshes.build import gmsh_session, mesh_arrays, mesh_parametric
-    from meshes.parametric import build_occ_model, fold_curves
+    from meshes.parametric import build_occ_model, curve_points, fold_curves
     from meshes.quality import tet_volumes
 
     g = BreastGeometry()
     with gmsh_session() as model:
         volume = build_occ_model(model, g)
-        crease = []
-        for c in fold_curves(model, g, volume):
-            lo, hi = model.getParametrizationBounds(1, c)
-            crease.append(np.reshape(model.getValue(1, c, list(np.linspace(lo[0], hi[0], 200))), (-1, 3)))
-    crease = np.vstack(crease)
+        crease = np.vstack([curve_points(model, c, 200) for c in fold_curves(model, g, volume)])
 
     def sizes(size: MeshSize) -> tuple[int, float, float]:
         with gmsh_session() as model:
