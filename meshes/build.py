@@ -118,7 +118,7 @@ def mesh_parametric(
         The gmsh surface tags of each named boundary.
     """
     volume = build_occ_model(model, geometry)
-    add_size_field(model, geometry, size, volume)
+    add_size_field(model, geometry, size)
     _set_meshing_options(size)
     model.mesh.generate(3)
     if size.order == 2:
@@ -340,8 +340,8 @@ def write_parametric_surface(geometry: BreastGeometry, size: MeshSize, path: str
     import meshio
 
     with gmsh_session() as model:
-        volume = build_occ_model(model, geometry)
-        add_size_field(model, geometry, size, volume)
+        build_occ_model(model, geometry)
+        add_size_field(model, geometry, size)
         _set_meshing_options(size)
         model.mesh.generate(2)
         groups = {Boundary.SKIN: [tag for _, tag in model.getEntities(2)]}

@@ -10,19 +10,19 @@ The target size at a point is the smallest of up to four laws, capped by
 
 ``d_mound`` is an approximate distance outside the mound ellipsoid (0 inside it),
 ``d_rib`` the distance from the rib-cage surface and ``d_fold`` the distance from
-the crease where the mound meets the skin layer (the inframammary fold).
-Displacements peak at the tip of the mound and their gradients at its base, so
-refining the mound pays most; the sharp crease is a re-entrant edge where the
-displacement gradient is singular and whose under-resolution pollutes the error
-everywhere, so a mesh graded towards it (``fold_size``) pays; ``rib_size`` refines
-the clamped chest wall. ``grading`` bounds how fast the size may grow (metres of
-size per metre of distance), which keeps neighbouring elements of similar size.
+the inframammary fold, where the mound meets the skin layer (0 over the fillet
+that rounds it, ``geometry.fold_radius``). Displacements peak at the tip of the
+mound and their gradients at its base, so refining the mound pays most. The fold
+is where the mesh must resolve the geometry: a sharp crease is a re-entrant edge
+where the displacement gradient is singular, a fillet a curvature of radius
+``fold_radius``, often below the element size; under-resolved, either pollutes
+the error everywhere, so a mesh graded towards it (``fold_size``) pays.
+``rib_size`` refines the clamped chest wall. ``grading`` bounds how fast the size
+may grow (metres of size per metre of distance), which keeps neighbouring
+elements of similar size.
 
-The mound and rib laws are gmsh ``MathEval`` fields: written once as
-expressions, evaluated in compiled code while gmsh meshes, and exact for the
-analytic surfaces. The crease has no closed-form distance, so the fold law is a
-``Distance`` field sampled along the crease's CAD curves, finer than
-``fold_size``.
+The laws are gmsh ``MathEval`` fields: written once as expressions of analytic
+(first-order) distances, evaluated in compiled code while gmsh meshes.
 """
 
 from __future__ import annotations
@@ -34,12 +34,15 @@ from typing import Any
 import numpy as np
 
 from meshes.exceptions import GeometryError
-from meshes.parametric import BreastGeometry, fold_curves
+from meshes.parametric import BreastGeometry
 
 
 @dataclass(frozen=True, slots=True)
 class MeshSize:
     """Element sizes (metres), their grading and the geometric order.
+
+    The defaults are the plain law that any geometry, parametric or imported, accepts;
+    ``config.yaml`` grades the default breast's mesh to its fold with curved cells.
 
     Attributes:
         global_size: largest element size (far from the mound and the chest wall).
@@ -48,9 +51,9 @@ class MeshSize:
         grading: growth of the size with distance from a refined region (m per m).
         rib_size: element size on the rib (chest-wall) surface; ``None`` leaves it to
             the other laws.
-        fold_size: element size at the crease where the mound meets the skin layer;
-            ``None`` leaves it to the other laws. Needs the sharp crease
-            (``BreastGeometry.fold_radius == 0``).
+        fold_size: element size over the inframammary fold (the crease where the
+            mound meets the skin layer, or the fillet rounding it); ``None`` leaves
+            it to the other laws.
     """
 
     global_size: float = 0.015
@@ -105,6 +108,24 @@ def _positive_part(expr: str) -> str:
     return f"(({expr}) + Fabs({expr})) / 2"
 
 
+def _mound_coordinates(geometry: BreastGeometry) -> list[tuple[str, float]]:
+    """MathEval coordinates along the mound ellipsoid's three axes (from its centre),
+    each with its semi-axis."""
+    base, axis = geometry.mound_frame()
+    centre = base + geometry.mound_offset * axis
+    rel = f"(x - {_num(centre[0])})", f"(y - {_num(centre[1])})", f"(z - {_num(centre[2])})"
+
+    def along(e: np.ndarray) -> str:
+        return f"({_num(e[0])}*{rel[0]} + {_num(e[1])}*{rel[1]} + {_num(e[2])}*{rel[2]})"
+
+    g = geometry
+    return [
+        (along(axis), g.mound_length),
+        (along(np.array([-axis[1], axis[0], 0.0])), g.mound_radius_lateral),
+        (rel[2], g.mound_radius_cranial),
+    ]
+
+
 def mound_distance_expression(geometry: BreastGeometry) -> str:
     """MathEval expression of an approximate distance outside the mound ellipsoid.
 
@@ -112,68 +133,52 @@ def mound_distance_expression(geometry: BreastGeometry) -> str:
     times the smallest semi-axis underestimates the true distance, so the size
     grows no faster than ``grading`` asks.
     """
-    base, axis = geometry.mound_frame()
-    centre = base + geometry.mound_offset * axis
-    e1 = axis
-    e2 = np.array([-axis[1], axis[0], 0.0])
-    rel = f"(x - {_num(centre[0])})", f"(y - {_num(centre[1])})", f"(z - {_num(centre[2])})"
-
-    def along(e: np.ndarray) -> str:
-        return f"({_num(e[0])}*{rel[0]} + {_num(e[1])}*{rel[1]} + {_num(e[2])}*{rel[2]})"
-
-    g = geometry
-    q = (
-        f"Sqrt(({along(e1)}/{_num(g.mound_length)})^2"
-        f" + ({along(e2)}/{_num(g.mound_radius_lateral)})^2"
-        f" + ({rel[2]}/{_num(g.mound_radius_cranial)})^2)"
-    )
-    r_min = min(g.mound_length, g.mound_radius_lateral, g.mound_radius_cranial)
+    coords = _mound_coordinates(geometry)
+    q = "Sqrt(" + " + ".join(f"({c}/{_num(r)})^2" for c, r in coords) + ")"
+    r_min = min(r for _, r in coords)
     return f"{_num(r_min)} * {_positive_part(f'{q} - 1')}"
 
 
-def rib_distance_expression(geometry: BreastGeometry) -> str:
-    """MathEval expression of the distance from the elliptic rib cylinder (first order)."""
-    a, b = geometry.rib_depth, geometry.rib_half_width
-    u, v = f"((x - {_num(a)}) / {_num(a)})", f"(y / {_num(b)})"
+def _elliptic_cylinder_distance(geometry: BreastGeometry, offset: float) -> str:
+    """First-order distance |f| / |grad f| from the elliptic cylinder of the rib
+    offset outwards by ``offset`` (0: the rib; ``layer_thickness``: the layer's skin)."""
+    c, a, b = geometry.rib_depth, geometry.rib_depth + offset, geometry.rib_half_width + offset
+    u, v = f"((x - {_num(c)}) / {_num(a)})", f"(y / {_num(b)})"
     f = f"({u}^2 + {v}^2 - 1)"
     grad = f"Sqrt((2*{u}/{_num(a)})^2 + (2*{v}/{_num(b)})^2 + 1e-30)"
     return f"Fabs({f} / {grad})"
 
 
-def fold_distance_field(model: Any, geometry: BreastGeometry, volume: int, spacing: float) -> int:
-    """A gmsh ``Distance`` field to the crease curves of ``volume``; returns its tag.
+def rib_distance_expression(geometry: BreastGeometry) -> str:
+    """MathEval expression of the distance from the elliptic rib cylinder (first order)."""
+    return _elliptic_cylinder_distance(geometry, 0.0)
 
-    The curves are sampled every ``spacing`` metres (at least 20 points each).
 
-    Raises:
-        GeometryError: if ``volume`` has no sharp crease (e.g. a rounded fold).
+def fold_distance_expression(geometry: BreastGeometry) -> str:
+    """MathEval expression of the distance from the inframammary fold.
+
+    The fold is where the mound ellipsoid meets the skin layer's outer cylinder. Near
+    that curve the distance from it is about ``sqrt(d_e**2 + d_c**2)``, with ``d_e``
+    and ``d_c`` the first-order distances ``|f| / |grad f|`` from the two surfaces
+    (exact where they meet at right angles). A fold rounded by a fillet of radius
+    ``r`` lies within about ``r`` of that curve, so ``r`` is subtracted: the size
+    is ``fold_size`` over the whole fillet.
     """
-    model.occ.synchronize()
-    curves = fold_curves(model, geometry, volume)
-    if not curves:
-        raise GeometryError(
-            "mesh.size.fold_size refines the sharp crease where the mound meets the skin layer, "
-            f"and this geometry has none (geometry.fold_radius = {geometry.fold_radius}); "
-            "set fold_size to null"
-        )
-    length = sum(model.occ.getMass(1, c) for c in curves)
-    tag = model.mesh.field.add("Distance")
-    model.mesh.field.setNumbers(tag, "CurvesList", curves)
-    samples = max(20, int(math.ceil(length / len(curves) / spacing)))
-    model.mesh.field.setNumber(tag, "Sampling", samples)
-    return tag
+    coords = _mound_coordinates(geometry)
+    f = "(" + " + ".join(f"({c}/{_num(r)})^2" for c, r in coords) + " - 1)"
+    grad = "Sqrt(" + " + ".join(f"(2*{c}/{_num(r * r)})^2" for c, r in coords) + " + 1e-30)"
+    d_mound = f"({f} / {grad})"
+    d_skin = _elliptic_cylinder_distance(geometry, geometry.layer_thickness)
+    return _positive_part(f"Sqrt({d_mound}^2 + {d_skin}^2) - {_num(geometry.fold_radius)}")
 
 
-def add_size_field(
-    model: Any, geometry: BreastGeometry, size: MeshSize, volume: int | None = None
-) -> int:
+def add_size_field(model: Any, geometry: BreastGeometry, size: MeshSize) -> int:
     """Install the size laws of :class:`MeshSize` as the background field of ``model``.
 
     Args:
         model: ``gmsh.model`` holding the breast.
         geometry: its shape parameters.
         size: the size laws.
-        volume: the breast's volume tag; needed only when ``size.fold_size`` is set.
 
     Returns:
         The tag of the background field.
@@ -183,10 +188,7 @@ def add_size_field(
     if size.rib_size is not None:
         laws.append((size.rib_size, rib_distance_expression(geometry)))
     if size.fold_size is not None:
-        if volume is None:
-            raise ValueError("add_size_field needs the volume tag to refine the crease")
-        distance = fold_distance_field(model, geometry, volume, size.fold_size / 4)
-        laws.append((size.fold_size, f"F{distance}"))
+        laws.append((size.fold_size, fold_distance_expression(geometry)))
     tags = []
     for h0, distance in laws:
         tag = field.add("MathEval")

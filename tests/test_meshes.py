@@ -229,32 +229,45 @@ def test_size_field_refines_the_mound_and_optionally_the_rib(tmp_path: Path) -> 
     assert rib[2] < 0.6 * mound[2]  # rib_size refines the chest wall far from the mound too
 
 
-def test_fold_size_refines_the_crease_and_needs_one() -> None:
+def _eval_math(expression: str, x: np.ndarray) -> np.ndarray:
+    """Evaluate a gmsh MathEval expression at points ``x`` (n, 3)."""
+    code = expression.replace("^", "**").replace("Sqrt", "np.sqrt").replace("Fabs", "np.abs")
+    return eval(code, {"np": np, "x": x[:, 0], "y": x[:, 1], "z": x[:, 2]})  # noqa: S307
+
+
+@pytest.mark.parametrize("fold_radius", [0.0, 0.01])
+def test_fold_size_refines_the_fold(fold_radius: float) -> None:
     from meshes.build import gmsh_session, mesh_arrays, mesh_parametric
     from meshes.parametric import build_occ_model, curve_points, fold_curves
     from meshes.quality import tet_volumes
+    from meshes.sizing import fold_distance_expression
 
-    g = BreastGeometry()
+    sharp = replace(BreastGeometry(), fold_radius=0.0)
     with gmsh_session() as model:
-        volume = build_occ_model(model, g)
-        crease = np.vstack([curve_points(model, c, 200) for c in fold_curves(model, g, volume)])
+        volume = build_occ_model(model, sharp)
+        crease = np.vstack([curve_points(model, c, 200) for c in fold_curves(model, sharp, volume)])
+    # The analytic distance vanishes on the crease and grows like the true one off it.
+    assert np.abs(_eval_math(fold_distance_expression(sharp), crease)).max() < 1e-4
+    skin_normal = np.c_[crease[:, 0] - sharp.rib_depth, crease[:, 1], 0 * crease[:, 2]]
+    skin_normal /= np.linalg.norm(skin_normal, axis=1)[:, None]
+    off = _eval_math(fold_distance_expression(sharp), crease - 0.005 * skin_normal)
+    assert np.all((off > 0.003) & (off < 0.008))
+
+    g = replace(sharp, fold_radius=fold_radius)
 
     def sizes(size: MeshSize) -> tuple[int, float, float]:
         with gmsh_session() as model:
             x, tets, _ = mesh_arrays(model, mesh_parametric(model, g, size))
         h = np.cbrt(6 * np.sqrt(2) * np.abs(tet_volumes(x, tets)))
         d = np.min(np.linalg.norm(x[tets].mean(axis=1)[:, None] - crease[None], axis=2), axis=1)
-        return len(tets), float(np.median(h[d < 0.008])), float(np.median(h[d > 0.04]))
+        near, far = d < fold_radius + 0.008, d > fold_radius + 0.06
+        return len(tets), float(np.median(h[near])), float(np.median(h[far]))
 
     plain = sizes(MeshSize(global_size=0.03, mound_size=0.02))
     fold = sizes(MeshSize(global_size=0.03, mound_size=0.02, fold_size=0.005))
-    assert fold[1] < 0.5 * plain[1]  # much finer at the crease ...
+    assert fold[1] < 0.5 * plain[1]  # much finer at the fold, sharp or rounded ...
     assert fold[2] == pytest.approx(plain[2], rel=0.15)  # ... not far from it
     assert fold[0] > plain[0]
-
-    rounded = replace(g, fold_radius=0.02)
-    with gmsh_session() as model, pytest.raises(GeometryError, match="fold_size"):
-        mesh_parametric(model, rounded, MeshSize(global_size=0.03, mound_size=0.02, fold_size=0.005))
 
 
 def test_png_shows_the_named_surfaces(tmp_path: Path) -> None:
