@@ -20,6 +20,7 @@ from fem.io import (
     write_fields,
 )
 from fem.loading import LoadingResult, solve_incrementally
+from fem.overlap import self_overlap
 from fem.parameters import Material, SolverSettings
 from fem.problem import GravityProblem
 from fem.solver import NewtonSolver
@@ -114,6 +115,8 @@ class CaseRunner:
             "mean_disp_mm": None,  # filled from the material points by run_case
             "volume_change": problem.volume_change(),
             "min_detF": problem.min_detF(),
+            # the model has no contact: flag a body that passes through itself (serial only)
+            "self_overlap": self_overlap(self.mesh, u) if self.comm.size == 1 else None,
             "dofs": problem.num_dofs(),
             "wall_s": {
                 "setup": self.setup_s,

@@ -38,6 +38,7 @@ def test_two_processes_give_the_serial_displacement(coarse_mesh: Path, tmp_path:
     assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
     summary = json.loads((tmp_path / "mpi" / "summary.json").read_text())
     assert summary["status"] == "converged" and summary["mpi_size"] == 2
+    assert summary["self_overlap"] is None and serial["self_overlap"]["overlapping_vertices"] == 0
     a = read_points(tmp_path / "serial" / "points.h5")
     b = read_points(tmp_path / "mpi" / "points.h5")
     assert np.array_equal(a["node_index"], b["node_index"])
