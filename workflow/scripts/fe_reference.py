@@ -2,11 +2,12 @@
 
 import logging
 
-from fem.benchmark import MeshSpec, Variant, solve_reference
+from fem.benchmark import MeshSpec, Variant, limit_blas_threads, solve_reference
 from fem.parameters import SolverSettings
 from fem.sweep import Case
 
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
+logging.info("BLAS on %d threads: %s", snakemake.threads, limit_blas_threads(snakemake.threads))
 
 ref = snakemake.params.reference
 variant = Variant(MeshSpec.from_mapping(ref["mesh"]), ref["element"], ref["solver"], ref["quadrature_degree"])
