@@ -88,11 +88,11 @@ class BreastGeometry:
     mound_angle: float = 46.0
     mound_z: float = 0.0
     mound_tilt: float = 0.0
-    mound_length: float = 0.07
+    mound_length: float = 0.075
     mound_radius_lateral: float = 0.065
     mound_radius_cranial: float = 0.06
     mound_offset: float = 0.03
-    fold_radius: float = 0.0
+    fold_radius: float = 0.010
 
     def __post_init__(self) -> None:
         positive = (
