@@ -158,7 +158,7 @@ class MeshSpec:
     """Element sizes (m) and geometric order of a study mesh; the rest of the mesh
     configuration (geometry, grading) is the workflow's.
 
-    ``fold_size`` is the element size at the inframammary crease (``None``: no
+    ``fold_size`` is the element size over the inframammary fold (``None``: no
     refinement there, whatever the workflow's own mesh asks for).
     """
 

@@ -577,8 +577,8 @@ def write_imported_mesh(
         )
     if size.fold_size is not None:
         raise GeometryError(
-            "mesh.size.fold_size refines the parametric breast's crease, which an imported "
-            "geometry does not have: set mesh.size.fold_size: null"
+            "mesh.size.fold_size refines the parametric breast's inframammary fold, which an "
+            "imported geometry does not name: set mesh.size.fold_size: null"
         )
     start = time.perf_counter()
     x, tets, facets, info = prepare_input(spec, size)

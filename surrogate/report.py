@@ -184,7 +184,7 @@ def _missing(what: str) -> str:
 
 def variant_label(variant_id: str) -> str:
     """A short, readable name of an FE study variant, e.g. ``P2/P1, h 15/10 mm, direct``
-    (``h 15/10/4 mm`` with 4 mm elements at the crease)."""
+    (``h 15/10/4 mm`` with 4 mm elements over the fold)."""
     match = _VARIANT_ID.match(str(variant_id))
     if match is None:
         return str(variant_id)
