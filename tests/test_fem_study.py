@@ -140,9 +140,9 @@ def test_one_core_pins_every_thread_and_restores_the_affinity() -> None:
 def mesh_ladder(tmp_path_factory: pytest.TempPathFactory) -> dict[float, Path]:
     """The sharp-fold geometry at four element sizes (uniform, curved cells).
 
-    The default breast's 1 cm fillet is not resolved by uniform 2-6 cm elements (its errors
-    do not fall on this ladder: pre-asymptotic), so the ladder keeps the sharp crease, whose
-    singularity is present at every size."""
+    The default breast's 1 cm fillet is not resolved by uniform 2-6 cm elements: on this
+    ladder its RMS errors fall at rates of only 0.31 and 0.41 (pre-asymptotic), so the ladder
+    keeps the sharp crease, whose singularity is present at every size."""
     from meshes.build import write_parametric_mesh
     from meshes.parametric import BreastGeometry
     from meshes.sizing import MeshSize
