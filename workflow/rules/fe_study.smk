@@ -93,8 +93,8 @@ rule fe_reference:
         "results/logs/fe_study/reference_c1={c1}_phi={phi}_theta={theta}.log",
     benchmark:
         "results/benchmarks/fe_study/reference_c1={c1}_phi={phi}_theta={theta}.tsv"
-    # One reference at a time, on every core (multi-threaded BLAS): each factorisation of
-    # its 308k unknowns holds 11-14 GB, and two at once exhausted a 24 GB machine.
+    # One reference at a time, on every core (multi-threaded BLAS): a solve of its 389k
+    # unknowns peaks at 12-13 GB, and two 308k-unknown solves at once exhausted a 24 GB machine.
     threads: all_cores()
     resources:
         mem_mb=16000,
