@@ -47,6 +47,19 @@ def fe_default_variant():
     return Variant(spec, element, config["fe"]["solver"], disc["quadrature_degree"]).id
 
 
+def fe_study_config():
+    """The config a study discretisation depends on: every study variant and the reference
+    set their own element, quadrature and solver preset (``Variant.settings``), so the
+    default's are left out and changing them reruns none of those solves."""
+    fe = {key: value for key, value in config["fe"].items() if key != "solver"}
+    fe["discretisation"] = {
+        key: value
+        for key, value in config["fe"]["discretisation"].items()
+        if key not in ("element", "degree", "quadrature_degree")
+    }
+    return {"fe": fe, "material": config["material"], "mesh": config["mesh"]}
+
+
 def fe_variant_mesh(wildcards):
     """The study mesh of the variant in ``wildcards``."""
     from fem.benchmark import Variant
@@ -87,7 +100,7 @@ rule fe_reference:
     output:
         f"{FE_STUDY_DIR}/reference/c1={{c1}}_phi={{phi}}_theta={{theta}}.h5",
     params:
-        config={key: config[key] for key in ("fe", "material", "mesh")},
+        config=fe_study_config(),
         reference=FE_STUDY["reference"],
     log:
         "results/logs/fe_study/reference_c1={c1}_phi={phi}_theta={theta}.log",
@@ -132,7 +145,7 @@ rule fe_variant:
     output:
         f"{FE_STUDY_DIR}/speed_accuracy/{{variant}}.json",
     params:
-        config={key: config[key] for key in ("fe", "material", "mesh")},
+        config=fe_study_config(),
         clinical=config["clinical"],
         max_dofs=FE_STUDY["speed_accuracy"]["max_dofs"],
     log:
