@@ -23,7 +23,7 @@ from fem.benchmark import (
 from fem.exceptions import InvalidParameterError
 from fem.stability import lowest_converging
 from surrogate.report import variant_label
-from tests.conftest import REPO
+from tests.conftest import REPO, job_counts, snakemake
 
 
 def test_variant_ids_round_trip_and_expand() -> None:
@@ -216,3 +216,23 @@ def test_fe_study_rules_run_end_to_end(small_run: Path) -> None:
     assert schemes == {"adaptive", "fixed-4"}
     assert len(stability["records"]) == 2 * 2 * 2
     assert stability["lowest_converging"]["adaptive"]["all_phi"] is not None
+
+
+@pytest.mark.parametrize("change", [{"solver": "direct-refactor"}, {"discretisation": {"quadrature_degree": 3}}])
+def test_the_default_discretisation_does_not_rerun_the_study_variants(
+    small_run: Path, tmp_path: Path, change: dict
+) -> None:
+    """The reference and the speed-accuracy variants set their own element, quadrature and
+    solver: changing the default's re-solves the sweep and the clinical benchmark only."""
+    config = yaml.safe_load((REPO / "tests" / "config.yaml").read_text())
+    fe = config.setdefault("fe", {})
+    for key, value in change.items():
+        fe[key] = {**fe.get(key, {}), **value} if isinstance(value, dict) else value
+    path = tmp_path / "config.yaml"
+    path.write_text(yaml.safe_dump(config))
+    run = snakemake(small_run, "-n", "-j2", config=path)
+    assert run.returncode == 0, run.stderr[-3000:]
+    counts = job_counts(run.stdout + run.stderr)
+    n_cases = len(config["sweep"]["C1_kPa"]) * len(config["sweep"]["phi_deg"])
+    assert counts["solve"] == n_cases and counts["fe_clinical"] == counts["fe_stability"] == 1
+    assert "fe_variant" not in counts and "fe_reference" not in counts
