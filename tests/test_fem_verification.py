@@ -165,14 +165,12 @@ def test_mirror_symmetric_body_deforms_symmetrically() -> None:
 
 
 # -- scaling, zero load, volume ------------------------------------------------------------------
-@pytest.fixture(scope="module", params=[0, 3], ids=["automatic-quadrature", "quadrature-3"])
-def coarse_problem(coarse_mesh: Path, request):
-    """The coarse breast at the automatic quadrature (degree 4 for P2/P1) and at the
-    workflow's default, degree 3."""
+@pytest.fixture(scope="module")
+def coarse_problem(coarse_mesh: Path):
     from meshes.io import read_mesh
 
     msh, _, facet_tags = read_mesh(coarse_mesh)
-    problem = GravityProblem(msh, facet_tags, Discretisation(quadrature_degree=request.param))
+    problem = GravityProblem(msh, facet_tags)
     solver = NewtonSolver(problem, TIGHT)
     yield problem, solver
     solver.destroy()
