@@ -248,6 +248,19 @@ class Variant:
         solver, q = rest.split("_q=")
         return cls(MeshSpec.from_id(mesh_part), element, solver, int(q))
 
+    @staticmethod
+    def base_config(config: dict[str, Any]) -> dict[str, Any]:
+        """The workflow config sections (``fe``, ``material``, ``mesh``) that a variant's
+        solve depends on: without the default's element, degree, quadrature and solver
+        preset, which :meth:`settings` replaces, so that changing them reruns no study solve."""
+        fe = {key: value for key, value in config.get("fe", {}).items() if key != "solver"}
+        fe["discretisation"] = {
+            key: value
+            for key, value in fe.get("discretisation", {}).items()
+            if key not in ("element", "degree", "quadrature_degree")
+        }
+        return {"fe": fe, "material": config["material"], "mesh": config["mesh"]}
+
     def settings(self, base: SolverSettings) -> SolverSettings:
         """``base`` with this variant's element, quadrature and solver preset."""
         disc = Discretisation(

@@ -4,7 +4,7 @@
 # loading. Benchmarks, not tests: `snakemake -j2 fe_study` runs them alone; the report needs
 # them. The library code is fem.benchmark and fem.stability; JSON results land in
 # results/fe_study/.
-from fem.benchmark import MESH_ID_PATTERN, VARIANT_ID_PATTERN, MeshSpec, clinical_cases, expand_variants
+from fem.benchmark import MESH_ID_PATTERN, VARIANT_ID_PATTERN, MeshSpec, Variant, clinical_cases, expand_variants
 from fem.exceptions import FEError
 
 FE_STUDY = config["fe_study"]
@@ -19,6 +19,8 @@ try:
     FE_REFERENCE_MESH = MeshSpec.from_mapping(FE_STUDY["reference"]["mesh"])
     FE_VARIANTS = expand_variants(FE_STUDY["speed_accuracy"]["variants"])
     FE_STABILITY_MESH = MeshSpec.from_mapping(FE_STUDY["stability"]["mesh"])
+    # what the reference and the variants depend on: not the default's discretisation
+    FE_STUDY_BASE_CONFIG = Variant.base_config(config)
 except (FEError, KeyError, TypeError, ValueError) as err:
     raise WorkflowError(f"invalid configuration: fe_study: {err}") from None
 
@@ -38,8 +40,6 @@ def fe_references(wildcards=None):
 
 def fe_default_variant():
     """Id of the study variant that the workflow's own mesh and fe settings amount to."""
-    from fem.benchmark import Variant
-
     size, disc = config["mesh"]["size"], config["fe"]["discretisation"]
     degree = disc["degree"]
     element = "p1-penalty" if disc["element"] == "p1-penalty" else f"p{degree}p{degree - 1}"
@@ -47,23 +47,8 @@ def fe_default_variant():
     return Variant(spec, element, config["fe"]["solver"], disc["quadrature_degree"]).id
 
 
-def fe_study_config():
-    """The config a study discretisation depends on: every study variant and the reference
-    set their own element, quadrature and solver preset (``Variant.settings``), so the
-    default's are left out and changing them reruns none of those solves."""
-    fe = {key: value for key, value in config["fe"].items() if key != "solver"}
-    fe["discretisation"] = {
-        key: value
-        for key, value in config["fe"]["discretisation"].items()
-        if key not in ("element", "degree", "quadrature_degree")
-    }
-    return {"fe": fe, "material": config["material"], "mesh": config["mesh"]}
-
-
 def fe_variant_mesh(wildcards):
     """The study mesh of the variant in ``wildcards``."""
-    from fem.benchmark import Variant
-
     return fe_study_mesh(Variant.from_id(wildcards.variant).mesh)
 
 
@@ -100,7 +85,7 @@ rule fe_reference:
     output:
         f"{FE_STUDY_DIR}/reference/c1={{c1}}_phi={{phi}}_theta={{theta}}.h5",
     params:
-        config=fe_study_config(),
+        config=FE_STUDY_BASE_CONFIG,
         reference=FE_STUDY["reference"],
     log:
         "results/logs/fe_study/reference_c1={c1}_phi={phi}_theta={theta}.log",
@@ -145,7 +130,7 @@ rule fe_variant:
     output:
         f"{FE_STUDY_DIR}/speed_accuracy/{{variant}}.json",
     params:
-        config=fe_study_config(),
+        config=FE_STUDY_BASE_CONFIG,
         clinical=config["clinical"],
         max_dofs=FE_STUDY["speed_accuracy"]["max_dofs"],
     log:
