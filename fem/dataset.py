@@ -13,6 +13,8 @@ Layout (units in attributes; M cases, N material points)::
     /cases/reason        (M,)   str       why (solver's words)
     /cases/converged     (M,)   bool
     /cases/load_fraction (M,)   float64   fraction of gravity reached
+    /cases/first_failure (M,)   str       reason of the first rejected load step ("" if none)
+    /cases/min_detF      (M,)   float64   smallest det F of the final state
     /cases/load_steps, newton_iterations  (M,) int64
     /cases/wall_s        (M,)   float64   solve wall time
     /cases/max_disp_mm   (M,)   float64
@@ -217,6 +219,8 @@ def build_dataset(
         "reason": np.array([s.get("reason", "") for s in summaries], dtype=object),
         "converged": converged,
         "load_fraction": column("load_fraction").astype(float),
+        "first_failure": np.array([s.get("first_failure") or "" for s in summaries], dtype=object),
+        "min_detF": column("min_detF").astype(float),
         "load_steps": column("load_steps", 0).astype(np.int64),
         "newton_iterations": iterations,
         "wall_s": wall,

@@ -7,13 +7,15 @@ iterations, the first failure and the classes of all failures (Newton, line sear
 inverted element, NaN residual, linear solver), time, and the largest displacement.
 
 :func:`lowest_converging` reads off, per scheme and Φ, the lowest C1 from which every
-grid value upwards converged, and what failed first at the next C1 below it.
+grid value upwards converged, and what failed first at the next C1 below it;
+:func:`sweep_records` makes the same records of a sweep's dataset.
 """
 
 from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -99,6 +101,36 @@ def stability_map(
     return out
 
 
+def sweep_records(cases: Mapping[str, Sequence[Any]]) -> list[dict[str, Any]]:
+    """The θ = 0 cases of a sweep as records of :func:`lowest_converging` (scheme ``"sweep"``).
+
+    The sweep is a stability map at the paper's own resolution, on the mesh the
+    dataset was solved on, which the FE study's coarse grid is not.
+
+    Args:
+        cases: per-case columns ``C1``, ``phi``, ``theta``, ``converged``,
+            ``load_fraction``, ``first_failure`` and ``reason`` (the dataset's ``/cases``).
+    """
+    records = []
+    for i in range(len(cases["C1"])):
+        if float(cases["theta"][i]) != 0.0:
+            continue
+        first = str(cases["first_failure"][i])
+        records.append(
+            {
+                "scheme": "sweep",
+                "C1": float(cases["C1"][i]),
+                "phi": float(cases["phi"][i]),
+                "converged": bool(cases["converged"][i]),
+                "load_fraction": float(cases["load_fraction"][i]),
+                "first_failure": first,
+                "failure_kinds": {},  # the dataset keeps the first failure only
+                "reason": str(cases["reason"][i]),
+            }
+        )
+    return records
+
+
 def lowest_converging(records: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
     """Per scheme and Φ: the lowest C1 from which every C1 upwards converged.
 
@@ -127,4 +159,4 @@ def lowest_converging(records: list[dict[str, Any]]) -> dict[str, dict[str, Any]
     return out
 
 
-__all__ = ["loading_schemes", "lowest_converging", "stability_map"]
+__all__ = ["loading_schemes", "lowest_converging", "stability_map", "sweep_records"]

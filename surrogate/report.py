@@ -784,30 +784,10 @@ def _stability_section(ctx: _Context) -> str:
                 "Load steps, Newton iterations and rejected steps over (Φ, C1) per scheme."))
         lowest = stab.get("lowest_converging") or {}
         if lowest:
-            names = list(lowest)
-            phis = sorted({k for s in lowest.values() for k in s if k != "all_phi"}, key=float)
-            rows = []
-            for phi in phis:
-                row = [f"{float(phi):g}"]
-                for name in names:
-                    item = lowest[name].get(phi) or {}
-                    below = item.get("failed_below")
-                    row.append(_fmt(item.get("lowest_C1"), "g"))
-                    row.append("—" if not below else
-                               f"C1 {_fmt(below.get('C1'), 'g')}: "
-                               f"{below.get('first_failure') or 'n/a'} at "
-                               f"{_pct(below.get('load_fraction'))} % of the load")
-                rows.append(row)
-            rows.append(["every Φ"] + [v for name in names
-                                       for v in (_fmt(lowest[name].get("all_phi"), "g"), "")])
-            header = ["Φ (deg)"] + [h for name in names
-                                    for h in (f"{name}: lowest converging C1 (kPa)",
-                                              f"{name}: first failure below it")]
             out.append(_p("The lowest C1 from which every stiffer C1 of the grid converged, per "
                           "scheme and angle, and what went wrong at the next C1 below "
                           "(\"—\": nothing failed down to the grid's lowest C1).", "caption"))
-            out.append(_table(header, rows, highlight=[len(rows) - 1],
-                              table_id="lowest-converging"))
+            out.append(_lowest_converging_table(lowest, "lowest-converging"))
         failed = [r for r in records if not r.get("converged")]
         if failed:
             out.append(_table(
@@ -820,8 +800,73 @@ def _stability_section(ctx: _Context) -> str:
                   r.get("reason", "")] for r in failed], table_id="failed-cases"))
         else:
             out.append(_p("Every case of the stability grid converged under every scheme."))
+    out.append(_h3("The sweep on its own mesh"))
+    out.append(_sweep_stability(ctx))
     out.append(_h3("Surrogate outside its training data"))
     out.append(_extrapolation(ctx))
+    return "".join(out)
+
+
+def _lowest_converging_table(lowest: Mapping[str, Any], table_id: str) -> str:
+    """Per Φ and scheme: the lowest converging C1 and the first failure below it."""
+    names = list(lowest)
+    phis = sorted({k for s in lowest.values() for k in s if k != "all_phi"}, key=float)
+    rows = []
+    for phi in phis:
+        row = [f"{float(phi):g}"]
+        for name in names:
+            item = lowest[name].get(phi) or {}
+            below = item.get("failed_below")
+            row.append(_fmt(item.get("lowest_C1"), "g"))
+            row.append("—" if not below else
+                       f"C1 {_fmt(below.get('C1'), 'g')}: "
+                       f"{below.get('first_failure') or 'n/a'} at "
+                       f"{_pct(below.get('load_fraction'))} % of the load")
+        rows.append(row)
+    rows.append(["every Φ"] + [v for name in names
+                               for v in (_fmt(lowest[name].get("all_phi"), "g"), "")])
+    header = ["Φ (deg)"] + [h for name in names
+                            for h in (f"{name}: lowest converging C1 (kPa)",
+                                      f"{name}: first failure below it")]
+    return _table(header, rows, highlight=[len(rows) - 1], table_id=table_id)
+
+
+def _sweep_stability(ctx: _Context) -> str:
+    """The sweep's convergence over (C1, Φ), on the mesh the dataset was solved on."""
+    path = ctx.paths.get("dataset")
+    if path is None or not path.is_file():
+        return _missing("results/dataset/dataset.h5")
+    import h5py
+
+    from fem.stability import lowest_converging, sweep_records
+
+    keys = ("C1", "phi", "theta", "converged", "load_fraction", "first_failure", "reason",
+            "min_detF")
+    with h5py.File(path, "r") as h5:
+        if any(f"cases/{k}" not in h5 for k in keys):
+            return _p("The dataset predates the first-failure record; rebuild it "
+                      "(snakemake --forcerun aggregate) to map the sweep's failures.", "note")
+        cases = {k: (h5[f"cases/{k}"].asstr()[...] if h5[f"cases/{k}"].dtype.kind == "O"
+                     else h5[f"cases/{k}"][...]) for k in keys}
+    records = sweep_records(cases)
+    if not records:
+        return _p("The sweep has no case at θ = 0, so there is no (C1, Φ) map of it.", "note")
+    failed = ~cases["converged"].astype(bool)
+    out = [_p(
+        f"The sweep itself is a stability map at the paper's resolution, solved on the mesh "
+        f"of the dataset: {int(failed.sum())} of {len(failed)} cases did not reach the full "
+        "load. Per Φ: the lowest C1 from which every stiffer C1 of the sweep converged, and "
+        "what failed first at the next C1 below it (\"—\": every C1 of the sweep converged).",
+        "caption")]
+    out.append(_lowest_converging_table(lowest_converging(records), "sweep-lowest-converging"))
+    if failed.any():
+        rows = [[f"{cases['C1'][i]:g}", f"{cases['phi'][i]:g}", f"{cases['theta'][i]:g}",
+                 _pct(cases["load_fraction"][i]), cases["first_failure"][i] or "n/a",
+                 _fmt(cases["min_detF"][i], ".2g"), cases["reason"][i]]
+                for i in np.flatnonzero(failed)]
+        out.append(_table(["C1 (kPa)", "Φ (deg)", "θ (deg)", "load reached (%)",
+                           "first failure", "min det F of the last converged state", "reason"],
+                          rows, table_id="sweep-failed-cases"))
     return "".join(out)
 
 

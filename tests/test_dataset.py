@@ -26,6 +26,8 @@ def _write_case(folder: Path, C1: float, phi: float, status: str = "converged", 
                "case": folder.name, "C1": C1, "phi": phi, "theta": 0.0,
                "gravity_vector": [9.81 * np.cos(np.radians(phi)), 9.81 * np.sin(np.radians(phi)), 0.0],
                "load_fraction": 1.0 if status == "converged" else 0.5, "load_steps": 1,
+               "first_failure": "" if status == "converged" else "diverged_max_it",
+               "min_detF": 0.9 if status == "converged" else 0.05,
                "newton_iterations": [5], "wall_s": {"solve": 1.0}, "max_disp_mm": 1.0}
     (folder / "summary.json").write_text(json.dumps(summary))
     return folder / "summary.json", folder / "points.h5"
@@ -49,6 +51,8 @@ def test_dataset_schema_and_contents(tmp_path: Path) -> None:
         assert h5["displacement"].compression == "gzip"
         assert np.all(np.isnan(h5["displacement"][3]))
         assert list(h5["cases/status"].asstr()[...]) == ["converged"] * 3 + ["failed", "converged"]
+        assert list(h5["cases/first_failure"].asstr()[...]) == [""] * 3 + ["diverged_max_it", ""]
+        assert list(h5["cases/min_detF"][...]) == [0.9] * 3 + [0.05, 0.9]
         assert np.sum(h5["points/kind"][...] == BOUNDARY) == 5
         prov = json.loads(h5.attrs["provenance"])
         assert prov["config"] == {"sweep": {"phi_deg": [0]}} and "packages" in prov

@@ -21,7 +21,7 @@ from fem.benchmark import (
     summarise_variants,
 )
 from fem.exceptions import InvalidParameterError
-from fem.stability import lowest_converging
+from fem.stability import lowest_converging, sweep_records
 from surrogate.report import variant_label
 from tests.conftest import REPO, job_counts, snakemake
 
@@ -75,6 +75,25 @@ def test_lowest_converging_reads_down_each_column() -> None:
     assert out["0.0"]["failed_below"]["C1"] == 0.5
     assert out["90.0"]["lowest_C1"] == 0.3 and out["90.0"]["failed_below"] is None
     assert out["all_phi"] == 1.0
+
+
+def test_sweep_records_map_the_sweep_at_theta_zero() -> None:
+    cases = {
+        "C1": np.array([2.0, 1.0, 0.8, 1.0]),
+        "phi": np.array([0.0, 0.0, 0.0, 0.0]),
+        "theta": np.array([0.0, 0.0, 0.0, 30.0]),
+        "converged": np.array([True, True, False, False]),
+        "load_fraction": np.array([1.0, 1.0, 0.7, 0.5]),
+        "first_failure": np.array(["", "diverged_max_it", "diverged_line_search", "x"], dtype=object),
+        "reason": np.array(["converged", "converged", "step cut below min_step", "y"], dtype=object),
+    }
+    records = sweep_records(cases)
+    assert [r["C1"] for r in records] == [2.0, 1.0, 0.8]  # theta = 30 left out
+    out = lowest_converging(records)["sweep"]
+    assert out["0.0"]["lowest_C1"] == 1.0
+    assert out["0.0"]["failed_below"] == {
+        "C1": 0.8, "first_failure": "diverged_line_search", "failure_kinds": {},
+        "load_fraction": 0.7, "reason": "step cut below min_step"}
 
 
 def test_stored_reference_is_rebuilt_exactly(coarse_mesh: Path, tmp_path: Path) -> None:

@@ -164,6 +164,11 @@ def test_small_sweep_report(small_run: Path) -> None:
     for row in clinical["by_sample"]["rows"]:
         assert f"{row['rmse_mm']:.3g} ± {row['sd_mm']:.3g}" in table3
     stability = json.loads((results / "fe_study/stability.json").read_text())
+    sweep_lowest = html_table(page, "sweep-lowest-converging")
+    assert "sweep: lowest converging C1" in sweep_lowest
+    with h5py.File(results / "dataset/dataset.h5") as h5:
+        converged = h5["cases/converged"][...]
+    assert f"{int((~converged).sum())} of {converged.size} cases did not reach" in page
     lowest = html_table(page, "lowest-converging")
     for scheme, per_phi in stability["lowest_converging"].items():
         assert f"{scheme}: lowest converging C1" in lowest
