@@ -189,7 +189,7 @@ class Loading:
         min_step: smallest increment before the case is declared failed. No case of
             the sweep on the default breast converged with an increment below 1/8 of
             the load; a case that needs 1/64 is at its limit point, and cutting on to
-            1/1024 only gained it 1.6 % of the load at 13-15 min a case (README
+            1/1024 only gained it up to 1.5 % of the load at 9-15 min a case (README
             "Stability").
         max_steps: cap on accepted plus rejected increments.
         growth: factor applied to the increment after an easy step.
