@@ -227,6 +227,7 @@ class _Context:
     clinical_fields: list[Path]
     json: dict[str, dict[str, Any] | None] = field(default_factory=dict)
     _dataset: Any = None
+    _cases: dict[str, np.ndarray] | None = None
 
     def dataset(self) -> Any:
         """The dataset (:func:`surrogate.data.load_dataset`), read once; None if absent."""
@@ -236,6 +237,26 @@ class _Context:
             if self.paths["dataset"].is_file():
                 self._dataset = load_dataset(self.paths["dataset"])
         return self._dataset
+
+    def case_columns(self) -> dict[str, np.ndarray]:
+        """Every per-case column under the dataset's ``/cases``, read once; {} if absent.
+
+        Strings come back as ``str`` arrays. A column an older dataset lacks is simply not
+        a key, so each section checks for the columns it needs.
+        """
+        if self._cases is None:
+            self._cases = {}
+            path = self.paths.get("dataset")
+            if path is not None and path.is_file():
+                import h5py
+
+                with h5py.File(path, "r") as h5:
+                    group = h5.get("cases")
+                    for key, column in (group.items() if group is not None else ()):
+                        if isinstance(column, h5py.Dataset):
+                            self._cases[key] = (column.asstr()[...] if column.dtype.kind == "O"
+                                                else column[...])
+        return self._cases
 
     def figure(self, name: str, draw: Callable[[Path], None], alt: str, caption: str) -> str:
         """Draw a figure into the report folder and return its HTML."""
@@ -833,21 +854,17 @@ def _lowest_converging_table(lowest: Mapping[str, Any], table_id: str) -> str:
 
 def _sweep_stability(ctx: _Context) -> str:
     """The sweep's convergence over (C1, Φ), on the mesh the dataset was solved on."""
-    path = ctx.paths.get("dataset")
-    if path is None or not path.is_file():
-        return _missing("results/dataset/dataset.h5")
-    import h5py
-
     from fem.stability import lowest_converging, sweep_records
 
+    columns = ctx.case_columns()
+    if not columns:
+        return _missing("results/dataset/dataset.h5")
     keys = ("C1", "phi", "theta", "converged", "load_fraction", "first_failure", "reason",
             "min_detF")
-    with h5py.File(path, "r") as h5:
-        if any(f"cases/{k}" not in h5 for k in keys):
-            return _p("The dataset predates the first-failure record; rebuild it "
-                      "(snakemake --forcerun aggregate) to map the sweep's failures.", "note")
-        cases = {k: (h5[f"cases/{k}"].asstr()[...] if h5[f"cases/{k}"].dtype.kind == "O"
-                     else h5[f"cases/{k}"][...]) for k in keys}
+    if any(k not in columns for k in keys):
+        return _p("The dataset predates the first-failure record; rebuild it "
+                  "(snakemake --forcerun aggregate) to map the sweep's failures.", "note")
+    cases = {k: columns[k] for k in keys}
     records = sweep_records(cases)
     if not records:
         return _p("The sweep has no case at θ = 0, so there is no (C1, Φ) map of it.", "note")
@@ -1123,16 +1140,13 @@ def _paper_section(ctx: _Context) -> str:
 
 
 def _sweep_cost_section(ctx: _Context) -> str:
-    path = ctx.paths.get("dataset")
     ds = ctx.dataset()
-    if ds is None or path is None:
+    if ds is None:
         return _missing("results/dataset/dataset.h5")
-    import h5py
-
-    with h5py.File(path, "r") as h5:
-        wall = h5["cases/wall_s"][...] if "cases/wall_s" in h5 else None
-        steps = h5["cases/load_steps"][...] if "cases/load_steps" in h5 else None
-        its = h5["cases/newton_iterations"][...] if "cases/newton_iterations" in h5 else None
+    columns = ctx.case_columns()
+    wall = columns.get("wall_s")
+    steps = columns.get("load_steps")
+    its = columns.get("newton_iterations")
     if wall is None:
         return _p("The dataset holds no solve times.", "note")
     out = [_p(
