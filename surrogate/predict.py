@@ -55,11 +55,17 @@ class ExtrapolationWarning(UserWarning):
 
 
 def training_range(ds: Dataset, cases: np.ndarray) -> dict[str, Any]:
-    """The C1, Φ and θ values of the given (training) cases."""
+    """The C1, Φ and θ values of the given (training) cases.
+
+    ``unconverged`` lists the (C1, Φ, θ) of the dataset's cases whose FE solve failed:
+    holes in the range, where no FE solution backs a prediction.
+    """
     return {
         "C1_kPa": [float(ds.C1[cases].min()), float(ds.C1[cases].max())],
         "phi_deg": sorted({float(v) for v in ds.phi[cases]}),
         "theta_deg": sorted({float(v) for v in ds.theta[cases]}),
+        "unconverged": [[float(ds.C1[i]), float(ds.phi[i]), float(ds.theta[i])]
+                        for i in np.flatnonzero(~ds.converged)],
     }
 
 
@@ -208,6 +214,29 @@ class Surrogate:
         elif len(phis) == 1:
             self._phi_gap = (phis[0], 360.0)
         self._thetas = [float(t) for t in rng.get("theta_deg", [])]
+        self._phis = phis
+        self._unconverged = [(float(c), float(p), float(t)) for c, p, t in rng.get("unconverged", [])]
+
+    def _unconverged_beside(self, C1: float, phi: float, theta: float) -> tuple[float, float] | None:
+        """The stiffest failed sweep case at a sweep angle next to Φ, if C1 is not stiffer.
+
+        The sweep's FE solves fail below some C1 at some angles (the model has no equilibrium
+        there; README "The solver"). A query at a sweep angle is judged by that angle's
+        failures, one between two angles by both neighbours' (same θ).
+        """
+        if not self._unconverged:
+            return None
+        angles = set(self._phis) | {p % 360.0 for _, p, _ in self._unconverged}
+        q = phi % 360.0
+        below = min(angles, key=lambda p: (q - p) % 360.0)
+        above = min(angles, key=lambda p: (p - q) % 360.0)
+        beside = [(c, p) for c, p, t in self._unconverged
+                  if abs(t - theta) < 1e-6 and any(
+                      abs((p - n + 180.0) % 360.0 - 180.0) < 1e-6 for n in (below, above))]
+        if not beside:
+            return None
+        c, p = max(beside)
+        return (c, p) if C1 <= c + 1e-9 else None
 
     @classmethod
     def load(cls, folder: str | Path) -> Surrogate:
@@ -254,7 +283,9 @@ class Surrogate:
             ValueError: if an input is not a finite number or C1 is not positive.
 
         Warns:
-            ExtrapolationWarning: if (C1, Φ, θ) lies outside the training range.
+            ExtrapolationWarning: if (C1, Φ, θ) lies outside the training range, or at or
+                below a C1 at which the sweep's FE solve failed at the same or a
+                neighbouring angle Φ.
         """
         return np.asarray(self._run(self._parts, self.features(C1, phi, theta)))
 
@@ -294,6 +325,12 @@ class Surrogate:
         if self._thetas and abs(math.sin(math.radians(phi))) > 1e-6 and \
                 min(abs(theta - t) for t in self._thetas) > 1e-6 and len(self._thetas) == 1:
             messages.append(f"θ = {theta}° but the surrogate was trained at θ = {self._thetas[0]}° only")
+        failed = self._unconverged_beside(C1, phi, theta)
+        if failed is not None:
+            messages.append(
+                f"the sweep's FE solve did not converge at C1 = {failed[0]:g} kPa, Φ = "
+                f"{failed[1]:g}° (beside C1 = {C1} kPa, Φ = {phi}°, θ = {theta}°), so no FE "
+                f"solution backs C1 ≤ {failed[0]:g} kPa there")
         for message in messages:
             warnings.warn(message + "; the prediction is an extrapolation", ExtrapolationWarning, stacklevel=4)
 

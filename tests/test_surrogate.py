@@ -126,6 +126,33 @@ def test_bad_inputs_are_named(dataset_path: Path, tmp_path: Path) -> None:
         load_dataset(broken)
 
 
+def test_prediction_warns_where_the_sweep_did_not_converge(dataset_path: Path, tmp_path: Path) -> None:
+    """A model knows the sweep's failed cases and warns at or below their C1 beside their Φ."""
+    import dataclasses
+    import warnings
+
+    from surrogate.data import load_dataset
+    from surrogate.predict import ExtrapolationWarning, Surrogate, save_model
+    from surrogate.train import train_and_evaluate
+
+    ds = load_dataset(dataset_path)
+    result = train_and_evaluate(ds, SurrogateConfig(hidden_layers=1, width=4, max_epochs=1), progress=False)
+    converged = ds.converged.copy()
+    converged[[ds.case_index(1.0, -90.0), ds.case_index(2.0, -90.0)]] = False
+    save_model(tmp_path / "m", result, dataclasses.replace(ds, converged=converged))
+    model = Surrogate.load(tmp_path / "m")
+    assert sorted(model.training_range["unconverged"]) == [[1.0, -90.0, 0.0], [2.0, -90.0, 0.0]]
+    # at the failed angle, and between it and its neighbours (0° and 180°), up to 2 kPa
+    for C1, phi in ((2.0, -90.0), (1.5, 270.0), (1.2, -45.0), (2.0, -135.0)):
+        with pytest.warns(ExtrapolationWarning, match="did not converge at C1 = 2 kPa, Φ = -90°"):
+            model.predict(C1, phi)
+    # stiffer than every failure, or beside angles without failures: no warning
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for C1, phi in ((2.5, -90.0), (1.0, 90.0), (1.0, 45.0), (1.0, 0.0)):
+            model.predict(C1, phi)
+
+
 def test_selection_takes_the_most_accurate_architecture_within_the_prediction_budget() -> None:
     from surrogate.study import StudyError, architecture_table, select_architecture
 
