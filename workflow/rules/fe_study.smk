@@ -4,54 +4,6 @@
 # loading. Benchmarks, not tests: `snakemake -j2 fe_study` runs them alone; the report needs
 # them. The library code is fem.benchmark and fem.stability; JSON results land in
 # results/fe_study/.
-from fem.benchmark import MESH_ID_PATTERN, VARIANT_ID_PATTERN, MeshSpec, Variant, clinical_cases, expand_variants
-from fem.exceptions import FEError
-
-FE_STUDY = config["fe_study"]
-FE_STUDY_DIR = "results/fe_study"
-FE_CLINICAL_JSON = f"{FE_STUDY_DIR}/clinical.json"
-FE_SPEED_ACCURACY_JSON = f"{FE_STUDY_DIR}/speed_accuracy.json"
-FE_STABILITY_JSON = f"{FE_STUDY_DIR}/stability.json"
-FE_STUDY_RESULTS = [FE_CLINICAL_JSON, FE_SPEED_ACCURACY_JSON, FE_STABILITY_JSON]
-
-try:
-    FE_CLINICAL_CASES = clinical_cases(config["clinical"])
-    FE_REFERENCE_MESH = MeshSpec.from_mapping(FE_STUDY["reference"]["mesh"])
-    FE_VARIANTS = expand_variants(FE_STUDY["speed_accuracy"]["variants"])
-    FE_STABILITY_MESH = MeshSpec.from_mapping(FE_STUDY["stability"]["mesh"])
-    # what the reference and the variants depend on: not the default's discretisation
-    FE_STUDY_BASE_CONFIG = Variant.base_config(config)
-except (FEError, KeyError, TypeError, ValueError) as err:
-    raise WorkflowError(f"invalid configuration: fe_study: {err}") from None
-
-
-def fe_study_mesh(spec):
-    """Path of the study mesh with sizes ``spec`` (a MeshSpec)."""
-    return f"{FE_STUDY_DIR}/meshes/{spec.id}/mesh.xdmf"
-
-
-def fe_references(wildcards=None):
-    """The reference displacement of every clinical case (input function: only a run that
-    needs the FE study requires the `clinical` list to be non-empty)."""
-    if not FE_CLINICAL_CASES:
-        raise WorkflowError("invalid configuration: the FE study needs at least one case in `clinical`")
-    return [f"{FE_STUDY_DIR}/reference/{case.id}.h5" for case in FE_CLINICAL_CASES]
-
-
-def fe_default_variant():
-    """Id of the study variant that the workflow's own mesh and fe settings amount to."""
-    size, disc = config["mesh"]["size"], config["fe"]["discretisation"]
-    degree = disc["degree"]
-    element = "p1-penalty" if disc["element"] == "p1-penalty" else f"p{degree}p{degree - 1}"
-    spec = MeshSpec.from_mapping(size)
-    return Variant(spec, element, config["fe"]["solver"], disc["quadrature_degree"]).id
-
-
-def fe_variant_mesh(wildcards):
-    """The study mesh of the variant in ``wildcards``."""
-    return fe_study_mesh(Variant.from_id(wildcards.variant).mesh)
-
-
 wildcard_constraints:
     fe_mesh=MESH_ID_PATTERN,
     variant=VARIANT_ID_PATTERN,
