@@ -64,9 +64,14 @@ def training_range(ds: Dataset, cases: np.ndarray) -> dict[str, Any]:
         "C1_kPa": [float(ds.C1[cases].min()), float(ds.C1[cases].max())],
         "phi_deg": sorted({float(v) for v in ds.phi[cases]}),
         "theta_deg": sorted({float(v) for v in ds.theta[cases]}),
-        "unconverged": [[float(ds.C1[i]), float(ds.phi[i]), float(ds.theta[i])]
-                        for i in np.flatnonzero(~ds.converged)],
+        "unconverged": unconverged_cases(ds),
     }
+
+
+def unconverged_cases(ds: Dataset) -> list[list[float]]:
+    """[C1 (kPa), Φ, θ (degrees)] of every case of ``ds`` whose FE solve failed."""
+    return [[float(ds.C1[i]), float(ds.phi[i]), float(ds.theta[i])]
+            for i in np.flatnonzero(~ds.converged)]
 
 
 def save_model(folder: str | Path, result: TrainResult, ds: Dataset) -> Path:

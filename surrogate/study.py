@@ -21,7 +21,8 @@ import numpy as np
 
 from surrogate import reference
 from surrogate.config import parse_architecture
-from surrogate.predict import HISTORY_JSON, MODEL_JSON, PARAMS_NPZ
+from surrogate.data import Dataset, write_json
+from surrogate.predict import HISTORY_JSON, MODEL_JSON, PARAMS_NPZ, unconverged_cases
 
 
 class StudyError(ValueError):
@@ -178,9 +179,22 @@ def compare_variants(
     return out
 
 
-def copy_model(source: str | Path, target: str | Path) -> None:
-    """Copy a model folder's files (model.json, params.npz, history.json) to ``target``."""
+def copy_model(source: str | Path, target: str | Path, dataset: Dataset | None = None) -> None:
+    """Copy a model folder's files (model.json, params.npz, history.json) to ``target``.
+
+    With ``dataset`` (the one the model was trained on), the copy's
+    ``training_range.unconverged`` is set to that dataset's failed cases, so that the
+    deployed model warns where no FE solution backs a prediction even when the source
+    run was saved without that record.
+    """
     source, target = Path(source), Path(target)
     target.mkdir(parents=True, exist_ok=True)
-    for name in (PARAMS_NPZ, HISTORY_JSON, MODEL_JSON):  # model.json last: it marks completion
+    for name in (PARAMS_NPZ, HISTORY_JSON):
         shutil.copyfile(source / name, target / name)
+    meta = json.loads((source / MODEL_JSON).read_text())
+    if dataset is not None:
+        if meta.get("n_points") != dataset.n_points:
+            raise ValueError(f"{source} has {meta.get('n_points')} material points, the dataset "
+                             f"{dataset.n_points}: it was not trained on this dataset")
+        meta.setdefault("training_range", {})["unconverged"] = unconverged_cases(dataset)
+    write_json(target / MODEL_JSON, meta)  # model.json last: it marks completion

@@ -127,21 +127,33 @@ def test_bad_inputs_are_named(dataset_path: Path, tmp_path: Path) -> None:
 
 
 def test_prediction_warns_where_the_sweep_did_not_converge(dataset_path: Path, tmp_path: Path) -> None:
-    """A model knows the sweep's failed cases and warns at or below their C1 beside their Φ."""
+    """A model knows the sweep's failed cases and warns at or below their C1 beside their Φ.
+
+    save_model records them; copy_model (the workflow's selection) records them from the
+    dataset in the copy of a run saved without them.
+    """
     import dataclasses
     import warnings
 
     from surrogate.data import load_dataset
     from surrogate.predict import ExtrapolationWarning, Surrogate, save_model
+    from surrogate.study import copy_model
     from surrogate.train import train_and_evaluate
 
     ds = load_dataset(dataset_path)
     result = train_and_evaluate(ds, SurrogateConfig(hidden_layers=1, width=4, max_epochs=1), progress=False)
     converged = ds.converged.copy()
     converged[[ds.case_index(1.0, -90.0), ds.case_index(2.0, -90.0)]] = False
-    save_model(tmp_path / "m", result, dataclasses.replace(ds, converged=converged))
-    model = Surrogate.load(tmp_path / "m")
-    assert sorted(model.training_range["unconverged"]) == [[1.0, -90.0, 0.0], [2.0, -90.0, 0.0]]
+    failed = dataclasses.replace(ds, converged=converged)
+    save_model(tmp_path / "saved", result, failed)
+    save_model(tmp_path / "run", result, ds)
+    assert Surrogate.load(tmp_path / "run").training_range["unconverged"] == []
+    copy_model(tmp_path / "run", tmp_path / "copied", dataset=failed)
+    for folder in ("saved", "copied"):
+        model = Surrogate.load(tmp_path / folder)
+        assert sorted(model.training_range["unconverged"]) == [[1.0, -90.0, 0.0], [2.0, -90.0, 0.0]]
+    with pytest.raises(ValueError, match="not trained on this dataset"):
+        copy_model(tmp_path / "run", tmp_path / "other", dataset=dataclasses.replace(ds, X=ds.X[:10]))
     # at the failed angle, and between it and its neighbours (0° and 180°), up to 2 kPa
     for C1, phi in ((2.0, -90.0), (1.5, 270.0), (1.2, -45.0), (2.0, -135.0)):
         with pytest.warns(ExtrapolationWarning, match="did not converge at C1 = 2 kPa, Φ = -90°"):

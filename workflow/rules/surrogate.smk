@@ -54,6 +54,7 @@ rule architecture_study:
 rule train:
     input:
         table=STUDY_TABLE,
+        dataset=DATASET,
     output:
         model=MODEL,
         params=f"{SURROGATE_DIR}/model/params.npz",
