@@ -219,8 +219,9 @@ class Surrogate:
         elif len(phis) == 1:
             self._phi_gap = (phis[0], 360.0)
         self._thetas = [float(t) for t in rng.get("theta_deg", [])]
-        self._phis = phis
         self._unconverged = [(float(c), float(p), float(t)) for c, p, t in rng.get("unconverged", [])]
+        # the angles a query's neighbours are taken from: built once, not per prediction
+        self._sweep_angles = sorted(set(phis) | {p % 360.0 for _, p, _ in self._unconverged})
 
     def _unconverged_beside(self, C1: float, phi: float, theta: float) -> tuple[float, float] | None:
         """The stiffest failed sweep case at a sweep angle next to Φ, if C1 is not stiffer.
@@ -231,10 +232,9 @@ class Surrogate:
         """
         if not self._unconverged:
             return None
-        angles = set(self._phis) | {p % 360.0 for _, p, _ in self._unconverged}
         q = phi % 360.0
-        below = min(angles, key=lambda p: (q - p) % 360.0)
-        above = min(angles, key=lambda p: (p - q) % 360.0)
+        below = min(self._sweep_angles, key=lambda p: (q - p) % 360.0)
+        above = min(self._sweep_angles, key=lambda p: (p - q) % 360.0)
         beside = [(c, p) for c, p, t in self._unconverged
                   if abs(t - theta) < 1e-6 and any(
                       abs((p - n + 180.0) % 360.0 - 180.0) < 1e-6 for n in (below, above))]

@@ -185,7 +185,7 @@ EXTRA_CASES = extrapolation_cases()
 
 
 def clinical_ids():
-    """Case folder names of the clinical cases (FE_CLINICAL_CASES: fe_study.smk)."""
+    """Case folder names of the clinical cases (FE_CLINICAL_CASES, above)."""
     return [case.id for case in FE_CLINICAL_CASES]
 
 
