@@ -131,7 +131,7 @@ def fe_default_variant():
 
 def fe_variant_mesh(wildcards):
     """The study mesh of the variant in ``wildcards``."""
-    return fe_study_mesh(Variant.from_id(wildcards.variant).mesh)
+    return fe_study_mesh(Variant.from_id(wildcards.fe_variant).mesh)
 
 
 # -- surrogate study (surrogate.smk) --------------------------------------------------------

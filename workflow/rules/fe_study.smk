@@ -6,7 +6,7 @@
 # results/fe_study/.
 wildcard_constraints:
     fe_mesh=MESH_ID_PATTERN,
-    variant=VARIANT_ID_PATTERN,
+    fe_variant=VARIANT_ID_PATTERN,
 
 
 rule fe_study:
@@ -80,13 +80,13 @@ rule fe_variant:
         reference_mesh=fe_study_mesh(FE_REFERENCE_MESH),
         references=fe_references,
     output:
-        f"{FE_STUDY_DIR}/speed_accuracy/{{variant}}.json",
+        f"{FE_STUDY_DIR}/speed_accuracy/{{fe_variant}}.json",
     params:
         config=FE_STUDY_BASE_CONFIG,
         clinical=config["clinical"],
         max_dofs=FE_STUDY["speed_accuracy"]["max_dofs"],
     log:
-        f"results/logs/fe_study/variant_{{variant}}.log",
+        f"results/logs/fe_study/variant_{{fe_variant}}.log",
     threads: all_cores()  # timed: run alone (see fe_clinical)
     resources:
         mem_mb=8000,
@@ -96,7 +96,7 @@ rule fe_variant:
 
 rule fe_speed_accuracy:
     input:
-        expand(f"{FE_STUDY_DIR}/speed_accuracy/{{variant}}.json", variant=[v.id for v in FE_VARIANTS]),
+        expand(f"{FE_STUDY_DIR}/speed_accuracy/{{fe_variant}}.json", fe_variant=[v.id for v in FE_VARIANTS]),
     output:
         FE_SPEED_ACCURACY_JSON,
     params:

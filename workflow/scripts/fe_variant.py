@@ -14,7 +14,7 @@ cases, references = load_references(
 )
 record = run_variant(
     snakemake.input.mesh,
-    Variant.from_id(snakemake.wildcards.variant),
+    Variant.from_id(snakemake.wildcards.fe_variant),
     SolverSettings.from_config(snakemake.params.config),
     cases,
     references,
