@@ -46,7 +46,7 @@ class CaseRunner:
         self.settings = settings
         self.mesh, self.cell_tags, self.facet_tags = read_mesh(mesh_path, self.comm)
         self.problem = GravityProblem(
-            self.mesh, self.facet_tags, settings.discretisation, settings.fixed
+            self.mesh, self.facet_tags, settings.discretisation, settings.fixed, settings.contact
         )
         self.solver = NewtonSolver(self.problem, settings.petsc_options, settings.solver)
         self.setup_s = time.perf_counter() - start
@@ -115,8 +115,10 @@ class CaseRunner:
             "mean_disp_mm": None,  # filled from the material points by run_case
             "volume_change": problem.volume_change(),
             "min_detF": problem.min_detF(),
-            # the model has no contact: flag a body that passes through itself (serial only)
+            # flag a body that passes through itself (serial only): contact, where it is on,
+            # keeps the skin off the chest below the fold, not the body off itself
             "self_overlap": self_overlap(self.mesh, u) if self.comm.size == 1 else None,
+            "contact": problem.contact_status(),
             "dofs": problem.num_dofs(),
             "wall_s": {
                 "setup": self.setup_s,

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from fem.contact import Contact, contact_from_mapping
 from fem.exceptions import InvalidParameterError
 from meshes.tags import Boundary
 
@@ -261,6 +262,7 @@ class SolverSettings:
         gravity: |g| (m/s²).
         solver: linear-solver preset of :func:`fem.solver.default_parameters`
             (``direct``, ``direct-lu`` or ``iterative``).
+        contact: penalty contact of the skin with a rigid obstacle (None: no contact).
     """
 
     discretisation: Discretisation = Discretisation()
@@ -270,6 +272,7 @@ class SolverSettings:
     density: float = TISSUE_DENSITY
     gravity: float = STANDARD_GRAVITY
     solver: str = "direct"
+    contact: Contact | None = None
 
     def __post_init__(self) -> None:
         from fem.options import solver_options  # options imports exceptions only
@@ -278,9 +281,18 @@ class SolverSettings:
 
     @classmethod
     def from_config(cls, config: dict[str, Any]) -> SolverSettings:
-        """Build from the workflow config (sections ``material``, ``fe``, ``mesh.fixed``)."""
+        """Build from the workflow config (sections ``material``, ``fe``, ``mesh``).
+
+        ``fe.contact``, when present, turns contact on; its ``chest`` obstacle (the
+        default) is the parametric breast's of ``mesh.geometry``.
+        """
         fe = config.get("fe", {})
         material = config.get("material", {})
+        mesh = config.get("mesh", {})
+        contact = fe.get("contact")
+        if contact is not None:
+            parametric = mesh.get("source", "parametric") == "parametric"
+            contact = contact_from_mapping(contact, mesh.get("geometry", {}) if parametric else None)
         return cls(
             discretisation=discretisation_from_mapping(fe.get("discretisation", {})),
             fixed=FixedBoundaries.from_mapping(config.get("mesh", {}).get("fixed", {"rib": "all"})),
@@ -289,6 +301,7 @@ class SolverSettings:
             density=_finite("density", material.get("density", TISSUE_DENSITY)),
             gravity=_finite("gravity", material.get("gravity", STANDARD_GRAVITY)),
             solver=str(fe.get("solver", "direct")),
+            contact=contact,
         )
 
     def describe(self, defaults: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -305,4 +318,5 @@ class SolverSettings:
             "petsc_options": {**(defaults or {}), **self.petsc_options},
             "density": self.density,
             "gravity": self.gravity,
+            "contact": None if self.contact is None else self.contact.as_mapping(),
         }

@@ -2,9 +2,10 @@
 
 Unknowns: displacement u (and, for Taylor–Hood, pressure p). Total potential
 
-    Π(u, p) = ∫ [C1 (Ī1 - 3) - p (J - 1)] dX - ∫ ρ λ g · u dX,
+    Π(u, p) = ∫ [C1 (Ī1 - 3) - p (J - 1)] dX - ∫ ρ λ g · u dX  [+ Π_c(u)],
 
-with λ ∈ [0, 1] the load fraction. The residual is Π's first variation and the
+with λ ∈ [0, 1] the load fraction and Π_c the optional contact penalty
+(:mod:`fem.contact`). The residual is Π's first variation and the
 Jacobian its second, so the discrete tangent is symmetric (used by MUMPS LDLᵀ).
 C1 and the body force are ``fem.Constant`` objects: one compiled form serves a
 whole sweep and the load steps within a case.
@@ -16,11 +17,13 @@ import logging
 from typing import Any
 
 import numpy as np
+import dolfinx.mesh
 import ufl
 from dolfinx import fem
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from fem.contact import Contact, contact_facets
 from fem.exceptions import MeshError
 from fem.kinematics import deformation_gradient, jacobian
 from fem.material import Incompressible, NeoHookean, Penalty
@@ -92,6 +95,9 @@ class GravityProblem:
         facet_tags: facet tags with :class:`meshes.tags.Boundary` values.
         discretisation: element choice.
         fixed: which boundaries are clamped.
+        contact: penalty contact of the skin with a rigid obstacle (:mod:`fem.contact`);
+            its energy joins the potential on the skin facets that start clear of the
+            obstacle. None: no contact.
     """
 
     def __init__(
@@ -100,6 +106,7 @@ class GravityProblem:
         facet_tags: Any,
         discretisation: Discretisation = Discretisation(),
         fixed: FixedBoundaries = FixedBoundaries(),
+        contact: Contact | None = None,
     ) -> None:
         check_mesh(mesh, facet_tags, fixed)
         self.mesh = mesh
@@ -139,6 +146,22 @@ class GravityProblem:
         dx = ufl.Measure("dx", domain=mesh, metadata={"quadrature_degree": discretisation.quadrature})
         self.dx = dx
         potential = psi * dx - ufl.dot(self.body_force, u) * dx
+        self.contact = contact
+        self.contact_facets = np.zeros(0, dtype=np.int32)
+        self._contact_vertices = np.zeros(0, dtype=np.int32)
+        if contact is not None:
+            self.contact_facets = contact_facets(mesh, facet_tags, contact)
+            tags = dolfinx.mesh.meshtags(mesh, mesh.topology.dim - 1, self.contact_facets,
+                                         np.ones_like(self.contact_facets))
+            ds = ufl.Measure("ds", domain=mesh, subdomain_data=tags,
+                             metadata={"quadrature_degree": discretisation.quadrature})
+            x = ufl.SpatialCoordinate(mesh)
+            potential += contact.energy(x, u, self.C1) * ds(1)
+            fdim = mesh.topology.dim - 1
+            mesh.topology.create_connectivity(fdim, 0)
+            vertices = dolfinx.mesh.compute_incident_entities(mesh, self.contact_facets, fdim, 0)
+            n_owned = mesh.topology.index_map(0).size_local
+            self._contact_vertices = np.sort(vertices[vertices < n_owned]).astype(np.int32)
         # kept: the preconditioner's pressure block must use these very arguments
         self._test, self._trial = ufl.TestFunction(self.W), ufl.TrialFunction(self.W)
         residual = ufl.derivative(potential, self.w, self._test)
@@ -231,6 +254,29 @@ class GravityProblem:
         values = self._detF.eval(self._cells)
         local = float(np.min(values)) if values.size else np.inf
         return self.mesh.comm.allreduce(local, op=MPI.MIN)
+
+    def contact_status(self) -> dict[str, Any] | None:
+        """Skin vertices that may touch the obstacle, those touching it, the deepest penetration.
+
+        None without contact. Measured at the mesh vertices (MPI-global); the penetration
+        is the penalty's slack, about the contact pressure over κ.
+        """
+        if self.contact is None:
+            return None
+        mesh = self.mesh
+        V1 = fem.VectorFunctionSpace(mesh, ("Lagrange", 1))
+        u1 = fem.Function(V1)
+        u1.interpolate(self.displacement())
+        dofs = fem.locate_dofs_topological(V1, 0, self._contact_vertices)
+        x = V1.tabulate_dof_coordinates()[dofs] + u1.x.array.reshape(-1, 3)[dofs]
+        gap = self.contact.obstacle.gap_values(x)
+        comm = mesh.comm
+        return {
+            "facets": comm.allreduce(int(self.contact_facets.size), op=MPI.SUM),
+            "vertices": comm.allreduce(int(gap.size), op=MPI.SUM),
+            "vertices_in_contact": comm.allreduce(int(np.sum(gap <= 0)), op=MPI.SUM),
+            "max_penetration_mm": 1e3 * comm.allreduce(float(max(0.0, -gap.min(initial=0.0))), op=MPI.MAX),
+        }
 
     def volume_change(self) -> float:
         """(∫ J dX - |Ω|) / |Ω|: zero for an exactly incompressible solution."""

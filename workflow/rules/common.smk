@@ -6,6 +6,7 @@ from snakemake.exceptions import WorkflowError
 from snakemake.utils import validate
 
 from fem.benchmark import MESH_ID_PATTERN, VARIANT_ID_PATTERN, MeshSpec, Variant, clinical_cases, expand_variants
+from fem.contact import resolve_obstacle
 from fem.exceptions import FEError
 from fem.parameters import SolverSettings
 from fem.sweep import ANGLE_PATTERN, C1_PATTERN, sweep_cases
@@ -58,6 +59,9 @@ config.clear()
 config.update(_canonical)
 
 CASES = sweep_cases(config["sweep"])
+# The solve jobs' FE settings, a `chest` contact obstacle written out from mesh.geometry:
+# the jobs need no mesh section, and without contact these are config["fe"] itself.
+FE_SOLVE = resolve_obstacle(config["fe"], config["mesh"])
 CASE_DIR = "results/cases/c1={c1}_phi={phi}_theta={theta}"
 OUTSIDE_DIR = "results/outside/c1={c1}_phi={phi}_theta={theta}"
 MESH = "results/mesh/mesh.xdmf"

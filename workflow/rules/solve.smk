@@ -7,7 +7,7 @@ rule solve:
         fields=f"{CASE_DIR}/fields.xdmf",
         fields_h5=f"{CASE_DIR}/fields.h5",
     params:
-        fe=config["fe"],
+        fe=FE_SOLVE,
         material=config["material"],
         fixed=config["mesh"]["fixed"],
     log:

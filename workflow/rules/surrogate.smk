@@ -185,7 +185,7 @@ rule surrogate_benchmark:
     params:
         clinical=config["clinical"],
         repeats=STUDY["timing_repeats"],
-        fe=config["fe"],
+        fe=FE_SOLVE,
         material=config["material"],
         fixed=config["mesh"]["fixed"],
     log:
