@@ -6,14 +6,17 @@ contact a homogeneous neo-Hookean body cannot take that load: the skin over the 
 is compressed along the surface past the creasing threshold and the solve stalls
 (README "The solver"). Here the chest's skin is a rigid obstacle at its reference
 position, the outer surface of the tissue layer over the rib cage (an elliptic
-cylinder along z for the parametric breast), and skin facets that start clear of it
-by more than ``clearance`` may touch it. The penalty energy
+cylinder along z for the parametric breast), and the skin points that start at
+least ``clearance`` from it may touch it (the skin that starts on it is the
+chest's own). The penalty energy
 
-    Π_c = ∫_Γc κ/2 ⟨−g(X + u)⟩² dA,   κ = stiffness · C1,
+    Π_c = ∫_skin κ/2 ⟨−g(X + u)⟩² [g(X) ≥ clearance] dA,   κ = stiffness · C1,
 
 with g the signed distance to the obstacle (negative inside), adds to the total
 potential: it is zero while no point penetrates, so the frictionless contact
-constraint g ≥ 0 holds to a penetration of about (contact pressure)/κ.
+constraint g ≥ 0 holds to a penetration of about (contact pressure)/κ. The contact
+zone is defined point by point on the reference skin, so it is the same surface
+on every mesh.
 """
 
 from __future__ import annotations
@@ -113,9 +116,9 @@ class Contact:
         stiffness: penalty κ as a multiple of C1, per metre: κ = stiffness · C1 (Pa/m).
             The default 1e4 /m lets a contact pressure of 1 kPa into the obstacle by
             0.1 mm at C1 = 1 kPa (pressure/κ scales as the sag, 1/C1).
-        clearance: skin facets whose vertices all start farther than this from the
-            obstacle (metres) can touch it (a facet that starts on the obstacle is part of the chest's
-            own skin, not a body that comes to rest on it).
+        clearance: skin points that start at least this far from the obstacle (metres)
+            can touch it; the skin that starts nearer is the chest's own, continuing into
+            the obstacle, not a body that comes to rest on it.
     """
 
     obstacle: Obstacle
@@ -138,13 +141,25 @@ class Contact:
             "clearance": self.clearance,
         }
 
+    def pressure(
+        self, x: ufl.core.expr.Expr, u: ufl.core.expr.Expr, C1: ufl.core.expr.Expr
+    ) -> ufl.core.expr.Expr:
+        """Contact pressure κ ⟨−g(x + u)⟩ (Pa) at reference skin point ``x`` (0 off the zone)."""
+        g = self.obstacle.gap(x + u)
+        penetration = ufl.conditional(ufl.le(g, 0.0), -g, 0.0)
+        return self.stiffness * C1 * penetration * self.zone(x)
+
     def energy(
         self, x: ufl.core.expr.Expr, u: ufl.core.expr.Expr, C1: ufl.core.expr.Expr
     ) -> ufl.core.expr.Expr:
-        """Penalty energy density per reference area at reference point ``x``."""
+        """Penalty energy density per reference area at reference skin point ``x``."""
         g = self.obstacle.gap(x + u)
         penetration = ufl.conditional(ufl.le(g, 0.0), -g, 0.0)
-        return 0.5 * self.stiffness * C1 * penetration**2
+        return 0.5 * self.stiffness * C1 * penetration**2 * self.zone(x)
+
+    def zone(self, x: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
+        """1 where the reference skin point ``x`` may touch the obstacle, else 0."""
+        return ufl.conditional(ufl.ge(self.obstacle.gap(x), self.clearance), 1.0, 0.0)
 
 
 def chest_obstacle(geometry: Any) -> EllipticCylinder:
@@ -156,26 +171,22 @@ def chest_obstacle(geometry: Any) -> EllipticCylinder:
     )
 
 
-def contact_facets(mesh: Any, facet_tags: Any, contact: Contact) -> np.ndarray:
-    """Local indices of the skin facets whose every vertex starts ``clearance`` clear (sorted).
-
-    A facet with a vertex on the obstacle belongs to the skin that continues into it
-    (the foot of the fold): it moves with the chest and must not be held off it.
-    """
-    from dolfinx.mesh import compute_midpoints
+def contact_vertices(mesh: Any, facet_tags: Any, contact: Contact) -> np.ndarray:
+    """Local indices of the owned skin vertices in the contact zone (sorted)."""
+    from dolfinx.mesh import compute_incident_entities, compute_midpoints
 
     from meshes.io import boundary_facets
     from meshes.tags import Boundary
 
-    skin = boundary_facets(facet_tags, [Boundary.SKIN]).astype(np.int32)
-    if skin.size == 0:
-        return skin
     fdim = mesh.topology.dim - 1
     mesh.topology.create_connectivity(fdim, 0)
-    vertices = mesh.topology.connectivity(fdim, 0).array.reshape(-1, 3)[skin]
-    points = compute_midpoints(mesh, 0, vertices.ravel())  # a vertex's midpoint is itself
-    clear = contact.obstacle.gap_values(points).reshape(-1, 3).min(axis=1) >= contact.clearance
-    return np.sort(skin[clear])
+    skin = boundary_facets(facet_tags, [Boundary.SKIN]).astype(np.int32)
+    vertices = compute_incident_entities(mesh, skin, fdim, 0)
+    vertices = vertices[vertices < mesh.topology.index_map(0).size_local]
+    if vertices.size == 0:
+        return vertices.astype(np.int32)
+    points = compute_midpoints(mesh, 0, vertices)  # a vertex's midpoint is itself
+    return np.sort(vertices[contact.obstacle.gap_values(points) >= contact.clearance]).astype(np.int32)
 
 
 def obstacle_from_mapping(spec: Any, geometry: dict[str, Any] | None = None) -> Obstacle:

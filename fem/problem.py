@@ -17,18 +17,18 @@ import logging
 from typing import Any
 
 import numpy as np
-import dolfinx.mesh
 import ufl
 from dolfinx import fem
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from fem.contact import Contact, contact_facets
+from fem.contact import Contact, contact_vertices
 from fem.exceptions import MeshError
 from fem.kinematics import deformation_gradient, jacobian
 from fem.material import Incompressible, NeoHookean, Penalty
 from fem.parameters import Discretisation, FixedBoundaries, Gravity, Material
 from meshes.io import boundary_facets, geometry_nodes
+from meshes.tags import Boundary
 
 log = logging.getLogger(__name__)
 
@@ -96,8 +96,7 @@ class GravityProblem:
         discretisation: element choice.
         fixed: which boundaries are clamped.
         contact: penalty contact of the skin with a rigid obstacle (:mod:`fem.contact`);
-            its energy joins the potential on the skin facets that start clear of the
-            obstacle. None: no contact.
+            its energy joins the potential on the skin. None: no contact.
     """
 
     def __init__(
@@ -147,21 +146,13 @@ class GravityProblem:
         self.dx = dx
         potential = psi * dx - ufl.dot(self.body_force, u) * dx
         self.contact = contact
-        self.contact_facets = np.zeros(0, dtype=np.int32)
         self._contact_vertices = np.zeros(0, dtype=np.int32)
         if contact is not None:
-            self.contact_facets = contact_facets(mesh, facet_tags, contact)
-            tags = dolfinx.mesh.meshtags(mesh, mesh.topology.dim - 1, self.contact_facets,
-                                         np.ones_like(self.contact_facets))
-            ds = ufl.Measure("ds", domain=mesh, subdomain_data=tags,
+            ds = ufl.Measure("ds", domain=mesh, subdomain_data=facet_tags,
                              metadata={"quadrature_degree": discretisation.quadrature})
             x = ufl.SpatialCoordinate(mesh)
-            potential += contact.energy(x, u, self.C1) * ds(1)
-            fdim = mesh.topology.dim - 1
-            mesh.topology.create_connectivity(fdim, 0)
-            vertices = dolfinx.mesh.compute_incident_entities(mesh, self.contact_facets, fdim, 0)
-            n_owned = mesh.topology.index_map(0).size_local
-            self._contact_vertices = np.sort(vertices[vertices < n_owned]).astype(np.int32)
+            potential += contact.energy(x, u, self.C1) * ds(int(Boundary.SKIN))
+            self._contact_vertices = contact_vertices(mesh, facet_tags, contact)
         # kept: the preconditioner's pressure block must use these very arguments
         self._test, self._trial = ufl.TestFunction(self.W), ufl.TrialFunction(self.W)
         residual = ufl.derivative(potential, self.w, self._test)
@@ -256,7 +247,7 @@ class GravityProblem:
         return self.mesh.comm.allreduce(local, op=MPI.MIN)
 
     def contact_status(self) -> dict[str, Any] | None:
-        """Skin vertices that may touch the obstacle, those touching it, the deepest penetration.
+        """Skin vertices in the contact zone, those touching the obstacle, the deepest penetration.
 
         None without contact. Measured at the mesh vertices (MPI-global); the penetration
         is the penalty's slack, about the contact pressure over κ.
@@ -272,7 +263,6 @@ class GravityProblem:
         gap = self.contact.obstacle.gap_values(x)
         comm = mesh.comm
         return {
-            "facets": comm.allreduce(int(self.contact_facets.size), op=MPI.SUM),
             "vertices": comm.allreduce(int(gap.size), op=MPI.SUM),
             "vertices_in_contact": comm.allreduce(int(np.sum(gap <= 0)), op=MPI.SUM),
             "max_penetration_mm": 1e3 * comm.allreduce(float(max(0.0, -gap.min(initial=0.0))), op=MPI.MAX),
