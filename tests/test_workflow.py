@@ -35,6 +35,8 @@ def test_one_case_path_runs_only_that_case(tmp_path: Path) -> None:
         ("sweep", "C1_kPa", [1.0, -2.0], "sweep.C1_kPa"),
         ("material", "density", 0.0, "material.density"),
         ("surrogate", "width", 0, "surrogate.width"),
+        ("fe", "contact", {"stiffness": 0}, "fe.contact.stiffness"),
+        ("fe", "contact", {"obstacle": "floor"}, "fe.contact.obstacle"),
     ],
 )
 def test_out_of_bounds_config_stops_before_any_job(
