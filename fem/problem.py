@@ -153,6 +153,7 @@ class GravityProblem:
             x = ufl.SpatialCoordinate(mesh)
             potential += contact.energy(x, u, self.C1) * ds(int(Boundary.SKIN))
             self._contact_vertices = contact_vertices(mesh, facet_tags, contact)
+            self._contact_force = fem.form(contact.pressure(x, u, self.C1) * ds(int(Boundary.SKIN)))
         # kept: the preconditioner's pressure block must use these very arguments
         self._test, self._trial = ufl.TestFunction(self.W), ufl.TrialFunction(self.W)
         residual = ufl.derivative(potential, self.w, self._test)
@@ -247,10 +248,12 @@ class GravityProblem:
         return self.mesh.comm.allreduce(local, op=MPI.MIN)
 
     def contact_status(self) -> dict[str, Any] | None:
-        """Skin vertices in the contact zone, those touching the obstacle, the deepest penetration.
+        """The contact force, and the skin vertices in the contact zone, touching, penetrating.
 
-        None without contact. Measured at the mesh vertices (MPI-global); the penetration
-        is the penalty's slack, about the contact pressure over κ.
+        None without contact. ``force_N`` is the contact pressure integrated over the
+        reference skin (N; compare the breast's weight, ρ g times its volume); vertex
+        counts and the deepest penetration (the penalty's slack, about the contact
+        pressure over κ) are measured at the mesh vertices. MPI-global.
         """
         if self.contact is None:
             return None
@@ -262,7 +265,9 @@ class GravityProblem:
         x = V1.tabulate_dof_coordinates()[dofs] + u1.x.array.reshape(-1, 3)[dofs]
         gap = self.contact.obstacle.gap_values(x)
         comm = mesh.comm
+        force = comm.allreduce(fem.assemble_scalar(self._contact_force), op=MPI.SUM)
         return {
+            "force_N": float(force),
             "vertices": comm.allreduce(int(gap.size), op=MPI.SUM),
             "vertices_in_contact": comm.allreduce(int(np.sum(gap <= 0)), op=MPI.SUM),
             "max_penetration_mm": 1e3 * comm.allreduce(float(max(0.0, -gap.min(initial=0.0))), op=MPI.MAX),

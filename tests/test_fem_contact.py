@@ -82,6 +82,7 @@ def test_a_block_resting_on_a_plane_carries_its_weight_by_contact() -> None:
     assert force == pytest.approx(weight, rel=1e-8)
 
     status = problem.contact_status()
+    assert status["force_N"] == pytest.approx(weight, rel=1e-8)
     mean_penetration = TISSUE_DENSITY * 9.81 * side / (contact.stiffness * C1)  # weight / (κ A)
     assert status["vertices_in_contact"] == status["vertices"] == 16  # the whole base
     assert mean_penetration < 1e-3 * status["max_penetration_mm"] < 2 * mean_penetration
@@ -106,7 +107,7 @@ def test_contact_changes_nothing_where_nothing_touches(coarse_mesh: Path, tmp_pa
                  for name, settings in (("contact", with_contact), ("free", without))]
     assert summaries[0]["status"] == summaries[1]["status"] == "converged"
     status = summaries[0]["contact"]
-    assert status["vertices"] > 100 and status["vertices_in_contact"] == 0
+    assert status["vertices"] > 100 and status["vertices_in_contact"] == 0 and status["force_N"] == 0
     assert summaries[1]["contact"] is None
     recorded = json.loads((tmp_path / "contact" / "summary.json").read_text())["settings"]["contact"]
     assert recorded["obstacle"]["elliptic_cylinder"]["semi_axes"] == pytest.approx([0.12, 0.17])
