@@ -22,8 +22,9 @@ on every mesh.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable, Union
+from typing import Any
 
 import numpy as np
 import ufl
@@ -49,7 +50,9 @@ class EllipticCylinder:
         if not all(math.isfinite(c) for c in self.centre):
             raise InvalidParameterError(f"obstacle centre must be finite, got {self.centre}")
         if not all(math.isfinite(s) and s > 0 for s in self.semi_axes):
-            raise InvalidParameterError(f"obstacle semi-axes must be positive, got {self.semi_axes}")
+            raise InvalidParameterError(
+                f"obstacle semi-axes must be positive, got {self.semi_axes}"
+            )
 
     def _gap(self, x0: Any, x1: Any, sqrt: Callable[[Any], Any]) -> Any:
         (cx, cy), (A, B) = self.centre, self.semi_axes
@@ -59,7 +62,9 @@ class EllipticCylinder:
 
     def as_mapping(self) -> dict[str, Any]:
         """The config entry of this obstacle."""
-        return {"elliptic_cylinder": {"centre": list(self.centre), "semi_axes": list(self.semi_axes)}}
+        return {
+            "elliptic_cylinder": {"centre": list(self.centre), "semi_axes": list(self.semi_axes)}
+        }
 
     def gap(self, x: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
         """Signed distance of the (current) point ``x`` (a UFL 3-vector): < 0 inside."""
@@ -87,7 +92,9 @@ class Plane:
             raise InvalidParameterError(f"plane point must be 3 finite numbers, got {self.point}")
         n = np.asarray(self.normal, dtype=float)
         if n.shape != (3,) or not np.all(np.isfinite(n)) or np.linalg.norm(n) == 0:
-            raise InvalidParameterError(f"plane normal must be a non-zero 3-vector, got {self.normal}")
+            raise InvalidParameterError(
+                f"plane normal must be a non-zero 3-vector, got {self.normal}"
+            )
         object.__setattr__(self, "point", tuple(float(c) for c in self.point))
         object.__setattr__(self, "normal", tuple(float(c) for c in n / np.linalg.norm(n)))
 
@@ -104,7 +111,7 @@ class Plane:
         return (x - np.asarray(self.point)) @ np.asarray(self.normal)
 
 
-Obstacle = Union[EllipticCylinder, Plane]
+Obstacle = EllipticCylinder | Plane
 
 
 @dataclass(frozen=True, slots=True)
@@ -186,7 +193,9 @@ def contact_vertices(mesh: Any, facet_tags: Any, contact: Contact) -> np.ndarray
     if vertices.size == 0:
         return vertices.astype(np.int32)
     points = compute_midpoints(mesh, 0, vertices)  # a vertex's midpoint is itself
-    return np.sort(vertices[contact.obstacle.gap_values(points) >= contact.clearance]).astype(np.int32)
+    return np.sort(vertices[contact.obstacle.gap_values(points) >= contact.clearance]).astype(
+        np.int32
+    )
 
 
 def obstacle_from_mapping(spec: Any, geometry: dict[str, Any] | None = None) -> Obstacle:
@@ -210,16 +219,19 @@ def obstacle_from_mapping(spec: Any, geometry: dict[str, Any] | None = None) -> 
             )
         return chest_obstacle(BreastGeometry.from_mapping(geometry))
     if isinstance(spec, dict) and len(spec) == 1:
-        (kind, values), = spec.items()
+        ((kind, values),) = spec.items()
         try:
             if kind == "plane":
                 return Plane(tuple(values["point"]), tuple(values["normal"]))
             if kind == "elliptic_cylinder":
                 return EllipticCylinder(tuple(values["centre"]), tuple(values["semi_axes"]))
         except (KeyError, TypeError) as err:
-            raise InvalidParameterError(f"fe.contact.obstacle.{kind} is incomplete: {err}") from None
+            raise InvalidParameterError(
+                f"fe.contact.obstacle.{kind} is incomplete: {err}"
+            ) from None
     raise InvalidParameterError(
-        f"fe.contact.obstacle must be 'chest', {{plane: ...}} or {{elliptic_cylinder: ...}}; got {spec!r}"
+        "fe.contact.obstacle must be 'chest', {plane: ...} or {elliptic_cylinder: ...}; "
+        f"got {spec!r}"
     )
 
 
@@ -243,6 +255,8 @@ def resolve_obstacle(fe: dict[str, Any], mesh: dict[str, Any]) -> dict[str, Any]
     contact = fe.get("contact")
     if contact is None or contact.get("obstacle", "chest") != "chest":
         return fe
-    geometry = mesh.get("geometry", {}) if mesh.get("source", "parametric") == "parametric" else None
+    geometry = (
+        mesh.get("geometry", {}) if mesh.get("source", "parametric") == "parametric" else None
+    )
     obstacle = obstacle_from_mapping("chest", geometry)
     return {**fe, "contact": {**contact, "obstacle": obstacle.as_mapping()}}

@@ -292,7 +292,8 @@ class SolverSettings:
         contact = fe.get("contact")
         if contact is not None:
             parametric = mesh.get("source", "parametric") == "parametric"
-            contact = contact_from_mapping(contact, mesh.get("geometry", {}) if parametric else None)
+            geometry = mesh.get("geometry", {}) if parametric else None
+            contact = contact_from_mapping(contact, geometry)
         return cls(
             discretisation=discretisation_from_mapping(fe.get("discretisation", {})),
             fixed=FixedBoundaries.from_mapping(config.get("mesh", {}).get("fixed", {"rib": "all"})),

@@ -266,11 +266,12 @@ class GravityProblem:
         gap = self.contact.obstacle.gap_values(x)
         comm = mesh.comm
         force = comm.allreduce(fem.assemble_scalar(self._contact_force), op=MPI.SUM)
+        penetration = max(0.0, -float(gap.min(initial=0.0)))
         return {
             "force_N": float(force),
             "vertices": comm.allreduce(int(gap.size), op=MPI.SUM),
             "vertices_in_contact": comm.allreduce(int(np.sum(gap <= 0)), op=MPI.SUM),
-            "max_penetration_mm": 1e3 * comm.allreduce(float(max(0.0, -gap.min(initial=0.0))), op=MPI.MAX),
+            "max_penetration_mm": 1e3 * comm.allreduce(penetration, op=MPI.MAX),
         }
 
     def volume_change(self) -> float:

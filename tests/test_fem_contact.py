@@ -14,7 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import ufl
-from dolfinx import fem, mesh as dmesh
+from dolfinx import fem
+from dolfinx import mesh as dmesh
 from mpi4py import MPI
 
 from fem.contact import (
@@ -28,13 +29,13 @@ from fem.contact import (
 from fem.exceptions import InvalidParameterError
 from fem.loading import solve_incrementally
 from fem.parameters import (
+    TISSUE_DENSITY,
     Discretisation,
     FixedBoundaries,
     Gravity,
     Loading,
     Material,
     SolverSettings,
-    TISSUE_DENSITY,
 )
 from fem.problem import GravityProblem
 from fem.solver import NewtonSolver
@@ -47,7 +48,9 @@ TIGHT = {"snes_rtol": 1e-12, "snes_atol": 1e-11}
 def standing_block(side: float, n: int):
     """A cube [-side, 0] x [0, side]^2 with its top (x = -side) tagged rib, its base skin."""
     mesh = dmesh.create_box(
-        MPI.COMM_WORLD, [np.array([-side, 0, 0]), np.array([0, side, side])], [n, n, n],
+        MPI.COMM_WORLD,
+        [np.array([-side, 0, 0]), np.array([0, side, side])],
+        [n, n, n],
         dmesh.CellType.tetrahedron,
     )
     fdim = 2
@@ -67,7 +70,9 @@ def test_a_block_resting_on_a_plane_carries_its_weight_by_contact() -> None:
     mesh, tags = standing_block(side, 3)
     contact = Contact(Plane((0.0, 0.0, 0.0), (-1.0, 0.0, 0.0)), stiffness=1.0e4, clearance=0.0)
     # the top slides freely along x: only the contact can hold the block up
-    problem = GravityProblem(mesh, tags, Discretisation(), FixedBoundaries({"rib": (1, 2)}), contact)
+    problem = GravityProblem(
+        mesh, tags, Discretisation(), FixedBoundaries({"rib": (1, 2)}), contact
+    )
     solver = NewtonSolver(problem, TIGHT)
     problem.set_case(Material(C1=C1), Gravity(phi=0.0))  # g along +x, into the plane
     result = solve_incrementally(problem, solver, Loading())
@@ -75,9 +80,15 @@ def test_a_block_resting_on_a_plane_carries_its_weight_by_contact() -> None:
 
     u = problem.displacement()
     x = ufl.SpatialCoordinate(mesh)
-    ds = ufl.Measure("ds", domain=mesh, subdomain_data=tags,
-                     metadata={"quadrature_degree": problem.discretisation.quadrature})
-    force = fem.assemble_scalar(fem.form(contact.pressure(x, u, problem.C1) * ds(int(Boundary.SKIN))))
+    ds = ufl.Measure(
+        "ds",
+        domain=mesh,
+        subdomain_data=tags,
+        metadata={"quadrature_degree": problem.discretisation.quadrature},
+    )
+    force = fem.assemble_scalar(
+        fem.form(contact.pressure(x, u, problem.C1) * ds(int(Boundary.SKIN)))
+    )
     weight = TISSUE_DENSITY * 9.81 * side**3
     assert force == pytest.approx(weight, rel=1e-8)
 
@@ -103,13 +114,19 @@ def test_contact_changes_nothing_where_nothing_touches(coarse_mesh: Path, tmp_pa
     assert with_contact.contact == Contact(chest_obstacle(BreastGeometry()), clearance=0.002)
     without = SolverSettings(petsc_options=TIGHT)
     case = Case(2.0, 180.0)
-    summaries = [run_case(coarse_mesh, case, tmp_path / name, settings)
-                 for name, settings in (("contact", with_contact), ("free", without))]
+    summaries = [
+        run_case(coarse_mesh, case, tmp_path / name, settings)
+        for name, settings in (("contact", with_contact), ("free", without))
+    ]
     assert summaries[0]["status"] == summaries[1]["status"] == "converged"
     status = summaries[0]["contact"]
-    assert status["vertices"] > 100 and status["vertices_in_contact"] == 0 and status["force_N"] == 0
+    assert (
+        status["vertices"] > 100 and status["vertices_in_contact"] == 0 and status["force_N"] == 0
+    )
     assert summaries[1]["contact"] is None
-    recorded = json.loads((tmp_path / "contact" / "summary.json").read_text())["settings"]["contact"]
+    recorded = json.loads((tmp_path / "contact" / "summary.json").read_text())["settings"][
+        "contact"
+    ]
     assert recorded["obstacle"]["elliptic_cylinder"]["semi_axes"] == pytest.approx([0.12, 0.17])
     import h5py
 
@@ -124,16 +141,22 @@ def test_the_chest_obstacle_is_the_outer_surface_of_the_tissue_layer() -> None:
     for psi in (0.0, 30.0, 46.0, 80.0):
         on = geometry.ellipse_point(psi, offset=geometry.layer_thickness)
         normal = geometry.ellipse_normal(psi, offset=geometry.layer_thickness)
-        points = np.array([[*on, 0.0], [*(on + 0.003 * normal), 0.01], [*(on - 0.003 * normal), 0.0]])
+        points = np.array(
+            [[*on, 0.0], [*(on + 0.003 * normal), 0.01], [*(on - 0.003 * normal), 0.0]]
+        )
         # first-order signed distance: exact on the surface, within 2 % of the distance near it
         assert obstacle.gap_values(points) == pytest.approx([0.0, 0.003, -0.003], abs=6e-5)
     rib = geometry.ellipse_point(20.0)
     assert obstacle.gap_values(np.array([[*rib, 0.0]]))[0] < -0.015  # the rib is 2 cm inside
 
 
-def test_a_chest_obstacle_is_written_out_for_the_solve_jobs_and_absent_contact_is_left_alone() -> None:
+def test_a_chest_obstacle_is_written_out_for_the_solve_jobs_and_absent_contact_is_left_alone() -> (
+    None
+):
     fe = {"solver": "direct", "loading": {}}
-    assert resolve_obstacle(fe, {"geometry": {}}) is fe  # no contact: the jobs' params are unchanged
+    assert (
+        resolve_obstacle(fe, {"geometry": {}}) is fe
+    )  # no contact: the jobs' params are unchanged
     resolved = resolve_obstacle({**fe, "contact": {}}, {"geometry": {"layer_thickness": 0.03}})
     obstacle = resolved["contact"]["obstacle"]["elliptic_cylinder"]
     assert obstacle["semi_axes"] == pytest.approx([0.13, 0.18])
@@ -152,11 +175,17 @@ def test_a_chest_obstacle_is_written_out_for_the_solve_jobs_and_absent_contact_i
         ({"obstacle": "floor"}, {}, "must be 'chest'"),
         ({"stiffness": -1.0}, {}, "contact stiffness must be positive"),
         ({"clearance": float("nan")}, {}, "contact clearance must be >= 0"),
-        ({"obstacle": {"elliptic_cylinder": {"centre": [0, 0], "semi_axes": [0.1, 0]}}}, None, "semi-axes"),
+        (
+            {"obstacle": {"elliptic_cylinder": {"centre": [0, 0], "semi_axes": [0.1, 0]}}},
+            None,
+            "semi-axes",
+        ),
     ],
 )
 def test_bad_contact_settings_are_refused_by_name(values, geometry, message) -> None:
-    with pytest.raises(InvalidParameterError, match=message.replace("(", r"\(").replace(")", r"\)")):
+    with pytest.raises(
+        InvalidParameterError, match=message.replace("(", r"\(").replace(")", r"\)")
+    ):
         contact_from_mapping(values, geometry)
 
 
