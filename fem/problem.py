@@ -262,6 +262,7 @@ class GravityProblem:
         u1 = fem.Function(V1)
         u1.interpolate(self.displacement())
         dofs = fem.locate_dofs_topological(V1, 0, self._contact_vertices)
+        dofs = dofs[dofs < V1.dofmap.index_map.size_local]  # without the other ranks' vertices
         x = V1.tabulate_dof_coordinates()[dofs] + u1.x.array.reshape(-1, 3)[dofs]
         gap = self.contact.obstacle.gap_values(x)
         comm = mesh.comm

@@ -192,3 +192,28 @@ def test_bad_contact_settings_are_refused_by_name(values, geometry, message) -> 
 def test_an_imported_mesh_with_chest_contact_is_refused_by_the_settings() -> None:
     with pytest.raises(InvalidParameterError, match="explicit obstacle"):
         SolverSettings.from_config({"fe": {"contact": {}}, "mesh": {"source": "file"}})
+
+
+def test_contact_keeps_the_skin_out_of_the_chest(coarse_mesh: Path, tmp_path: Path) -> None:
+    """Soft and tilted supine, the mound rolls onto the chest: it passes 2 mm into it freely.
+
+    With a vanishing penalty the contact zone measures how far the free body passes into
+    the chest; with the default the penetration is the penalty's slack, and a stiffer
+    penalty leaves less of it while the contact force settles.
+    """
+    from fem.case import run_case
+    from fem.sweep import Case
+
+    status = {}
+    for stiffness in (1e-3, 1e4, 1e5):
+        fe = {"contact": {"stiffness": stiffness}}
+        settings = SolverSettings.from_config({"fe": fe, "mesh": {"geometry": {}}})
+        summary = run_case(coarse_mesh, Case(0.6, 15.0), tmp_path / f"{stiffness:g}", settings)
+        assert summary["status"] == "converged", summary["reason"]
+        status[stiffness] = summary["contact"]
+    free, default, stiff = status[1e-3], status[1e4], status[1e5]
+    assert free["max_penetration_mm"] > 1.5 and free["force_N"] < 1e-5
+    assert default["vertices_in_contact"] > 0
+    assert default["max_penetration_mm"] < 0.3 * free["max_penetration_mm"]
+    assert stiff["max_penetration_mm"] < 0.5 * default["max_penetration_mm"]
+    assert stiff["force_N"] == pytest.approx(default["force_N"], rel=0.3)

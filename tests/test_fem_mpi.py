@@ -50,3 +50,29 @@ def test_two_processes_give_the_serial_displacement(coarse_mesh: Path, tmp_path:
     assert np.max(np.abs(a["u"] - b["u"])) <= 1e-7 * scale
     assert summary["max_disp_mm"] == pytest.approx(serial["max_disp_mm"], rel=1e-7)
     assert summary["volume_change"] == pytest.approx(0.0, abs=1e-10)
+
+
+@pytest.mark.skipif(MPIRUN is None, reason="mpirun is not installed")
+def test_two_processes_give_the_serial_contact(coarse_mesh: Path, tmp_path: Path) -> None:
+    """With contact on and the mound resting on the chest, MPI changes nothing either."""
+    from fem.case import run_case
+    from fem.dataset import read_points
+    from fem.parameters import SolverSettings
+    from fem.sweep import Case
+
+    config = {"fe": {"contact": {}}, "mesh": {"geometry": {}}}
+    (tmp_path / "config.yaml").write_text(json.dumps(config))  # JSON is YAML
+    settings = SolverSettings.from_config(config)
+    serial = run_case(coarse_mesh, Case(0.6, 15.0), tmp_path / "serial", settings)
+    run = _mpirun(2, str(coarse_mesh), "--c1", "0.6", "--phi", "15",
+                  "--config", str(tmp_path / "config.yaml"), "--out", str(tmp_path / "mpi"))
+    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
+    summary = json.loads((tmp_path / "mpi" / "summary.json").read_text())
+    assert summary["status"] == serial["status"] == "converged"
+    a, b = serial["contact"], summary["contact"]
+    assert a["vertices_in_contact"] > 0
+    assert (b["vertices"], b["vertices_in_contact"]) == (a["vertices"], a["vertices_in_contact"])
+    assert b["force_N"] == pytest.approx(a["force_N"], rel=1e-6)
+    u_serial = read_points(tmp_path / "serial" / "points.h5")["u"]
+    u_mpi = read_points(tmp_path / "mpi" / "points.h5")["u"]
+    assert np.max(np.abs(u_serial - u_mpi)) <= 1e-7 * np.abs(u_serial).max()
