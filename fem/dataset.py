@@ -15,6 +15,9 @@ Layout (units in attributes; M cases, N material points)::
     /cases/load_fraction (M,)   float64   fraction of gravity reached
     /cases/first_failure (M,)   str       reason of the first rejected load step ("" if none)
     /cases/min_detF      (M,)   float64   smallest det F of the final state
+    /cases/self_overlap  (M,)   int64     boundary vertices of the final state inside another
+                                          of its cells (the body through itself); -1: not measured
+    /cases/contact_force_N (M,) float64   contact force on the skin (fe.contact); NaN without
     /cases/load_steps, newton_iterations  (M,) int64
     /cases/wall_s        (M,)   float64   solve wall time
     /cases/max_disp_mm   (M,)   float64
@@ -221,13 +224,20 @@ def build_dataset(
         "load_fraction": column("load_fraction").astype(float),
         "first_failure": np.array([s.get("first_failure") or "" for s in summaries], dtype=object),
         "min_detF": column("min_detF").astype(float),
+        "self_overlap": np.array(
+            [(s.get("self_overlap") or {}).get("overlapping_vertices", -1) for s in summaries],
+            dtype=np.int64,
+        ),
+        "contact_force_N": np.array(
+            [(s.get("contact") or {}).get("force_N", np.nan) for s in summaries], dtype=float
+        ),
         "load_steps": column("load_steps", 0).astype(np.int64),
         "newton_iterations": iterations,
         "wall_s": wall,
         "max_disp_mm": column("max_disp_mm").astype(float),
     }
     units = {"C1": "kPa", "phi": "deg", "theta": "deg", "gravity": "m/s^2", "wall_s": "s",
-             "max_disp_mm": "mm", "load_fraction": "1"}
+             "max_disp_mm": "mm", "load_fraction": "1", "contact_force_N": "N"}
     kind = np.where(reference["fixed"], BOUNDARY, DOMAIN).astype(np.int8)
     _write_atomically(
         Path(output),

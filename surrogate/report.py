@@ -884,7 +884,38 @@ def _sweep_stability(ctx: _Context) -> str:
         out.append(_table(["C1 (kPa)", "Φ (deg)", "θ (deg)", "load reached (%)",
                            "first failure", "min det F of the last converged state", "reason"],
                           rows, table_id="sweep-failed-cases"))
+    out.append(_sweep_contact_and_overlap(columns, failed))
     return "".join(out)
+
+
+def _sweep_contact_and_overlap(columns: dict[str, np.ndarray], failed: np.ndarray) -> str:
+    """Which cases end in contact with the chest, and which pass through themselves."""
+    def case(i: int) -> str:
+        return f"C1 = {columns['C1'][i]:g} kPa at Φ = {columns['phi'][i]:g}°"
+
+    out = []
+    if "contact_force_N" in columns:
+        force = np.asarray(columns["contact_force_N"], dtype=float)
+        if np.isnan(force).all():
+            out.append("The sweep was solved without contact (fe.contact): nothing "
+                       "keeps the skin out of the chest below the fold.")
+        else:
+            touching = np.flatnonzero(np.nan_to_num(force) > 0)
+            out.append(f"Solved with contact of the skin with the chest: {len(touching)} cases "
+                       "end in contact" + (f", the largest force {force[touching].max():.2g} N "
+                                           f"({case(touching[np.argmax(force[touching])])})"
+                                           if len(touching) else "") + ".")
+    if "self_overlap" in columns:
+        overlap = np.asarray(columns["self_overlap"])
+        through = np.flatnonzero(overlap > 0)
+        if len(through):
+            out.append(f"{len(through)} cases end passing through themselves (boundary vertices "
+                       "inside another cell: the fold's skin creasing into itself), "
+                       + ", ".join(f"{case(i)} ({overlap[i]}{', failed' if failed[i] else ''})"
+                                   for i in through) + ".")
+        else:
+            out.append("No case ends passing through itself.")
+    return _p(" ".join(out), "caption") if out else ""
 
 
 def _extrapolation(ctx: _Context) -> str:

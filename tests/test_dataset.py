@@ -15,7 +15,7 @@ N = 50
 
 
 def _write_case(folder: Path, C1: float, phi: float, status: str = "converged", n: int = N,
-                rng: np.random.Generator | None = None) -> tuple[Path, Path]:
+                rng: np.random.Generator | None = None, **extra: object) -> tuple[Path, Path]:
     rng = rng or np.random.default_rng(0)
     folder.mkdir(parents=True)
     X = np.linspace(0, 1, 3 * N).reshape(N, 3)[:n]
@@ -28,7 +28,8 @@ def _write_case(folder: Path, C1: float, phi: float, status: str = "converged", 
                "load_fraction": 1.0 if status == "converged" else 0.5, "load_steps": 1,
                "first_failure": "" if status == "converged" else "diverged_max_it",
                "min_detF": 0.9 if status == "converged" else 0.05,
-               "newton_iterations": [5], "wall_s": {"solve": 1.0}, "max_disp_mm": 1.0}
+               "newton_iterations": [5], "wall_s": {"solve": 1.0}, "max_disp_mm": 1.0,
+               "self_overlap": {"overlapping_vertices": 0}, "contact": None, **extra}
     (folder / "summary.json").write_text(json.dumps(summary))
     return folder / "summary.json", folder / "points.h5"
 
@@ -41,7 +42,10 @@ def _cases(tmp_path: Path, overrides: dict[int, dict] | None = None) -> tuple[li
 
 
 def test_dataset_schema_and_contents(tmp_path: Path) -> None:
-    summaries, points = _cases(tmp_path, {3: {"status": "failed"}})
+    contact = {"force_N": 0.25, "vertices": 392, "vertices_in_contact": 2, "max_penetration_mm": 0.1}
+    summaries, points = _cases(tmp_path, {3: {"status": "failed"}, 1: {"contact": contact},
+                                          2: {"self_overlap": {"overlapping_vertices": 13}},
+                                          4: {"self_overlap": None}})  # None: solved under MPI
     info = build_dataset(summaries, points, tmp_path / "ds.h5", SplitFractions(), seed=1,
                          config={"sweep": {"phi_deg": [0]}})
     assert info["failed"] == ["c3"]
@@ -53,6 +57,10 @@ def test_dataset_schema_and_contents(tmp_path: Path) -> None:
         assert list(h5["cases/status"].asstr()[...]) == ["converged"] * 3 + ["failed", "converged"]
         assert list(h5["cases/first_failure"].asstr()[...]) == [""] * 3 + ["diverged_max_it", ""]
         assert list(h5["cases/min_detF"][...]) == [0.9] * 3 + [0.05, 0.9]
+        assert list(h5["cases/self_overlap"][...]) == [0, 0, 13, 0, -1]
+        force = h5["cases/contact_force_N"]
+        assert force.attrs["units"] == "N"
+        assert force[1] == 0.25 and np.isnan(np.delete(force[...], 1)).all()
         assert np.sum(h5["points/kind"][...] == BOUNDARY) == 5
         prov = json.loads(h5.attrs["provenance"])
         assert prov["config"] == {"sweep": {"phi_deg": [0]}} and "packages" in prov

@@ -170,7 +170,11 @@ def test_small_sweep_report(small_run: Path) -> None:
     assert "sweep: lowest converging C1" in sweep_lowest
     with h5py.File(results / "dataset/dataset.h5") as h5:
         converged = h5["cases/converged"][...]
+        overlap = h5["cases/self_overlap"][...]
+        assert np.isnan(h5["cases/contact_force_N"][...]).all()  # tests/config.yaml: no contact
     assert f"{int((~converged).sum())} of {converged.size} cases did not reach" in page
+    assert "The sweep was solved without contact (fe.contact)" in page
+    assert ("No case ends passing through itself" in page) == (not overlap.any())
     lowest = html_table(page, "lowest-converging")
     for scheme, per_phi in stability["lowest_converging"].items():
         assert f"{scheme}: lowest converging C1" in lowest
