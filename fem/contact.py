@@ -1,14 +1,13 @@
 """Frictionless penalty contact of the breast's skin with the chest wall below the fold.
 
-When the mound rolls over the inframammary fold (lying on the side, standing, supine
-soft tissue), its skin comes to rest on the skin of the chest below it. Without
-contact a homogeneous neo-Hookean body cannot take that load: the skin over the fold
-is compressed along the surface past the creasing threshold and the solve stalls
-(README "The solver"). Here the chest's skin is a rigid obstacle at its reference
-position, the outer surface of the tissue layer over the rib cage (an elliptic
-cylinder along z for the parametric breast), and the skin points that start at
-least ``clearance`` from it may touch it (the skin that starts on it is the
-chest's own). The penalty energy
+When a soft mound rolls over the inframammary fold (lying on the side; supine, tilted
+laterally), its skin comes to rest on the skin of the chest below it. Without contact
+the model lets it pass into the chest, or its solve stalls where the skin over the
+fold creases on the way (README "Contact with the chest"). Here the chest's skin is
+a rigid obstacle at its reference position, the outer surface of the tissue layer
+over the rib cage (an elliptic cylinder along z for the parametric breast), and the
+skin points that start at least ``clearance`` from it may touch it (the skin that
+starts on it is the chest's own). The penalty energy
 
     Π_c = ∫_skin κ/2 ⟨−g(X + u)⟩² [g(X) ≥ clearance] dA,   κ = stiffness · C1,
 
@@ -119,7 +118,7 @@ class Contact:
     """Penalty contact of the skin with a rigid obstacle.
 
     Attributes:
-        obstacle: the chest's skin below the fold.
+        obstacle: the rigid obstacle (for the parametric breast, :func:`chest_obstacle`).
         stiffness: penalty κ as a multiple of C1, per metre: κ = stiffness · C1 (Pa/m).
             The default 1e4 /m lets a contact pressure of 1 kPa into the obstacle by
             0.1 mm at C1 = 1 kPa (pressure/κ scales as the sag, 1/C1).
@@ -152,17 +151,18 @@ class Contact:
         self, x: ufl.core.expr.Expr, u: ufl.core.expr.Expr, C1: ufl.core.expr.Expr
     ) -> ufl.core.expr.Expr:
         """Contact pressure κ ⟨−g(x + u)⟩ (Pa) at reference skin point ``x`` (0 off the zone)."""
-        g = self.obstacle.gap(x + u)
-        penetration = ufl.conditional(ufl.le(g, 0.0), -g, 0.0)
-        return self.stiffness * C1 * penetration * self.zone(x)
+        return self.stiffness * C1 * self._penetration(x, u) * self.zone(x)
 
     def energy(
         self, x: ufl.core.expr.Expr, u: ufl.core.expr.Expr, C1: ufl.core.expr.Expr
     ) -> ufl.core.expr.Expr:
         """Penalty energy density per reference area at reference skin point ``x``."""
+        return 0.5 * self.stiffness * C1 * self._penetration(x, u) ** 2 * self.zone(x)
+
+    def _penetration(self, x: ufl.core.expr.Expr, u: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
+        """⟨−g(x + u)⟩: how far the displaced point lies inside the obstacle (touching counts)."""
         g = self.obstacle.gap(x + u)
-        penetration = ufl.conditional(ufl.le(g, 0.0), -g, 0.0)
-        return 0.5 * self.stiffness * C1 * penetration**2 * self.zone(x)
+        return ufl.conditional(ufl.le(g, 0.0), -g, 0.0)
 
     def zone(self, x: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
         """1 where the reference skin point ``x`` may touch the obstacle, else 0."""
