@@ -17,7 +17,8 @@ Layout (units in attributes; M cases, N material points)::
     /cases/min_detF      (M,)   float64   smallest det F of the final state
     /cases/self_overlap  (M,)   int64     boundary vertices of the final state inside another
                                           of its cells (the body through itself); -1: not measured
-    /cases/contact_force_N (M,) float64   contact force on the skin (fe.contact); NaN without
+    /cases/contact_force_N (M,) float64   contact force on the skin, N (fe.contact); NaN when
+                                          solved without contact
     /cases/load_steps, newton_iterations  (M,) int64
     /cases/wall_s        (M,)   float64   solve wall time
     /cases/max_disp_mm   (M,)   float64
