@@ -178,26 +178,6 @@ def chest_obstacle(geometry: Any) -> EllipticCylinder:
     )
 
 
-def contact_vertices(mesh: Any, facet_tags: Any, contact: Contact) -> np.ndarray:
-    """Local indices of the owned skin vertices in the contact zone (sorted)."""
-    from dolfinx.mesh import compute_incident_entities, compute_midpoints
-
-    from meshes.io import boundary_facets
-    from meshes.tags import Boundary
-
-    fdim = mesh.topology.dim - 1
-    mesh.topology.create_connectivity(fdim, 0)
-    skin = boundary_facets(facet_tags, [Boundary.SKIN]).astype(np.int32)
-    vertices = compute_incident_entities(mesh, skin, fdim, 0)
-    vertices = vertices[vertices < mesh.topology.index_map(0).size_local]
-    if vertices.size == 0:
-        return vertices.astype(np.int32)
-    points = compute_midpoints(mesh, 0, vertices)  # a vertex's midpoint is itself
-    return np.sort(vertices[contact.obstacle.gap_values(points) >= contact.clearance]).astype(
-        np.int32
-    )
-
-
 def obstacle_from_mapping(spec: Any, geometry: dict[str, Any] | None = None) -> Obstacle:
     """The obstacle of a config entry.
 

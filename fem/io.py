@@ -48,7 +48,7 @@ def vertex_nodes(mesh: Any) -> np.ndarray:
     return nodes[nodes < mesh.geometry.index_map().size_local]
 
 
-def _node_to_vertex_dof(mesh: Any, V: fem.FunctionSpace) -> np.ndarray:
+def node_to_vertex_dof(mesh: Any, V: fem.FunctionSpace) -> np.ndarray:
     """Map geometry-node index -> (block) dof at that vertex of a Lagrange space.
 
     Lagrange elements list their vertex dofs first, so the value at a vertex is read
@@ -83,7 +83,7 @@ def gather_vertex_values(mesh: Any, f: fem.Function) -> tuple[np.ndarray, np.nda
     nodes = vertex_nodes(mesh)
     V = f.function_space
     bs = V.dofmap.index_map_bs
-    values = f.x.array.reshape(-1, bs)[_node_to_vertex_dof(mesh, V)[nodes]]
+    values = f.x.array.reshape(-1, bs)[node_to_vertex_dof(mesh, V)[nodes]]
     return _gather_by_node(mesh, nodes, values if bs > 1 else values.ravel())
 
 
@@ -93,16 +93,29 @@ def gather_vertex_coordinates(mesh: Any) -> tuple[np.ndarray, np.ndarray] | None
     return _gather_by_node(mesh, nodes, mesh.geometry.x[nodes])
 
 
-def gather_boundary_vertices(
-    mesh: Any, facet_tags: Any, boundaries: list[Boundary]
-) -> tuple[np.ndarray, np.ndarray] | None:
-    """Per-vertex flag: on a facet tagged with any of ``boundaries`` (rank 0)."""
+def _on_boundaries(mesh: Any, facet_tags: Any, boundaries: list[Boundary]) -> np.ndarray:
+    """Per-geometry-node flag: a vertex of a local facet tagged with any of ``boundaries``."""
     from dolfinx.cpp.mesh import entities_to_geometry
 
     facets = boundary_facets(facet_tags, boundaries)
     flags = np.zeros(mesh.geometry.x.shape[0], dtype=bool)
     if facets.size:
-        flags[entities_to_geometry(mesh._mesh, mesh.topology.dim - 1, facets, False)[:, :3].ravel()] = True
+        vertices = entities_to_geometry(mesh._mesh, mesh.topology.dim - 1, facets, False)[:, :3]
+        flags[vertices.ravel()] = True
+    return flags
+
+
+def boundary_vertex_nodes(mesh: Any, facet_tags: Any, boundaries: list[Boundary]) -> np.ndarray:
+    """Local geometry-node indices of the owned vertices on ``boundaries`` (sorted)."""
+    nodes = vertex_nodes(mesh)
+    return nodes[_on_boundaries(mesh, facet_tags, boundaries)[nodes]]
+
+
+def gather_boundary_vertices(
+    mesh: Any, facet_tags: Any, boundaries: list[Boundary]
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """Per-vertex flag: on a facet tagged with any of ``boundaries`` (rank 0)."""
+    flags = _on_boundaries(mesh, facet_tags, boundaries)
     nodes = vertex_nodes(mesh)
     gathered = _gather_by_node(mesh, nodes, flags[nodes])
     # A vertex shared between ranks is on the boundary if any rank says so. Every rank

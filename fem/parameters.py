@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from fem.contact import Contact, contact_from_mapping
+from fem.contact import Contact, contact_from_mapping, resolve_obstacle
 from fem.exceptions import InvalidParameterError
 from meshes.tags import Boundary
 
@@ -288,12 +288,7 @@ class SolverSettings:
         """
         fe = config.get("fe", {})
         material = config.get("material", {})
-        mesh = config.get("mesh", {})
-        contact = fe.get("contact")
-        if contact is not None:
-            parametric = mesh.get("source", "parametric") == "parametric"
-            geometry = mesh.get("geometry", {}) if parametric else None
-            contact = contact_from_mapping(contact, geometry)
+        contact = resolve_obstacle(fe, config.get("mesh", {})).get("contact")
         return cls(
             discretisation=discretisation_from_mapping(fe.get("discretisation", {})),
             fixed=FixedBoundaries.from_mapping(config.get("mesh", {}).get("fixed", {"rib": "all"})),
@@ -302,7 +297,7 @@ class SolverSettings:
             density=_finite("density", material.get("density", TISSUE_DENSITY)),
             gravity=_finite("gravity", material.get("gravity", STANDARD_GRAVITY)),
             solver=str(fe.get("solver", "direct")),
-            contact=contact,
+            contact=None if contact is None else contact_from_mapping(contact),
         )
 
     def describe(self, defaults: dict[str, Any] | None = None) -> dict[str, Any]:

@@ -22,8 +22,9 @@ from dolfinx import fem
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from fem.contact import Contact, contact_vertices
+from fem.contact import Contact
 from fem.exceptions import MeshError
+from fem.io import boundary_vertex_nodes, node_to_vertex_dof
 from fem.kinematics import deformation_gradient, jacobian
 from fem.material import Incompressible, NeoHookean, Penalty
 from fem.parameters import Discretisation, FixedBoundaries, Gravity, Material
@@ -146,13 +147,15 @@ class GravityProblem:
         self.dx = dx
         potential = psi * dx - ufl.dot(self.body_force, u) * dx
         self.contact = contact
-        self._contact_vertices = np.zeros(0, dtype=np.int32)
+        self._contact_nodes = np.zeros(0, dtype=np.int64)  # owned skin vertices in the zone
         if contact is not None:
             ds = ufl.Measure("ds", domain=mesh, subdomain_data=facet_tags,
                              metadata={"quadrature_degree": discretisation.quadrature})
             x = ufl.SpatialCoordinate(mesh)
             potential += contact.energy(x, u, self.C1) * ds(int(Boundary.SKIN))
-            self._contact_vertices = contact_vertices(mesh, facet_tags, contact)
+            skin = boundary_vertex_nodes(mesh, facet_tags, [Boundary.SKIN])
+            zone = contact.obstacle.gap_values(mesh.geometry.x[skin]) >= contact.clearance
+            self._contact_nodes = skin[zone]
             self._contact_force = fem.form(contact.pressure(x, u, self.C1) * ds(int(Boundary.SKIN)))
         # kept: the preconditioner's pressure block must use these very arguments
         self._test, self._trial = ufl.TestFunction(self.W), ufl.TrialFunction(self.W)
@@ -258,12 +261,9 @@ class GravityProblem:
         if self.contact is None:
             return None
         mesh = self.mesh
-        V1 = fem.VectorFunctionSpace(mesh, ("Lagrange", 1))
-        u1 = fem.Function(V1)
-        u1.interpolate(self.displacement())
-        dofs = fem.locate_dofs_topological(V1, 0, self._contact_vertices)
-        dofs = dofs[dofs < V1.dofmap.index_map.size_local]  # without the other ranks' vertices
-        x = V1.tabulate_dof_coordinates()[dofs] + u1.x.array.reshape(-1, 3)[dofs]
+        u = self.displacement()
+        dofs = node_to_vertex_dof(mesh, u.function_space)[self._contact_nodes]
+        x = mesh.geometry.x[self._contact_nodes] + u.x.array.reshape(-1, 3)[dofs]
         gap = self.contact.obstacle.gap_values(x)
         comm = mesh.comm
         force = comm.allreduce(fem.assemble_scalar(self._contact_force), op=MPI.SUM)
