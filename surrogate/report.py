@@ -888,6 +888,11 @@ def _sweep_stability(ctx: _Context) -> str:
     return "".join(out)
 
 
+def _cases_end(n: int) -> str:
+    """'1 case ends' or 'n cases end'."""
+    return f"{n} case ends" if n == 1 else f"{n} cases end"
+
+
 def _sweep_contact_and_overlap(columns: dict[str, np.ndarray], failed: np.ndarray) -> str:
     """Which cases end in contact with the chest, and which pass through themselves."""
     def case(i: int) -> str:
@@ -901,15 +906,15 @@ def _sweep_contact_and_overlap(columns: dict[str, np.ndarray], failed: np.ndarra
                        "keeps the skin out of the chest below the fold.")
         else:
             touching = np.flatnonzero(np.nan_to_num(force) > 0)
-            out.append(f"Solved with contact of the skin with the chest: {len(touching)} cases "
-                       "end in contact" + (f", the largest force {force[touching].max():.2g} N "
-                                           f"({case(touching[np.argmax(force[touching])])})"
-                                           if len(touching) else "") + ".")
+            largest = (f", the largest force {force[touching].max():.2g} N "
+                       f"({case(touching[np.argmax(force[touching])])})" if len(touching) else "")
+            out.append("Solved with contact of the skin with the chest: "
+                       f"{_cases_end(len(touching))} in contact{largest}.")
     if "self_overlap" in columns:
         overlap = np.asarray(columns["self_overlap"])
         through = np.flatnonzero(overlap > 0)
         if len(through):
-            out.append(f"{len(through)} cases end passing through themselves (boundary vertices "
+            out.append(f"{_cases_end(len(through))} passing through themselves (boundary vertices "
                        "inside another cell: the fold's skin creasing into itself), "
                        + ", ".join(f"{case(i)} ({overlap[i]}{', failed' if failed[i] else ''})"
                                    for i in through) + ".")

@@ -73,6 +73,23 @@ def test_dataset_schema_and_contents(tmp_path: Path) -> None:
         assert sorted(by_case) == [0, 1, 2, 4]
 
 
+def test_report_says_whether_the_sweep_had_contact() -> None:
+    """The report's sweep sentence reads the dataset's contact column: NaN is no contact."""
+    from surrogate.report import _sweep_contact_and_overlap
+
+    columns = {"C1": np.array([0.8, 0.9, 5.0]), "phi": np.array([-90.0, -120.0, 180.0]),
+               "self_overlap": np.array([2, 0, 0])}
+    failed = np.array([True, False, False])
+    without = _sweep_contact_and_overlap({**columns, "contact_force_N": np.full(3, np.nan)}, failed)
+    assert "solved without contact" in without
+    assert "1 case ends passing through themselves" in without
+    assert "C1 = 0.8 kPa at Φ = -90° (2, failed)" in without
+    force = np.array([np.nan, 0.48, 0.0])  # the failed case has no force
+    with_contact = _sweep_contact_and_overlap({**columns, "contact_force_N": force}, failed)
+    assert "Solved with contact of the skin with the chest: 1 case ends in contact" in with_contact
+    assert "the largest force 0.48 N (C1 = 0.9 kPa at Φ = -120°)" in with_contact
+
+
 def test_mismatched_point_count_names_the_case(tmp_path: Path) -> None:
     summaries, points = _cases(tmp_path, {2: {"n": N - 1}})
     with pytest.raises(DatasetError, match="case c2: .* 49 material points, expected 50"):
