@@ -195,7 +195,7 @@ def obstacle_from_mapping(spec: Any, geometry: dict[str, Any] | None = None) -> 
             raise InvalidParameterError(
                 "fe.contact.obstacle 'chest' is the parametric breast's chest skin; an imported "
                 "mesh (mesh.source: file) needs an explicit obstacle, e.g. "
-                "{plane: {point: [x, y, z], normal: [nx, ny, nz]}}"
+                "{plane: {point: [x, y, z], normal: [nx, ny, nz]}}, or no fe.contact"
             )
         return chest_obstacle(BreastGeometry.from_mapping(geometry))
     if isinstance(spec, dict) and len(spec) == 1:

@@ -356,7 +356,18 @@ def file_config(**file_section: object) -> dict:
         "surfaces": {"rib": RIB_PLANE},
         **file_section,
     }
+    # the parametric breast's `chest` obstacle does not exist here: the rib plane is the chest
+    config["fe"]["contact"] = {"obstacle": {"plane": RIB_PLANE["plane"]}}
     return config
+
+
+def _plan(tmp_path: Path, config: dict, target: str) -> subprocess.CompletedProcess:
+    """``snakemake -n target`` in tmp_path on this config."""
+    path = tmp_path / "file.yaml"
+    path.write_text(yaml.safe_dump(config))
+    cmd = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-d", str(tmp_path),
+           "--configfile", str(path), "-j1", "-n", target]
+    return subprocess.run(cmd, capture_output=True, text=True, cwd=tmp_path)
 
 
 def test_schema_accepts_a_file_source_and_rejects_a_missing_rib_rule() -> None:
@@ -373,27 +384,27 @@ def test_schema_accepts_a_file_source_and_rejects_a_missing_rib_rule() -> None:
 
 def test_mesh_rule_depends_on_the_imported_file(tmp_path: Path) -> None:
     write_surface(tmp_path / "box.stl", *box_mesh(2))
-    path = tmp_path / "file.yaml"
-    path.write_text(yaml.safe_dump(file_config()))
-    cmd = [
-        sys.executable,
-        "-m",
-        "snakemake",
-        "-s",
-        str(REPO / "Snakefile"),
-        "-d",
-        str(tmp_path),
-        "--configfile",
-        str(path),
-        "-j1",
-        "-n",
-        "results/mesh/mesh.xdmf",
-    ]
-    run = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp_path)
+    run = _plan(tmp_path, file_config(), "results/mesh/mesh.xdmf")
     assert run.returncode == 0, run.stderr[-3000:]
     plan = run.stdout + run.stderr
     # the file is the rule's input (editing it rebuilds the mesh); the PNG is an output
     assert "input: box.stl" in plan and "results/mesh/mesh.png" in plan
+
+
+def test_the_default_contact_on_an_imported_mesh_is_refused(tmp_path: Path) -> None:
+    """The workflow refuses `contact: {}` with an imported mesh before it plans a job.
+
+    config.yaml's `contact: {}` rests the skin on the parametric breast's chest, which an
+    imported mesh does not have.
+    """
+    write_surface(tmp_path / "box.stl", *box_mesh(2))
+    config = file_config()
+    config["fe"]["contact"] = {}
+    run = _plan(tmp_path, config, "results/mesh/mesh.xdmf")
+    said = run.stdout + run.stderr
+    assert run.returncode != 0 and "invalid configuration: fe.contact.obstacle 'chest'" in said
+    assert "an imported mesh (mesh.source: file) needs an explicit obstacle" in said
+    assert "or no fe.contact" in said and not (tmp_path / "results").exists()
 
 
 def test_clamping_a_surface_no_rule_names_is_refused() -> None:
