@@ -914,7 +914,8 @@ def _sweep_contact_and_overlap(columns: dict[str, np.ndarray], failed: np.ndarra
         overlap = np.asarray(columns["self_overlap"])
         through = np.flatnonzero(overlap > 0)
         if len(through):
-            out.append(f"{_cases_end(len(through))} passing through themselves (boundary vertices "
+            itself = "itself" if len(through) == 1 else "themselves"
+            out.append(f"{_cases_end(len(through))} passing through {itself} (boundary vertices "
                        "inside another cell: the fold's skin creasing into itself), "
                        + ", ".join(f"{case(i)} ({overlap[i]}{', failed' if failed[i] else ''})"
                                    for i in through) + ".")

@@ -82,7 +82,7 @@ def test_report_says_whether_the_sweep_had_contact() -> None:
     failed = np.array([True, False, False])
     without = _sweep_contact_and_overlap({**columns, "contact_force_N": np.full(3, np.nan)}, failed)
     assert "solved without contact" in without
-    assert "1 case ends passing through themselves" in without
+    assert "1 case ends passing through itself" in without
     assert "C1 = 0.8 kPa at Φ = -90° (2, failed)" in without
     force = np.array([np.nan, 0.48, 0.0])  # the failed case has no force
     with_contact = _sweep_contact_and_overlap({**columns, "contact_force_N": force}, failed)
