@@ -107,6 +107,7 @@ class CaseRunner:
             "rejected_steps": len(result.attempts) - len(accepted),
             "first_failure": result.first_failure,
             "failure_kinds": result.failure_kinds,
+            "rescued": result.rescued,
             "newton_iterations": result.newton_iterations,
             "total_newton_iterations": result.total_iterations,
             "final_residual": accepted[-1].final_residual if accepted else None,

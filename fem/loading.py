@@ -4,8 +4,11 @@ Gravity is applied as a load fraction λ that goes from 0 to 1. The scheme tries
 a large step first (by default the whole load); when Newton fails or an element
 inverts (det F ≤ 0) it restores the last converged state and cuts the step;
 after an easy step it grows the step; each step starts from a linear
-extrapolation of the last two converged states. With ``fixed_steps`` it becomes
-the classic fixed-increment scheme that it is benchmarked against.
+extrapolation of the last two converged states. When the step has been cut below
+``min_step``, a last resort starts again from rest with Newton's
+:data:`fem.options.RESCUE_OPTIONS` before the case is declared failed. With
+``fixed_steps`` it becomes the classic fixed-increment scheme that it is
+benchmarked against (no last resort).
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from fem.options import RESCUE_OPTIONS
 from fem.parameters import Loading
 from fem.problem import GravityProblem
 from fem.solver import NewtonSolver
@@ -36,6 +40,7 @@ class StepRecord:
     final_residual: float | None
     min_detF: float | None
     linear_iterations: int = 0
+    rescue: bool = False
 
 
 @dataclass
@@ -76,6 +81,11 @@ class LoadingResult:
     def linear_iterations(self) -> int:
         """Krylov iterations of all attempts (one per Newton iteration for a direct solver)."""
         return sum(a.linear_iterations for a in self.attempts)
+
+    @property
+    def rescued(self) -> bool:
+        """Whether the last resort (:attr:`fem.parameters.Loading.rescue`) was needed."""
+        return any(a.rescue for a in self.attempts)
 
     @property
     def total_iterations(self) -> int:
@@ -126,9 +136,12 @@ def solve_incrementally(
     """
     state = problem.w.x.array
     history: list[tuple[float, np.ndarray]] = [(0.0, state.copy())]
+    rest = history[0]
     fraction = 0.0
     step = 1.0 / loading.fixed_steps if loading.fixed_steps else loading.initial_step
     result = LoadingResult(converged=False, fraction=0.0, reason="")
+    newton: dict | None = None  # RESCUE_OPTIONS once the last resort has begun
+    first_pass: tuple[float, np.ndarray] | None = None  # where the loading got without it
 
     while fraction < _FULL:
         if len(result.attempts) >= loading.max_steps:
@@ -138,7 +151,7 @@ def solve_incrementally(
         target = fraction + step
         _predict(problem, history, step, loading.extrapolate)
         problem.set_load_fraction(target)
-        outcome = solver.solve()
+        outcome = solver.solve(newton)
         min_det = problem.min_detF() if outcome.converged else None
         inverted = min_det is not None and not min_det > 0
         ok = outcome.converged and not inverted
@@ -153,6 +166,7 @@ def solve_incrementally(
                 final_residual=outcome.residuals[-1] if outcome.residuals else None,
                 min_detF=min_det,
                 linear_iterations=outcome.linear_iterations,
+                rescue=newton is not None,
             )
         )
         log.debug("λ=%.4f step=%.4f %s in %d its", target, step, reason, outcome.iterations)
@@ -168,12 +182,23 @@ def solve_incrementally(
             break
         step *= loading.cutback
         if step < loading.min_step:
+            if loading.rescue and newton is None:
+                # From the stalled state the creasing fold does not let Newton through; from
+                # rest, the whole load at once with another line search can get past it.
+                log.info("λ=%.4f: steps below min_step fail (%s); last resort: from rest with %s",
+                         fraction, reason, RESCUE_OPTIONS)
+                newton, first_pass = RESCUE_OPTIONS, (fraction, state.copy())
+                state[:] = rest[1]
+                history, fraction, step = [rest], 0.0, loading.initial_step
+                continue
             result.reason = (
-                f"step cut below min_step={loading.min_step:g} at λ={fraction:.4f}; "
-                f"last failure: {reason}"
+                f"step cut below min_step={loading.min_step:g} at λ={fraction:.4f}"
+                f"{' (also with the last resort)' if newton else ''}; last failure: {reason}"
             )
             break
 
+    if first_pass is not None and fraction < _FULL and first_pass[0] > fraction:
+        fraction, state[:] = first_pass[0], first_pass[1]  # the last resort got less far
     problem.set_load_fraction(fraction)
     result.fraction = fraction
     result.converged = fraction >= _FULL

@@ -80,6 +80,15 @@ _MUMPS: dict[str, Any] = {
     "mat_mumps_icntl_14": 100,
 }
 
+#: Newton settings of the adaptive loader's last resort (:class:`fem.parameters.Loading`
+#: ``rescue``): when the step has been cut below ``min_step``, the loader starts again
+#: from rest with these in place of the defaults' ``bt`` and 15 iterations. On the
+#: default mesh with contact, C1 = 0.9 kPa at Φ = −90° converged from rest in one load
+#: step of 22 Newton iterations (32 s) with these, where the defaults stalled at 97 % of
+#: the load after 12 cut-backs (183 s); from that stalled state these failed too. Only
+#: the keys below may be set here.
+RESCUE_OPTIONS: dict[str, Any] = {"snes_linesearch_type": "l2", "snes_max_it": 60}
+
 # A factorisation at every Newton iteration: exact Newton.
 _FACTORISE_EVERY_ITERATION: dict[str, Any] = {"ksp_type": "preonly", "refactor_above_its": 0}
 
@@ -173,4 +182,11 @@ def solver_options(preset: str = "direct", overrides: dict[str, Any] | None = No
     return options
 
 
-__all__ = ["LINE_SEARCHES", "SOLVER_KEYS", "SOLVER_PRESETS", "default_parameters", "solver_options"]
+__all__ = [
+    "LINE_SEARCHES",
+    "RESCUE_OPTIONS",
+    "SOLVER_KEYS",
+    "SOLVER_PRESETS",
+    "default_parameters",
+    "solver_options",
+]

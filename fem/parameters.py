@@ -200,6 +200,11 @@ class Loading:
         extrapolate: predict each step's initial guess from the previous two.
         fixed_steps: if > 0, disable adaptivity and use this many equal steps
             (the baseline the adaptive scheme is compared against).
+        rescue: when the step has been cut below ``min_step``, load once more from
+            rest with Newton's :data:`fem.options.RESCUE_OPTIONS` (line search ``l2``, 60
+            iterations) before declaring the case failed; a failed case keeps whichever
+            pass got further. A case that converges without it is solved exactly as
+            before.
     """
 
     initial_step: float = 1.0
@@ -210,6 +215,7 @@ class Loading:
     cutback: float = 0.5
     extrapolate: bool = True
     fixed_steps: int = 0
+    rescue: bool = True
 
     def __post_init__(self) -> None:
         if not 0 < _finite("initial_step", self.initial_step) <= 1:

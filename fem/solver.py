@@ -20,7 +20,14 @@ import numpy as np
 from dolfinx.fem import petsc as fem_petsc
 from petsc4py import PETSc
 
-from fem.options import LINE_SEARCHES, SOLVER_KEYS, SOLVER_PRESETS, default_parameters, solver_options
+from fem.exceptions import InvalidParameterError
+from fem.options import (
+    LINE_SEARCHES,
+    SOLVER_KEYS,
+    SOLVER_PRESETS,
+    default_parameters,
+    solver_options,
+)
 from fem.problem import GravityProblem
 
 log = logging.getLogger(__name__)
@@ -267,8 +274,44 @@ class NewtonSolver:
             self.P.assemble()
 
     # -- driver ---------------------------------------------------------------------------------
-    def solve(self) -> SolveResult:
-        """Run Newton from the problem's current state; on success the state holds the solution."""
+    def solve(self, newton: dict[str, Any] | None = None) -> SolveResult:
+        """Run Newton from the problem's current state; on success the state holds the solution.
+
+        Args:
+            newton: for this solve only, another line search (``snes_linesearch_type``)
+                and iteration limit (``snes_max_it``), e.g.
+                :data:`fem.options.RESCUE_OPTIONS`; the solver's own are restored after.
+
+        Raises:
+            InvalidParameterError: if ``newton`` has another key or an unknown line search.
+        """
+        if not newton:
+            return self._solve()
+        unknown = sorted(set(newton) - {"snes_linesearch_type", "snes_max_it"})
+        if unknown:
+            raise InvalidParameterError(
+                f"per-solve Newton settings take snes_linesearch_type and snes_max_it, "
+                f"not {', '.join(unknown)}"
+            )
+        line_search = newton.get("snes_linesearch_type")
+        if line_search is not None and line_search not in LINE_SEARCHES:
+            raise InvalidParameterError(
+                f"unknown line search {line_search!r}; choose one of {', '.join(LINE_SEARCHES)}"
+            )
+        # petsc4py 3.18 has no handle on the line search: go through the options database
+        opts = PETSc.Options()
+        own = {key: self.options[key] for key in newton}
+        try:
+            for key, value in newton.items():
+                opts[f"{self.prefix}{key}"] = value
+            self.snes.setFromOptions()
+            return self._solve()
+        finally:
+            for key, value in own.items():
+                opts[f"{self.prefix}{key}"] = value
+            self.snes.setFromOptions()
+
+    def _solve(self) -> SolveResult:
         self.problem.w.vector.copy(self.x)
         self.snes.setConvergenceHistory(reset=True)
         start = time.perf_counter()

@@ -47,6 +47,40 @@ def test_failed_first_step_is_cut_back_and_recovers(coarse_mesh: Path) -> None:
     assert result.first_failure.startswith("diverged_max_it")
 
 
+def test_the_last_resort_goes_on_where_the_steps_fail(coarse_mesh: Path) -> None:
+    """Steps cut below min_step: the loader goes on once with RESCUE_OPTIONS before failing."""
+    from fem.case import CaseRunner
+    from fem.options import RESCUE_OPTIONS
+
+    # one Newton iteration reaches no step; the last resort's 60 do
+    crippled = {"snes_max_it": 1}
+    case = Case(2.0, 180.0)
+    without = CaseRunner(coarse_mesh, SolverSettings(loading=Loading(rescue=False),
+                                                     petsc_options=crippled))
+    failed, _ = without.solve(case)
+    assert not failed.converged and not failed.rescued and "min_step" in failed.reason
+    runner = CaseRunner(coarse_mesh, SolverSettings(petsc_options=crippled))
+    result, _ = runner.solve(case)
+    assert result.converged and result.rescued
+    first = next(a for a in result.attempts if a.rescue)
+    assert first.fraction == 1.0 and first.step == 1.0  # the whole load, from rest
+    assert all(not a.converged for a in result.attempts if not a.rescue)
+    # the solver's own settings are back after each rescued solve
+    from petsc4py import PETSc
+
+    assert PETSc.Options().getString(f"{runner.solver.prefix}snes_linesearch_type") == "bt"
+    assert runner.solver.snes.getTolerances()[3] == 1
+    u = runner.problem.displacement().x.array.copy()
+    reference = CaseRunner(coarse_mesh, SolverSettings())
+    assert reference.solve(case)[0].converged and not reference.solve(case)[0].rescued
+    u_ref = reference.problem.displacement().x.array
+    assert np.abs(u - u_ref).max() < 1e-6 * np.abs(u_ref).max()
+    with pytest.raises(InvalidParameterError, match="not ksp_type"):
+        runner.solver.solve({**RESCUE_OPTIONS, "ksp_type": "cg"})
+    with pytest.raises(InvalidParameterError, match="unknown line search 'nleqerr'"):
+        runner.solver.solve({"snes_linesearch_type": "nleqerr"})
+
+
 @pytest.mark.parametrize("c1", [0.0, -1.0, math.nan, math.inf])
 def test_bad_c1_is_named(c1: float) -> None:
     with pytest.raises(InvalidParameterError, match="C1"):
