@@ -51,11 +51,15 @@ class LoadingResult:
     fraction: float
     reason: str
     attempts: list[StepRecord] = field(default_factory=list)
+    #: The attempts of the load path that the result holds (the last resort starts a
+    #: second path from rest): ``attempts[path_start:path_end]``.
+    path_start: int = 0
+    path_end: int | None = None
 
     @property
     def accepted(self) -> list[StepRecord]:
-        """The converged increments, in order."""
-        return [a for a in self.attempts if a.converged]
+        """The converged increments of the load path the result holds, in order."""
+        return [a for a in self.attempts[self.path_start:self.path_end] if a.converged]
 
     @property
     def newton_iterations(self) -> list[int]:
@@ -188,6 +192,7 @@ def solve_incrementally(
                 log.info("λ=%.4f: steps below min_step fail (%s); last resort: from rest with %s",
                          fraction, reason, RESCUE_OPTIONS)
                 newton, first_pass = RESCUE_OPTIONS, (fraction, state.copy())
+                result.path_start = len(result.attempts)
                 state[:] = rest[1]
                 history, fraction, step = [rest], 0.0, loading.initial_step
                 continue
@@ -199,6 +204,7 @@ def solve_incrementally(
 
     if first_pass is not None and fraction < _FULL and first_pass[0] > fraction:
         fraction, state[:] = first_pass[0], first_pass[1]  # the last resort got less far
+        result.path_start, result.path_end = 0, result.path_start
     problem.set_load_fraction(fraction)
     result.fraction = fraction
     result.converged = fraction >= _FULL

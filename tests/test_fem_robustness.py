@@ -64,6 +64,9 @@ def test_the_last_resort_goes_on_where_the_steps_fail(coarse_mesh: Path) -> None
     assert result.converged and result.rescued
     first = next(a for a in result.attempts if a.rescue)
     assert first.fraction == 1.0 and first.step == 1.0  # the whole load, from rest
+    # the load path held is the last resort's: one step of more than one iteration
+    assert result.accepted == [a for a in result.attempts if a.rescue and a.converged]
+    assert len(result.newton_iterations) == 1 and result.newton_iterations[0] > 1
     assert all(not a.converged for a in result.attempts if not a.rescue)
     # the solver's own settings are back after each rescued solve
     from petsc4py import PETSc
