@@ -48,7 +48,7 @@ def test_failed_first_step_is_cut_back_and_recovers(coarse_mesh: Path) -> None:
 
 
 def test_the_last_resort_goes_on_where_the_steps_fail(coarse_mesh: Path) -> None:
-    """Steps cut below min_step: the loader goes on once with RESCUE_OPTIONS before failing."""
+    """Steps cut below min_step: the loader starts again from rest with RESCUE_OPTIONS."""
     from fem.case import CaseRunner
     from fem.options import RESCUE_OPTIONS
 
