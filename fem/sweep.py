@@ -169,3 +169,8 @@ def sweep_cases(sweep: dict[str, Any]) -> list[Case]:
         directions = [(p, t) for p in sample_phi(sweep["phi_deg"]) for t in thetas]
     cases = {Case(c, p, t) for c in c1s for p, t in directions}
     return sorted(cases)
+
+
+def clinical_cases(clinical: list[dict[str, Any]]) -> list[Case]:
+    """The config's ``clinical`` list as cases."""
+    return [Case(float(c["C1"]), float(c["phi"]), float(c.get("theta", 0.0))) for c in clinical]

@@ -88,7 +88,7 @@ def test_higher_order_and_quadrature_change_the_answer_only_slightly(
     coarse_mesh: Path, reference: np.ndarray
 ) -> None:
     from fem.case import CaseRunner
-    from fem.evaluation import evaluate
+    from fem.interpolation import evaluate
 
     scale = np.abs(reference).max()
     # same element, other quadrature: converges, close but not identical

@@ -12,17 +12,11 @@ import numpy as np
 import pytest
 import yaml
 
-from fem.benchmark import (
-    VARIANT_ID_PATTERN,
-    MeshSpec,
-    Variant,
-    expand_variants,
-    pareto_front,
-    summarise_variants,
-)
 from fem.exceptions import InvalidParameterError
-from fem.stability import lowest_converging, sweep_records
-from surrogate.report import variant_label
+from report.build import variant_label
+from studies.fe_speed_accuracy import pareto_front, summarise_variants
+from studies.fe_variants import VARIANT_ID_PATTERN, MeshSpec, Variant, expand_variants
+from studies.stability import lowest_converging, sweep_records
 from tests.conftest import REPO, job_counts, snakemake
 
 
@@ -97,10 +91,11 @@ def test_sweep_records_map_the_sweep_at_theta_zero() -> None:
 
 
 def test_stored_reference_is_rebuilt_exactly(coarse_mesh: Path, tmp_path: Path) -> None:
-    from fem.benchmark import load_displacement, save_displacement, vertex_displacement
     from fem.case import CaseRunner
-    from fem.evaluation import evaluate
+    from fem.interpolation import evaluate
     from fem.sweep import Case
+    from studies.fe_reference import load_displacement, save_displacement
+    from studies.fe_timing import vertex_displacement
 
     runner = CaseRunner(coarse_mesh)
     runner.solve(Case(1.0, 180.0))
@@ -118,7 +113,7 @@ def test_point_location_fallback_finds_the_containing_cell(coarse_mesh: Path) ->
     from dolfinx import geometry
     from mpi4py import MPI
 
-    from fem.evaluation import _colliding_cells, _most_inside_cell
+    from fem.interpolation import _colliding_cells, _most_inside_cell
     from meshes.io import read_mesh
 
     mesh, _, _ = read_mesh(coarse_mesh, MPI.COMM_SELF)
@@ -134,7 +129,7 @@ def test_blas_and_openmp_threads_are_limited_in_the_loaded_libraries() -> None:
     import ctypes
     import os
 
-    from fem.benchmark import limit_blas_threads
+    from studies.machine import limit_blas_threads
 
     done = limit_blas_threads(1)  # numpy has loaded OpenBLAS; dolfinx's import loads libgomp
     assert {"libblas.so.3", "libopenblas.so.0"} & set(done)
@@ -145,7 +140,7 @@ def test_blas_and_openmp_threads_are_limited_in_the_loaded_libraries() -> None:
 def test_one_core_pins_every_thread_and_restores_the_affinity() -> None:
     import os
 
-    from fem.benchmark import one_core
+    from studies.machine import one_core
 
     allowed = os.sched_getaffinity(0)
     with one_core() as core:
@@ -185,11 +180,11 @@ def test_error_falls_with_mesh_size_against_a_finer_reference(mesh_ladder: dict[
     mound meets the chest-wall layer, and the reference is itself only one size finer.
     Measured here: RMS rates 0.66 (0.06 -> 0.045) and 0.53 (0.045 -> 0.03).
     """
-    from fem.benchmark import accuracy_at_vertices
     from fem.case import CaseRunner
-    from fem.evaluation import observed_rates
     from fem.parameters import Discretisation, SolverSettings
     from fem.sweep import Case
+    from studies.accuracy import observed_rates
+    from studies.fe_benchmark import accuracy_at_vertices
 
     case = Case(5.0, 180.0)
     fine = CaseRunner(mesh_ladder[0.02], SolverSettings(discretisation=Discretisation(degree=3)))

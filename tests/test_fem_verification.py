@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import ufl
-from dolfinx import fem, mesh as dmesh
+from dolfinx import fem
+from dolfinx import mesh as dmesh
 from mpi4py import MPI
 from petsc4py import PETSc
 

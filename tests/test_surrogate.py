@@ -135,9 +135,9 @@ def test_prediction_warns_where_the_sweep_did_not_converge(dataset_path: Path, t
     import dataclasses
     import warnings
 
+    from studies.architecture import copy_model
     from surrogate.data import load_dataset
     from surrogate.predict import ExtrapolationWarning, Surrogate, save_model
-    from surrogate.study import copy_model
     from surrogate.train import train_and_evaluate
 
     ds = load_dataset(dataset_path)
@@ -166,7 +166,7 @@ def test_prediction_warns_where_the_sweep_did_not_converge(dataset_path: Path, t
 
 
 def test_selection_takes_the_most_accurate_architecture_within_the_prediction_budget() -> None:
-    from surrogate.study import StudyError, architecture_table, select_architecture
+    from studies.architecture import StudyError, architecture_table, select_architecture
 
     runs = [
         {"folder": f"{arch}/r{r}", "architecture": arch, "seed": r, "boundary": "network",

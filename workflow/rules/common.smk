@@ -5,7 +5,8 @@ import yaml
 from snakemake.exceptions import WorkflowError
 from snakemake.utils import validate
 
-from fem.benchmark import MESH_ID_PATTERN, VARIANT_ID_PATTERN, MeshSpec, Variant, clinical_cases, expand_variants
+from fem.sweep import clinical_cases
+from studies.fe_variants import MESH_ID_PATTERN, VARIANT_ID_PATTERN, MeshSpec, Variant, expand_variants
 from fem.contact import resolve_obstacle
 from fem.exceptions import FEError
 from fem.parameters import SolverSettings

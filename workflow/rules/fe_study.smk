@@ -2,7 +2,7 @@
 # baseline, accuracy against a refined reference), speed against accuracy over mesh sizes x
 # elements x solver presets, and stability maps over (C1, Phi) for adaptive and fixed-step
 # loading. Benchmarks, not tests: `snakemake -j2 fe_study` runs them alone; the report needs
-# them. The library code is fem.benchmark and fem.stability; JSON results land in
+# them. The library code is in studies/ (fe_benchmark, fe_speed_accuracy, stability); JSON results land in
 # results/fe_study/.
 wildcard_constraints:
     fe_mesh=MESH_ID_PATTERN,

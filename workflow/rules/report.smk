@@ -1,4 +1,4 @@
-# The report: one HTML page with its PNG figures beside it (surrogate.report). It reads every
+# The report: one HTML page with its PNG figures beside it (report.build). It reads every
 # result of the workflow, so `rule all`, which asks for it, pulls in the FE sweep, the FE study
 # and the surrogate's study, models and benchmarks.
 

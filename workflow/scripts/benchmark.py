@@ -4,9 +4,9 @@ import json
 import logging
 from pathlib import Path
 
-from fem.benchmark import clinical_cases
 from fem.parameters import SolverSettings
-from surrogate.benchmark import format_benchmark, run_benchmark
+from fem.sweep import clinical_cases
+from studies.surrogate_benchmark import format_benchmark, run_benchmark
 from surrogate.data import write_json
 
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)

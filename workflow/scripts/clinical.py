@@ -8,8 +8,8 @@ from surrogate.runtime import configure_cpu
 
 configure_cpu()
 
+from studies.surrogate_evaluation import evaluate_clinical  # noqa: E402
 from surrogate.data import load_dataset, write_json  # noqa: E402
-from surrogate.evaluate import evaluate_clinical  # noqa: E402
 from surrogate.predict import Surrogate  # noqa: E402
 
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)

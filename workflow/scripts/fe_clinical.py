@@ -4,8 +4,10 @@ baseline, accuracy against the reference) at the workflow's default discretisati
 import json
 import logging
 
-from fem.benchmark import clinical_benchmark, limit_blas_threads, load_references
 from fem.parameters import SolverSettings
+from studies.fe_benchmark import clinical_benchmark
+from studies.fe_reference import load_references
+from studies.machine import limit_blas_threads
 
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
 logging.info("single-threaded BLAS: %s", limit_blas_threads(1))

@@ -2,9 +2,11 @@
 
 import logging
 
-from fem.benchmark import MeshSpec, Variant, limit_blas_threads, solve_reference
 from fem.parameters import SolverSettings
 from fem.sweep import Case
+from studies.fe_reference import solve_reference
+from studies.fe_variants import MeshSpec, Variant
+from studies.machine import limit_blas_threads
 
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
 logging.info("BLAS on %d threads: %s", snakemake.threads, limit_blas_threads(snakemake.threads))

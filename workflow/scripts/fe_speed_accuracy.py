@@ -4,7 +4,7 @@ cheapest variant meeting the accuracy target."""
 import json
 import logging
 
-from fem.benchmark import summarise_variants
+from studies.fe_speed_accuracy import summarise_variants
 
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
 

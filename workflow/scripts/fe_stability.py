@@ -4,7 +4,7 @@ import json
 import logging
 
 from fem.parameters import SolverSettings
-from fem.stability import loading_schemes, stability_map
+from studies.stability import loading_schemes, stability_map
 
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
 

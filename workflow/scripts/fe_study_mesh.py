@@ -2,8 +2,8 @@
 
 import logging
 
-from fem.benchmark import MeshSpec
 from meshes.config import MeshConfig, make_mesh
+from studies.fe_variants import MeshSpec
 
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
 

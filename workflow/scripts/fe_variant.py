@@ -3,8 +3,11 @@
 import json
 import logging
 
-from fem.benchmark import Variant, limit_blas_threads, load_references, run_variant
 from fem.parameters import SolverSettings
+from studies.fe_reference import load_references
+from studies.fe_speed_accuracy import run_variant
+from studies.fe_variants import Variant
+from studies.machine import limit_blas_threads
 
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
 logging.info("single-threaded BLAS: %s", limit_blas_threads(1))

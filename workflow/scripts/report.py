@@ -1,8 +1,8 @@
-"""Snakemake adapter: write the HTML report and its figures (surrogate.report)."""
+"""Snakemake adapter: write the HTML report and its figures (report.build)."""
 
 import logging
 
-from surrogate.report import build_report
+from report.build import build_report
 
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
 build_report(dict(snakemake.input.items()), snakemake.output.html, snakemake.params.clinical)

@@ -5,8 +5,8 @@ import json
 import logging
 from pathlib import Path
 
+from studies.architecture import copy_model
 from surrogate.data import load_dataset
-from surrogate.study import copy_model
 
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
 

@@ -2,9 +2,9 @@
 
 import logging
 
+from studies.architecture import architecture_table, read_run, select_architecture
+from studies.timing import time_on_one_core
 from surrogate.data import write_json
-from surrogate.study import architecture_table, read_run, select_architecture
-from surrogate.timing import time_on_one_core
 
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
 log = logging.getLogger("study_table")

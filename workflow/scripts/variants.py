@@ -4,8 +4,8 @@ import json
 import logging
 from pathlib import Path
 
+from studies.architecture import compare_variants, read_run
 from surrogate.data import write_json
-from surrogate.study import compare_variants, read_run
 
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
 

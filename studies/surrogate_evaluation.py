@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from surrogate import reference
+from studies import paper
 from surrogate.data import Dataset
 from surrogate.predict import ExtrapolationWarning, Surrogate, write_point_fields_xdmf
 
@@ -90,7 +90,7 @@ def clinical_table(
         if not ds.converged[case]:
             raise KeyError(f"clinical case {ds.ids[case]} did not converge in the FE sweep")
         row = {"label": item.get("label", str(ds.ids[case])), **compare_case(model, ds, case)}
-        row["paper"] = reference.table3_row(item["C1"], item["phi"])
+        row["paper"] = paper.table3_row(item["C1"], item["phi"])
         if fe_wall_s is not None:
             row["fe_wall_s"] = fe_wall_s.get(str(ds.ids[case]))
         rows.append(row)

@@ -4,11 +4,11 @@ The page answers the user's request ("both speed and accuracy count: chart one a
 the other, test stability where methods fail, and model no more than a scene needs")
 and sets our results beside the paper's. Every number on it is read from the files the
 workflow wrote (the dataset, the mesh quality, the FE study's and the surrogate's JSON
-results, the clinical error fields) or from :mod:`surrogate.reference` (the paper's);
+results, the clinical error fields) or from :mod:`studies.paper` (the paper's);
 a file or key that is absent shows as "n/a" or as a note, never as a guess.
 
 :func:`build_report` is the entry point; it decides what goes in and writes the HTML.
-The figures are drawn by :mod:`fem.plots` and :mod:`surrogate.plots`.
+The figures are drawn by :mod:`studies.figures.fe` and :mod:`studies.figures.surrogate`.
 """
 
 from __future__ import annotations
@@ -26,10 +26,10 @@ from typing import Any
 
 import numpy as np
 
-from fem import plots as fem_plots
 from fem.sweep import Case
-from surrogate import plots as surrogate_plots
-from surrogate import reference
+from studies import paper
+from studies.figures import fe as fem_plots
+from studies.figures import surrogate as surrogate_plots
 from surrogate.config import parse_architecture
 
 log = logging.getLogger(__name__)
@@ -854,7 +854,7 @@ def _lowest_converging_table(lowest: Mapping[str, Any], table_id: str) -> str:
 
 def _sweep_stability(ctx: _Context) -> str:
     """The sweep's convergence over (C1, Φ), on the mesh the dataset was solved on."""
-    from fem.stability import lowest_converging, sweep_records
+    from studies.stability import lowest_converging, sweep_records
 
     columns = ctx.case_columns()
     if not columns:
@@ -991,18 +991,18 @@ def _table2(ctx: _Context) -> str:
         return _missing("results/surrogate/study/table2.json")
     ours = table.get("rows") or {}
     selected = table.get("selected_architecture")
-    names = sorted(set(ours) | set(reference.TABLE2), key=parse_architecture)
+    names = sorted(set(ours) | set(paper.TABLE2), key=parse_architecture)
     rows, highlight = [], []
     for i, name in enumerate(names):
         row = ours.get(name) or {}
-        paper = reference.TABLE2.get(name) or {}
+        published = paper.TABLE2.get(name) or {}
         err, train = row.get("validation_error_mm") or {}, row.get("train_s") or {}
-        p_err, p_train = paper.get("validation_error_mm"), paper.get("train_s")
+        p_err, p_train = published.get("validation_error_mm"), published.get("train_s")
         mark = []
         if name == selected:
             mark.append("selected by us")
             highlight.append(i)
-        if name == reference.BEST_ARCHITECTURE:
+        if name == paper.BEST_ARCHITECTURE:
             mark.append("selected by the paper")
         if name == table.get("most_accurate_architecture") and name != selected:
             mark.append("most accurate, over the prediction budget")
@@ -1043,7 +1043,7 @@ def _table3(ctx: _Context) -> str:
         if not block or not block.get("rows"):
             continue
         cases = block["rows"]
-        paper = [reference.table3_row(r["C1"], r["phi"]) or {} for r in cases]
+        published = [paper.table3_row(r["C1"], r["phi"]) or {} for r in cases]
         metrics = [
             ("FE mean displacement (mm)", lambda r: _fmt(r.get("fe_mean_mm"), ".3g"),
              lambda p: _fmt(p.get("fe_mean_mm"), ".3g")),
@@ -1059,10 +1059,10 @@ def _table3(ctx: _Context) -> str:
         rows = []
         for name, ours, theirs in metrics:
             rows.append([f"{name}: ours"] + [ours(r) for r in cases])
-            rows.append([f"{name}: paper"] + [theirs(p) for p in paper])
+            rows.append([f"{name}: paper"] + [theirs(p) for p in published])
         rows.append(["max error (mm): ours"] + [_fmt(r.get("max_error_mm"), ".3g") for r in cases])
         rows.append(["max error (mm): paper (Fig. 5 caption)"] + [
-            _fmt(reference.fig5_max_error_mm(r["C1"], r["phi"]), ".3g") for r in cases])
+            _fmt(paper.fig5_max_error_mm(r["C1"], r["phi"]), ".3g") for r in cases])
         out.append(_p(f"{split.replace('_', '-')} model ({block.get('architecture', 'n/a')}, "
                       f"boundary: {block.get('boundary', 'n/a')}):"))
         out.append(_table(["metric"] + [r.get("label", r["case"]) for r in cases], rows,
@@ -1079,24 +1079,24 @@ def _table4(ctx: _Context) -> str:
     if not speed:
         return "".join(out) + _p("The benchmark holds no timed case.", "note")
     items = {_case_id(c): c for c in ctx.clinical}
-    paper = []
+    published = []
     for row in speed:
         item = items.get(row["case"])
-        paper.append(reference.table4_row(item["C1"], item["phi"]) if item else None)
+        published.append(paper.table4_row(item["C1"], item["phi"]) if item else None)
     out.append(_p(
         "Wall time of one FE solve (set-up excluded) and one surrogate prediction, both on the "
         "same pinned CPU core in one job, ours beside the paper's (an Intel Core i7 at 2.3 GHz, "
         "mean ± SD), and the speed-up FE / surrogate.", "caption"))
     rows = [
         ["FE: ours"] + [_seconds(r.get("fe_solve_s")) for r in speed],
-        ["FE: paper"] + [_pm(*p["fe_s"], ".3g") + " s" if p else "n/a" for p in paper],
+        ["FE: paper"] + [_pm(*p["fe_s"], ".3g") + " s" if p else "n/a" for p in published],
         ["surrogate: ours"] + [_seconds(1e-3 * r["surrogate_ms"]) if _finite(r.get("surrogate_ms"))
                                else "n/a" for r in speed],
         ["surrogate: paper"] + [_pm(*p["surrogate_s"], ".3g") + " s" if p else "n/a"
-                                for p in paper],
+                                for p in published],
         ["speed-up: ours"] + [_times(r.get("speedup")) for r in speed],
         ["speed-up: paper"] + [_times(p["fe_s"][0] / p["surrogate_s"][0]) if p else "n/a"
-                               for p in paper],
+                               for p in published],
     ]
     out.append(_table(["model"] + [ctx.case_label(r["case"]) for r in speed], rows,
                       highlight=(0, 2, 4), table_id="table4"))
@@ -1155,7 +1155,7 @@ def _figure5(ctx: _Context) -> str:
                                   surrogate_plots.plot_point_fields(X, panels, p, label),
                                   f"FE displacement and surrogate error, {label}",
                                   f"{label}: FE |u| and surrogate error, seen from the front."))
-        paper_max = reference.fig5_max_error_mm(item["C1"], item["phi"])
+        paper_max = paper.fig5_max_error_mm(item["C1"], item["phi"])
         table_rows.append([label] + [
             _fmt(rows[s].get(cid, {}).get("max_error_mm"), ".3g") for s in ("by_sample", "by_case")
         ] + [_fmt(paper_max, ".3g")])

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from surrogate import reference
+from studies import paper
 from surrogate.config import parse_architecture
 from surrogate.data import Dataset, write_json
 from surrogate.predict import HISTORY_JSON, MODEL_JSON, PARAMS_NPZ, unconverged_cases
@@ -102,7 +102,7 @@ def architecture_table(runs: Iterable[dict[str, Any]]) -> dict[str, Any]:
         raise StudyError("the architecture study has no runs")
     order = sorted(groups, key=parse_architecture)
     rows = {arch: {**summarise(groups[arch]), "paper": _paper_row(arch)} for arch in order}
-    table = {"rows": rows, "paper_selected_architecture": reference.BEST_ARCHITECTURE}
+    table = {"rows": rows, "paper_selected_architecture": paper.BEST_ARCHITECTURE}
     return select_architecture(table)
 
 
@@ -112,7 +112,7 @@ def select_architecture(table: dict[str, Any], budget_ms: float | None = None) -
     Without a budget: the lowest mean validation error (the paper's rule). With
     ``budget_ms``: the lowest mean validation error among the architectures whose
     one-core prediction time (``predict_one_core.api.median_ms`` of each row, see
-    :func:`surrogate.timing.time_on_one_core`) is within the budget: a larger network
+    :func:`studies.timing.time_on_one_core`) is within the budget: a larger network
     that is a little more accurate but too slow for the view it serves is not chosen.
     If none is within the budget, the fastest is chosen and the table says so.
     Within the architecture, the run with the lowest validation error is the model.
@@ -151,7 +151,7 @@ def select_architecture(table: dict[str, Any], budget_ms: float | None = None) -
 
 
 def _paper_row(arch: str) -> dict[str, Any] | None:
-    row = reference.TABLE2.get(arch)
+    row = paper.TABLE2.get(arch)
     if row is None:
         return None
     return {k: {"mean": v[0], "sd": v[1]} for k, v in row.items()}

@@ -1,4 +1,4 @@
-"""Point evaluation of FE fields on other meshes, and displacement error measures.
+"""Point evaluation of FE fields at arbitrary points, on this or another mesh of the same body.
 
 Discretisations are compared at the *material points* (the vertices of the
 default mesh, as in the dataset): every solution, whatever its mesh and element,
@@ -135,37 +135,4 @@ def vertex_values(problem: Any, points: np.ndarray) -> tuple[np.ndarray, np.ndar
     return evaluate(problem.displacement(), points)
 
 
-def displacement_errors(u: np.ndarray, reference: np.ndarray) -> dict[str, float]:
-    """Pointwise displacement errors against a reference (both (N, 3), metres).
-
-    Returns:
-        ``max_error_mm``, ``rms_error_mm``, ``mean_error_mm`` (the paper's Eq. 3),
-        the reference's ``max_disp_mm`` and ``relative_max_error`` = max error /
-        max |u_ref| (the accuracy target is 1 %).
-    """
-    err = np.linalg.norm(np.asarray(u) - np.asarray(reference), axis=1)
-    scale = float(np.linalg.norm(reference, axis=1).max())
-    return {
-        "max_error_mm": 1e3 * float(err.max()),
-        "rms_error_mm": 1e3 * float(np.sqrt(np.mean(err**2))),
-        "mean_error_mm": 1e3 * float(err.mean()),
-        "max_disp_mm": 1e3 * scale,
-        "relative_max_error": float(err.max()) / scale if scale > 0 else float("nan"),
-    }
-
-
-def observed_rates(sizes: list[float], errors: list[float]) -> list[float]:
-    """Convergence rates log(e_i / e_(i+1)) / log(h_i / h_(i+1)) between successive meshes."""
-    rates = []
-    for (h0, e0), (h1, e1) in zip(zip(sizes, errors), zip(sizes[1:], errors[1:])):
-        rates.append(float(np.log(e0 / e1) / np.log(h0 / h1)) if e0 > 0 and e1 > 0 else float("nan"))
-    return rates
-
-
-def fitted_rate(sizes: list[float], errors: list[float]) -> float:
-    """Least-squares slope of log(error) against log(h)."""
-    h, e = np.log(np.asarray(sizes)), np.log(np.asarray(errors))
-    return float(np.polyfit(h, e, 1)[0])
-
-
-__all__ = ["displacement_errors", "evaluate", "fitted_rate", "observed_rates", "vertex_values"]
+__all__ = ["evaluate", "vertex_values"]

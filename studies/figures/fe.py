@@ -2,7 +2,7 @@
 
 Every function takes plain numbers (arrays, lists of mappings) and writes one PNG with
 matplotlib's Agg backend; which numbers go in is decided by the caller
-(:mod:`surrogate.report`).
+(:mod:`report.build`).
 """
 
 from __future__ import annotations
@@ -190,7 +190,7 @@ def plot_stability_maps(
     is outlined and marked with a cross whose colour names its first failure.
 
     Args:
-        records: :func:`fem.stability.stability_map`'s records (``scheme``, ``C1``,
+        records: :func:`studies.stability.stability_map`'s records (``scheme``, ``C1``,
             ``phi``, ``converged``, ``load_steps``, ``newton_iterations``,
             ``rejected_steps``, ``first_failure``, ``failure_kinds``).
         path: PNG to write.

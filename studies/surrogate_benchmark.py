@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from surrogate import reference
-from surrogate.timing import time_on_one_core
+from studies import paper
+from studies.timing import time_on_one_core
 
 log = logging.getLogger(__name__)
 
@@ -79,8 +79,8 @@ def run_benchmark(
         mesh: the FE mesh.
         clinical_cases: :class:`fem.sweep.Case` objects of the clinical cases.
         settings: FE solver settings (:class:`fem.parameters.SolverSettings`).
-        table: the architecture study (:func:`surrogate.study.architecture_table`).
-        clinical: the clinical evaluation (:func:`surrogate.evaluate.evaluate_clinical`).
+        table: the architecture study (:func:`studies.architecture.architecture_table`).
+        clinical: the clinical evaluation (:func:`studies.surrogate_evaluation.evaluate_clinical`).
         repeats: timed surrogate predictions.
         core: CPU to pin to (default: the lowest this process may use).
     """
@@ -105,12 +105,13 @@ def run_benchmark(
     train_3x32 = table["rows"].get("3x32", {}).get("train_s", {}).get("mean")
     rows = []
     for c in clinical_cases:
-        paper = reference.table4_row(c.C1, c.phi)
+        published = paper.table4_row(c.C1, c.phi)
         rows.append({
             "case": c.id, "fe_solve_s": fe[c.id]["solve_s"], "surrogate_ms": predict_ms,
             "speedup": ratios[c.id],
-            "paper": None if paper is None else {"fe_s": paper["fe_s"][0], "surrogate_s": paper["surrogate_s"][0],
-                                                 "speedup": paper["fe_s"][0] / paper["surrogate_s"][0]},
+            "paper": None if published is None else {
+                "fe_s": published["fe_s"][0], "surrogate_s": published["surrogate_s"][0],
+                "speedup": published["fe_s"][0] / published["surrogate_s"][0]},
         })
     return {
         "machine": {"processor": platform.processor() or platform.machine(), "cpus": os.cpu_count(),
@@ -134,9 +135,9 @@ def run_benchmark(
             "predict_one_core_ms": _goal(predict_ms, GOALS["predict_one_core_ms"]),
             "train_3x32_s": _goal(train_3x32, GOALS["train_3x32_s"]),
         },
-        "paper": {"validation_error_mm": reference.TABLE2["3x32"]["validation_error_mm"],
+        "paper": {"validation_error_mm": paper.TABLE2["3x32"]["validation_error_mm"],
                   "worst_clinical_rmse_mm": 1.04, "worst_clinical_relative_rmse": 1.04 / 38.4,
-                  "predict_s": (2.0, 2.4), "speedup": reference.SPEEDUP_RANGE, "train_3x32_s": 3155.0},
+                  "predict_s": (2.0, 2.4), "speedup": paper.SPEEDUP_RANGE, "train_3x32_s": 3155.0},
     }
 
 

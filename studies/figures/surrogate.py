@@ -1,7 +1,7 @@
 """Figures about the surrogate: training, speed against accuracy, extrapolation, error fields.
 
 Every function takes plain numbers and writes one PNG with matplotlib's Agg backend;
-which numbers go in is decided by the caller (:mod:`surrogate.report`).
+which numbers go in is decided by the caller (:mod:`report.build`).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 
-from fem.plots import FONT_SIZE, plain_log_ticks, save_figure  # noqa: E402
+from studies.figures.fe import FONT_SIZE, plain_log_ticks, save_figure  # noqa: E402
 
 
 def plot_history(

@@ -3,7 +3,7 @@
 The parent process may run JAX with every core (or train on them); a fair "one
 core" figure needs a fresh process whose CPU affinity is a single core before JAX
 starts its thread pools: every thread it ever starts then runs on that core.
-:func:`time_on_one_core` starts ``python -m surrogate.timing`` that way (with the
+:func:`time_on_one_core` starts ``python -m studies.timing`` that way (with the
 classic XLA CPU runtime, see :mod:`surrogate.runtime`, and optionally Eigen's
 multi-threading off as well) and reads its JSON; the child reports the CPUs it was
 allowed to run on and its XLA flags, so the result documents its own pinning.
@@ -11,7 +11,7 @@ allowed to run on and its XLA flags, so the result documents its own pinning.
 Example (what the benchmark rule runs)::
 
     XLA_FLAGS=--xla_cpu_use_thunk_runtime=false \\
-        python -m surrogate.timing results/surrogate/model --core 0 --repeats 2000
+        python -m studies.timing results/surrogate/model --core 0 --repeats 2000
 """
 
 from __future__ import annotations
@@ -123,7 +123,7 @@ def time_on_one_core(
     """
     if core is None:
         core = min(os.sched_getaffinity(0))
-    cmd = [sys.executable, "-m", "surrogate.timing", *map(str, model_dirs), "--core", str(core),
+    cmd = [sys.executable, "-m", "studies.timing", *map(str, model_dirs), "--core", str(core),
            "--repeats", str(repeats), "--warmup", str(warmup),
            "--queries", ";".join(",".join(str(v) for v in q) for q in queries)]
     proc = subprocess.run(cmd, env=one_core_env(single_thread), capture_output=True, text=True)

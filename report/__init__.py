@@ -1,0 +1,1 @@
+"""The workflow's report: one HTML page built from the studies' typed results."""

@@ -1,0 +1,123 @@
+"""Speed against accuracy: one study variant timed on the clinical cases, and the Pareto front.
+
+:func:`run_variant` times one variant (a mesh size x element x solver preset) on the
+clinical cases on one pinned core and measures its error at its own material points
+against the reference; :func:`summarise_variants` marks the Pareto front (cost against
+the worst relative error) and the cheapest variant meeting the accuracy target.
+"""
+
+from __future__ import annotations
+
+import logging
+import statistics
+from pathlib import Path
+from typing import Any
+
+from fem.overlap import self_overlap
+from fem.parameters import SolverSettings
+from fem.sweep import Case
+from studies.fe_benchmark import TARGETS, accuracy_at_vertices
+from studies.fe_timing import timed_solve
+from studies.fe_variants import Variant
+from studies.machine import machine_state, timed_on_one_core
+
+log = logging.getLogger(__name__)
+
+
+@timed_on_one_core
+def run_variant(
+    mesh_path: str | Path,
+    variant: Variant,
+    base: SolverSettings,
+    cases: list[Case],
+    references: dict[str, tuple[Any, dict[str, Any]]],
+    max_dofs: int | None = None,
+) -> dict[str, Any]:
+    """Time one study variant on the clinical cases and measure its error at its material points.
+
+    The material points of a variant are its own mesh's vertices (as the dataset's are
+    the default mesh's); the reference is evaluated there. A variant above ``max_dofs``
+    is recorded as skipped (with its DOF count), not solved. Timed on one pinned core.
+    """
+    from fem.case import CaseRunner
+
+    settings = variant.settings(base)
+    runner = CaseRunner(mesh_path, settings)
+    dofs = runner.problem.num_dofs()
+    record: dict[str, Any] = {
+        "variant": variant.id,
+        "mesh": variant.mesh.size_mapping(),
+        "element": variant.element,
+        "solver": variant.solver,
+        "quadrature_degree": settings.discretisation.quadrature,
+        "dofs": dofs,
+        "cells": runner.mesh.topology.index_map(3).size_global,
+        "material_points": runner.mesh.topology.index_map(0).size_global,
+        "setup_s": runner.setup_s,
+        "machine": machine_state(),
+    }
+    if max_dofs is not None and dofs > max_dofs:
+        record["skipped"] = f"{dofs} dofs exceed fe_study.speed_accuracy.max_dofs = {max_dofs}"
+        runner.solver.destroy()
+        return record
+    rows = []
+    for case in cases:
+        row = timed_solve(runner, case)
+        reference = references.get(case.id)
+        if row["converged"]:
+            row["self_overlap"] = self_overlap(runner.mesh, runner.problem.displacement())
+            if reference is not None:
+                row["accuracy"] = accuracy_at_vertices(runner, reference[0])
+        rows.append(row)
+        log.info("%s %s: %.2f s, error %s", variant.id, case.id, row["wall_s"],
+                 row.get("accuracy", {}).get("relative_max_error") if row.get("accuracy") else "n/a")
+    record["cases"] = rows
+    ok = [r for r in rows if r.get("accuracy")]
+    record["median_wall_s"] = statistics.median(r["wall_s"] for r in rows)
+    record["median_cpu_s"] = statistics.median(r["cpu_s"] for r in rows)
+    record["max_factorization_equivalents"] = max(r["factorization_equivalents"] for r in rows)
+    record["max_relative_error"] = max(r["accuracy"]["relative_max_error"] for r in ok) if len(ok) == len(rows) else None
+    record["max_error_mm"] = max(r["accuracy"]["max_error_mm"] for r in ok) if len(ok) == len(rows) else None
+    record["max_overlapping_vertices"] = max(
+        (r["self_overlap"]["overlapping_vertices"] for r in rows if "self_overlap" in r), default=None
+    )
+    runner.solver.destroy()
+    return record
+
+
+def pareto_front(costs: list[float], errors: list[float]) -> list[bool]:
+    """Points no other point beats in both cost and error (ties count as beaten only if strictly worse in one)."""
+    flags = []
+    for i, (c, e) in enumerate(zip(costs, errors)):
+        dominated = any(
+            (c2 <= c and e2 <= e) and (c2 < c or e2 < e)
+            for j, (c2, e2) in enumerate(zip(costs, errors)) if j != i
+        )
+        flags.append(not dominated)
+    return flags
+
+
+def summarise_variants(
+    records: list[dict[str, Any]], target: float = TARGETS["relative_max_error"], cost: str = "median_cpu_s"
+) -> dict[str, Any]:
+    """Mark the Pareto front (cost against worst-case relative error) and the cheapest
+    variant that meets ``target``.
+
+    Args:
+        records: :func:`run_variant` records.
+        target: accuracy target on the max relative error over the clinical cases.
+        cost: the cost measure (CPU seconds are robust to a shared machine; wall
+            seconds are what a user waits).
+    """
+    solved = [r for r in records if not r.get("skipped") and r.get("max_relative_error") is not None]
+    flags = pareto_front([r[cost] for r in solved], [r["max_relative_error"] for r in solved])
+    for r, flag in zip(solved, flags):
+        r["pareto"] = flag
+    meeting = sorted((r for r in solved if r["max_relative_error"] <= target), key=lambda r: r[cost])
+    return {
+        "target_relative_max_error": target,
+        "cost": cost,
+        "variants": records,
+        "pareto_front": [r["variant"] for r in solved if r["pareto"]],
+        "cheapest_meeting_target": meeting[0]["variant"] if meeting else None,
+    }
