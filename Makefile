@@ -40,8 +40,11 @@ $(VENV)/.installed: requirements.lock constraints.txt pyproject.toml
 	$(PY) -c "import numpy, petsc4py, dolfinx, jax, optax, gmsh, snakemake; assert numpy.__version__ == '1.24.2', numpy.__version__"
 	touch $@
 
-test: setup
-	$(PY) -m pytest -q tests
+# The checks first (seconds), then the suite; `make test PYTEST_ARGS="-m unit"` runs one layer
+# (markers in pyproject.toml: unit, solve, workflow, cluster).
+PYTEST_ARGS ?=
+test: setup lint
+	$(PY) -m pytest -q $(PYTEST_ARGS) tests
 
 # The whole run holds a kernel lock (flock), released even when the run is SIGKILLed; while we
 # hold it no other `make reproduce` can be running on WORKDIR, so a Snakemake lock left by a
@@ -52,7 +55,11 @@ reproduce: setup
 		'$(SNAKEMAKE) --unlock --quiet all >/dev/null 2>&1; $(SNAKEMAKE) -j$(JOBS) $(SNAKEMAKE_ARGS)' \
 		|| { rc=$$?; [ $$rc -ne 75 ] || echo "another 'make reproduce' is running on $(WORKDIR)" >&2; exit $$rc; }
 
+# ruff (with the docstring rules of pyproject.toml), the import-linter contracts (the layers
+# import downward only) and Snakemake's own lint of the workflow.
 lint: setup
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/lint-imports
 	$(VENV)/bin/snakemake --lint
 
 # Re-resolve the pins from requirements.in (needs network); review the diff. Lines marked

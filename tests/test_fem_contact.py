@@ -42,6 +42,8 @@ from fem.solver import NewtonSolver
 from meshes.parametric import BreastGeometry
 from meshes.tags import Boundary
 
+pytestmark = pytest.mark.solve
+
 TIGHT = {"snes_rtol": 1e-12, "snes_atol": 1e-11}
 
 

@@ -13,6 +13,8 @@ from fem.exceptions import InvalidParameterError, MeshError
 from fem.parameters import Gravity, Loading, Material, SolverSettings
 from fem.sweep import Case
 
+pytestmark = pytest.mark.solve
+
 
 def test_unconvergeable_case_ends_failed_with_fraction_and_reason(coarse_mesh: Path, tmp_path: Path) -> None:
     from fem.case import run_case

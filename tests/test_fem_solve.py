@@ -10,6 +10,8 @@ import pytest
 
 from fem.sweep import Case
 
+pytestmark = pytest.mark.solve
+
 
 @pytest.fixture(scope="module")
 def runner(coarse_mesh: Path):

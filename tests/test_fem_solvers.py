@@ -15,6 +15,8 @@ from fem.exceptions import InvalidParameterError
 from fem.parameters import Discretisation, SolverSettings
 from fem.sweep import Case
 
+pytestmark = pytest.mark.solve
+
 CASE = Case(1.0, 180.0)
 
 
@@ -50,8 +52,12 @@ def test_solver_options_agree(coarse_mesh: Path, reference: np.ndarray, solver: 
     u, result = _displacement(coarse_mesh, solver=solver, petsc_options=options)
     assert np.max(np.abs(u - reference)) <= 1e-7 * np.abs(reference).max()
     if solver == "iterative":
-        # Krylov iterations were really spent (not a direct solve in disguise)
-        assert result.attempts and result.newton_iterations[0] >= 3
+        # Krylov iterations were really spent (not a direct solve in disguise): a direct solve
+        # takes one linear iteration per Newton iteration; the fieldsplit preconditioner is
+        # inexact, so each Newton step needs several
+        assert result.attempts and result.linear_iterations >= 5 * result.total_iterations
+    elif solver.startswith("direct-"):
+        assert result.linear_iterations == result.total_iterations
 
 
 def test_default_keeps_its_factorisation_across_newton_iterations(coarse_mesh: Path) -> None:

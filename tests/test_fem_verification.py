@@ -25,6 +25,8 @@ from fem.problem import GravityProblem, strain_energy
 from fem.solver import NewtonSolver
 from meshes.tags import Boundary
 
+pytestmark = pytest.mark.solve
+
 TIGHT = {"snes_rtol": 1e-12, "snes_atol": 1e-11}
 
 

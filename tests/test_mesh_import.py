@@ -32,6 +32,8 @@ from meshes.parametric import BreastGeometry, rib_cage_surface
 from meshes.tags import Boundary
 from tests.conftest import REPO
 
+pytestmark = pytest.mark.unit
+
 BOX = (0.05, 0.2, 0.15)  # a slab of tissue: 5 cm deep (x), 20 cm wide (y), 15 cm tall (z)
 SIZE = MeshSize(global_size=0.03, mound_size=0.02)
 RIB_PLANE = {"plane": {"point": [0.0, 0.0, 0.0], "normal": [1.0, 0.0, 0.0]}, "distance": 0.001}

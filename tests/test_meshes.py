@@ -15,6 +15,8 @@ from meshes.sizing import MeshSize
 from meshes.tags import Boundary
 from tests.conftest import REPO
 
+pytestmark = pytest.mark.unit
+
 
 def test_geometry_rejects_bad_values_by_name() -> None:
     with pytest.raises(GeometryError, match="layer_thickness"):

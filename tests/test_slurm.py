@@ -23,7 +23,7 @@ import pytest
 
 from tests.conftest import REPO
 
-pytestmark = pytest.mark.slurm
+pytestmark = pytest.mark.cluster
 
 DAEMONS = ("munged", "slurmctld", "slurmd")
 

@@ -13,6 +13,8 @@ from fem.parameters import Gravity, Loading, Material, SolverSettings
 from fem.sweep import Case, sweep_cases
 from tests.conftest import REPO
 
+pytestmark = pytest.mark.unit
+
 
 def test_case_id_round_trips() -> None:
     case = Case(1.0, -150.0, 0.0)
