@@ -1,0 +1,214 @@
+"""Name the boundary of an imported mesh by rules: a group of the file, or nearness to a surface.
+
+The rib surface (the fixed chest wall) must be selected; other named surfaces may be; every
+boundary facet no rule selects is skin.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from meshes.checks import UNITS, point_surface_distance
+from meshes.exceptions import GeometryError, NoRibFacetsError, SurfaceRuleError
+from meshes.reading import InputMesh, read_surface
+from meshes.tags import Boundary
+
+
+@dataclass(frozen=True, slots=True)
+class BoundaryRule:
+    """How to find one named boundary among the boundary facets of an imported mesh.
+
+    Exactly one of ``group``, ``plane`` or ``surface`` is set.
+
+    Attributes:
+        group: a physical-group name (gmsh ``.msh``) or an integer tag of the file's
+            triangle cell data.
+        plane: ``(point, normal)`` of a plane, metres after unit conversion.
+        surface: path of a triangulated surface (STL/OBJ/PLY, same units as the model).
+        distance: facets whose every vertex lies within this distance of the plane or
+            surface are selected, metres.
+    """
+
+    group: str | int | None = None
+    plane: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
+    surface: str | None = None
+    distance: float = 0.001
+
+    def __post_init__(self) -> None:
+        given = [k for k in ("group", "plane", "surface") if getattr(self, k) is not None]
+        if len(given) != 1:
+            raise GeometryError(
+                "a boundary rule needs exactly one of group, plane or surface, "
+                f"got {given or 'none'}"
+            )
+        if not (math.isfinite(self.distance) and self.distance > 0):
+            raise GeometryError(
+                f"a boundary rule's distance must be positive, got {self.distance!r}"
+            )
+        if self.plane is not None:
+            point, normal = self.plane
+            if len(point) != 3 or len(normal) != 3 or np.linalg.norm(normal) == 0:
+                raise GeometryError(
+                    "a plane rule needs a 3-vector point and a non-zero 3-vector normal"
+                )
+
+    @classmethod
+    def from_mapping(cls, values: dict[str, Any], units: str = "m") -> BoundaryRule:
+        """Build from a config mapping; lengths in the file's ``units`` become metres.
+
+        Forms: ``{group: rib}``, ``{plane: {point: [x, y, z], normal: [nx, ny, nz]},
+        distance: d}``, ``{surface: path.stl, distance: d}``.
+        """
+        known = {"group", "plane", "surface", "distance"}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise GeometryError(f"unknown boundary-rule key(s): {', '.join(unknown)}")
+        scale = UNITS[units]
+        plane = None
+        if values.get("plane") is not None:
+            p = values["plane"]
+            if set(p) != {"point", "normal"}:
+                raise GeometryError("a plane rule is {point: [x, y, z], normal: [nx, ny, nz]}")
+            plane = (
+                tuple(scale * float(v) for v in p["point"]),
+                tuple(float(v) for v in p["normal"]),
+            )
+        # like the plane's point, the distance is in the file's units; 1 mm by default
+        distance = scale * float(values["distance"]) if "distance" in values else 0.001
+        return cls(
+            group=values.get("group"),
+            plane=plane,
+            surface=str(values["surface"]) if values.get("surface") is not None else None,
+            distance=distance,
+        )
+
+    def describe(self) -> str:
+        """The rule in words, for messages."""
+        if self.group is not None:
+            return f"group {self.group!r}"
+        if self.plane is not None:
+            point, normal = self.plane
+            return f"within {1e3 * self.distance:g} mm of the plane through {point} normal {normal}"
+        return f"within {1e3 * self.distance:g} mm of the surface {self.surface}"
+
+
+def _facet_distance(x: np.ndarray, faces: np.ndarray, rule: BoundaryRule, units: str) -> np.ndarray:
+    """For each face, the largest distance of its vertices from the rule's plane/surface."""
+    vertices = np.unique(faces)
+    d = np.full(len(x), np.inf)
+    if rule.plane is not None:
+        point, normal = (np.asarray(v, dtype=float) for v in rule.plane)
+        d[vertices] = np.abs((x[vertices] - point) @ (normal / np.linalg.norm(normal)))
+    else:
+        spts, stris = read_surface(rule.surface, units)
+        # exact up to 10x the rule's distance, so a miss can say how far off it was
+        d[vertices] = point_surface_distance(x[vertices], spts, stris, 10.0 * rule.distance)
+    return d[faces].max(axis=1)
+
+
+def classify_boundary(
+    x: np.ndarray,
+    faces: np.ndarray,
+    rules: dict[Boundary, BoundaryRule],
+    units: str,
+    face_groups: np.ndarray | None = None,
+    group_names: dict[str, int] | None = None,
+) -> dict[Boundary, np.ndarray]:
+    """Name the boundary faces by the rules; the faces no rule selects are skin.
+
+    Args:
+        x: points (N, 3), metres.
+        faces: boundary triangles (m, 3).
+        rules: a rule per boundary (``rib`` required).
+        units: the model's units (surface rules read their file in them).
+        face_groups: group integer of each face from the file (-1: none), or None.
+        group_names: physical name -> group integer of the file.
+
+    Returns:
+        Boundary -> its faces (every boundary present, possibly empty).
+
+    Raises:
+        NoRibFacetsError: if the rib rule selects nothing, with how near the closest facet was.
+        SurfaceRuleError: if another rule selects nothing, names an unknown group, or a
+            facet is selected by two rules.
+    """
+    group_names = group_names or {}
+    selected: dict[Boundary, np.ndarray] = {}
+    for boundary, rule in rules.items():
+        if rule.group is not None:
+            if face_groups is None or np.all(face_groups < 0):
+                raise SurfaceRuleError(
+                    f"the {boundary.label} rule selects {rule.describe()}, but the input has no "
+                    "boundary groups (only a volume mesh with tagged triangles, e.g. gmsh "
+                    "physical groups, has them); use a plane or surface rule"
+                )
+            if isinstance(rule.group, str) and not rule.group.lstrip("-").isdigit():
+                if rule.group not in group_names:
+                    raise SurfaceRuleError(
+                        f"the {boundary.label} rule names group {rule.group!r}, but the file's "
+                        f"groups are: {', '.join(sorted(group_names)) or 'unnamed'}"
+                    )
+                value = group_names[rule.group]
+            else:
+                value = int(rule.group)
+            mask = face_groups == value
+            if not mask.any():
+                present = sorted(set(face_groups[face_groups >= 0].tolist()))
+                error = NoRibFacetsError if boundary == Boundary.RIB else SurfaceRuleError
+                raise error(
+                    f"no boundary facets found for the {boundary.label} surface: {rule.describe()} "
+                    f"(tag {value}) holds no boundary triangles; tags on the boundary: {present}"
+                )
+        else:
+            distance = _facet_distance(x, faces, rule, units)
+            mask = distance <= rule.distance
+            if not mask.any():
+                nearest = float(np.min(distance))
+                how_far = (
+                    f"the closest facet lies {1e3 * nearest:.3g} mm from it"
+                    if math.isfinite(nearest)
+                    else f"no facet comes within {1e3 * 10 * rule.distance:.3g} mm of it"
+                )
+                error = NoRibFacetsError if boundary == Boundary.RIB else SurfaceRuleError
+                raise error(
+                    f"no boundary facets found for the {boundary.label} surface: none lies "
+                    f"{rule.describe()}; {how_far}. Check the rule's position, the distance and "
+                    f"mesh.file.units ({units})"
+                )
+        selected[boundary] = mask
+    for i, first in enumerate(list(selected)):
+        for second in list(selected)[i + 1 :]:
+            both = int(np.sum(selected[first] & selected[second]))
+            if both:
+                raise SurfaceRuleError(
+                    f"{both} boundary facet(s) match both the {first.label} and the "
+                    f"{second.label} rules; make the rules exclusive (e.g. a smaller distance)"
+                )
+    taken = np.zeros(len(faces), dtype=bool)
+    for mask in selected.values():
+        taken |= mask
+    out = {
+        b: faces[selected[b]] if b in selected else np.empty((0, 3), dtype=np.int64)
+        for b in Boundary
+    }
+    out[Boundary.SKIN] = np.concatenate([out[Boundary.SKIN], faces[~taken]])
+    return out
+
+
+def face_groups(mesh: InputMesh, faces: np.ndarray) -> np.ndarray | None:
+    """Group of each boundary face, looked up from the file's tagged triangles."""
+    if len(mesh.triangles) == 0 or np.all(mesh.triangle_groups < 0):
+        return None
+    keys = {
+        tuple(t): g
+        for t, g in zip(
+            np.sort(mesh.triangles, axis=1).tolist(), mesh.triangle_groups.tolist(), strict=True
+        )
+    }
+    return np.array(
+        [keys.get(tuple(f), -1) for f in np.sort(faces, axis=1).tolist()], dtype=np.int64
+    )

@@ -1,0 +1,151 @@
+"""Read a user's surface or volume mesh file into points, tetrahedra and tagged triangles (metres).
+
+Files are read with meshio; an XDMF written by dolfinx (several grids: mesh and tags), which
+meshio cannot read, is read with dolfinx, its facet tags becoming named groups.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from meshes.checks import UNITS, merge_duplicate_points
+from meshes.exceptions import MeshInputError
+from meshes.tags import Boundary
+
+SURFACE_SUFFIXES = (".stl", ".obj", ".ply")
+VOLUME_SUFFIXES = (".msh", ".vtu", ".xdmf")
+
+
+@dataclass(frozen=True)
+class InputMesh:
+    """A file's content in metres: points, tetrahedra (possibly none), triangles and groups.
+
+    Attributes:
+        points: (N, 3) coordinates, metres.
+        tets: (n, 4) tetrahedra, or (0, 4) for a surface.
+        triangles: (m, 3) triangles of the file.
+        triangle_groups: (m,) integer group of each triangle (-1: none).
+        group_names: physical name -> group integer.
+    """
+
+    points: np.ndarray
+    tets: np.ndarray
+    triangles: np.ndarray
+    triangle_groups: np.ndarray
+    group_names: dict[str, int]
+
+    @property
+    def is_volume(self) -> bool:
+        """Whether the file holds tetrahedra (else it is a surface)."""
+        return len(self.tets) > 0
+
+
+def read_input(path: str | Path, units: str) -> InputMesh:
+    """Read a surface or volume mesh with meshio and convert it to metres.
+
+    Raises:
+        MeshInputError: if the file is missing, unreadable, or holds neither
+            tetrahedra nor triangles.
+    """
+    import meshio
+
+    path = Path(path)
+    if not path.is_file():
+        raise MeshInputError(f"mesh file {path} does not exist")
+    try:
+        mesh = meshio.read(str(path))
+    # meshio raises many types (and its XDMF reader calls sys.exit): all mean "cannot read"
+    except (Exception, SystemExit) as err:
+        if path.suffix.lower() == ".xdmf":
+            # meshio reads single-grid XDMF only; dolfinx writes mesh and tags as several
+            return _read_dolfinx_xdmf(path, units, err)
+        raise MeshInputError(f"cannot read {path}: {type(err).__name__}: {err}") from err
+    scale = UNITS[units]
+    points = np.asarray(mesh.points, dtype=float)[:, :3] * scale
+    tets, tris, groups = [], [], []
+    physical = mesh.cell_data.get("gmsh:physical")
+    int_data = [
+        name
+        for name, blocks in mesh.cell_data.items()
+        if name != "gmsh:geometrical"
+        and all(np.issubdtype(np.asarray(b).dtype, np.integer) for b in blocks)
+    ]
+    tag_name = "gmsh:physical" if physical is not None else (int_data[0] if int_data else None)
+    for k, block in enumerate(mesh.cells):
+        data = np.asarray(block.data, dtype=np.int64)
+        if block.type in ("tetra", "tetra10"):
+            tets.append(data[:, :4])  # vertices only: imported meshes are linear
+        elif block.type in ("triangle", "triangle6"):
+            tris.append(data[:, :3])
+            tags = np.asarray(mesh.cell_data[tag_name][k]).reshape(-1) if tag_name else None
+            groups.append(tags.astype(np.int64) if tags is not None else np.full(len(data), -1))
+        elif block.type == "quad":
+            # split quads of a surface scan into two triangles each
+            tris.append(np.concatenate([data[:, [0, 1, 2]], data[:, [0, 2, 3]]]))
+            groups.append(np.full(2 * len(data), -1))
+    if not tets and not tris:
+        types = sorted({b.type for b in mesh.cells})
+        raise MeshInputError(
+            f"{path} holds no tetrahedra or triangles (cell types: {', '.join(types) or 'none'})"
+        )
+    names = {str(name): int(value[0]) for name, value in (mesh.field_data or {}).items()}
+    return InputMesh(
+        points=points,
+        tets=np.concatenate(tets) if tets else np.empty((0, 4), dtype=np.int64),
+        triangles=np.concatenate(tris) if tris else np.empty((0, 3), dtype=np.int64),
+        triangle_groups=np.concatenate(groups) if groups else np.empty(0, dtype=np.int64),
+        group_names=names,
+    )
+
+
+def _read_dolfinx_xdmf(path: Path, units: str, meshio_error: Exception) -> InputMesh:
+    """Read an XDMF file as dolfinx writes it (this project's mesh.xdmf, for instance).
+
+    The facet tags become groups, named after :class:`Boundary` (their values).
+    """
+    from dolfinx.cpp.mesh import entities_to_geometry
+    from dolfinx.io import XDMFFile
+    from mpi4py import MPI
+
+    from meshes.io import geometry_nodes
+    from meshes.tags import FACET_TAGS_NAME, MESH_NAME
+
+    try:
+        with XDMFFile(MPI.COMM_SELF, str(path), "r") as xdmf:
+            mesh = xdmf.read_mesh(name=MESH_NAME)
+            mesh.topology.create_connectivity(2, 3)
+            try:
+                tags = xdmf.read_meshtags(mesh, name=FACET_TAGS_NAME)
+            except RuntimeError:
+                tags = None
+    except RuntimeError as err:
+        raise MeshInputError(
+            f"cannot read {path}: meshio reads single-grid XDMF only ({meshio_error}) and dolfinx "
+            f"found no mesh named {MESH_NAME!r} in it ({err})"
+        ) from err
+    if mesh.topology.cell_name() != "tetrahedron":
+        raise MeshInputError(f"{path} holds {mesh.topology.cell_name()} cells, not tetrahedra")
+    if tags is not None and len(tags.indices):
+        triangles = entities_to_geometry(mesh._mesh, 2, tags.indices, False).astype(np.int64)
+        groups = tags.values.astype(np.int64)
+    else:
+        triangles, groups = np.empty((0, 3), dtype=np.int64), np.empty(0, dtype=np.int64)
+    return InputMesh(
+        points=np.asarray(mesh.geometry.x, dtype=float) * UNITS[units],
+        tets=geometry_nodes(mesh)[:, :4].astype(np.int64),  # vertices only
+        triangles=triangles,
+        triangle_groups=groups,
+        group_names={b.label: int(b) for b in Boundary},
+    )
+
+
+def read_surface(path: str | Path, units: str) -> tuple[np.ndarray, np.ndarray]:
+    """Points (metres) and triangles of a surface file used by a ``surface`` rule."""
+    surface = read_input(path, units)
+    if len(surface.triangles) == 0:
+        raise MeshInputError(f"{path} holds no triangles to measure distances from")
+    extent = float(np.linalg.norm(np.ptp(surface.points, axis=0)))
+    return merge_duplicate_points(surface.points, surface.triangles, 1e-9 * max(extent, 1e-12))
