@@ -58,7 +58,9 @@ class CaseRunner:
         gravity = case.gravity(s.gravity)
         return self.solve_material(material, gravity)
 
-    def solve_material(self, material: Material, gravity: Any) -> tuple[LoadingResult, dict[str, float]]:
+    def solve_material(
+        self, material: Material, gravity: Any
+    ) -> tuple[LoadingResult, dict[str, float]]:
         """Solve for explicit :class:`Material` and :class:`Gravity` objects."""
         problem, solver = self.problem, self.solver
         problem.set_case(material, gravity)
@@ -83,7 +85,9 @@ class CaseRunner:
         }
         return result, timings
 
-    def summary(self, case: Case, result: LoadingResult, timings: dict[str, float]) -> dict[str, Any]:
+    def summary(
+        self, case: Case, result: LoadingResult, timings: dict[str, float]
+    ) -> dict[str, Any]:
         """Summary record of a solved case (call right after :meth:`solve`)."""
         problem = self.problem
         linear_s = self.solver.time_linear_system()
@@ -155,9 +159,7 @@ class CaseRunner:
             summary["mean_disp_mm"] = float(1e3 * np.mean(np.linalg.norm(values, axis=1)))
             summary["num_points"] = int(index.size)
         summary["wall_s"]["output"] = time.perf_counter() - start
-        summary["wall_s"]["total"] = sum(
-            summary["wall_s"][k] for k in ("setup", "solve", "output")
-        )
+        summary["wall_s"]["total"] = sum(summary["wall_s"][k] for k in ("setup", "solve", "output"))
         writer.commit(summary)
         return summary
 

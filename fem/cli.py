@@ -1,8 +1,8 @@
-"""Command line: solve one case outside Snakemake, serially or under MPI.
+r"""Command line: solve one case outside Snakemake, serially or under MPI.
 
 Example::
 
-    mpirun -n 2 .venv/bin/python -m fem.cli results/mesh/mesh.xdmf --c1 1.0 --phi 180 \\
+    mpirun -n 2 .venv/bin/python -m fem.cli results/mesh/mesh.xdmf --c1 1.0 --phi 180 \
         --out results/cases/c1=1.00_phi=180.0_theta=0.0 --config config.yaml
 
 Only rank 0 logs. The case folder receives the same files as the workflow's
@@ -34,7 +34,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--phi", type=float, required=True, help="gravity elevation Φ in degrees")
     parser.add_argument("--theta", type=float, default=0.0, help="gravity azimuth θ in degrees")
     parser.add_argument("--out", type=Path, required=True, help="case folder to write")
-    parser.add_argument("--config", type=Path, help="workflow config (sections fe, material, mesh.fixed)")
+    parser.add_argument(
+        "--config", type=Path, help="workflow config (sections fe, material, mesh.fixed)"
+    )
     parser.add_argument("--solver", help="solver preset, overriding the config's fe.solver")
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     args = parser.parse_args(argv)
@@ -59,7 +61,9 @@ def main(argv: list[str] | None = None) -> int:
             print(f"error: {err}", file=sys.stderr)
         return 2
     if comm.rank == 0:
-        print(json.dumps({k: summary[k] for k in ("status", "reason", "load_steps", "max_disp_mm")}))
+        print(
+            json.dumps({k: summary[k] for k in ("status", "reason", "load_steps", "max_disp_mm")})
+        )
     return 0
 
 

@@ -49,23 +49,29 @@ def evaluate(u: fem.Function, points: np.ndarray) -> tuple[np.ndarray, np.ndarra
         nearest = _closest_cells(mesh, tree, points[outside])
         cells[outside] = nearest
         try:
-            distance[outside] = np.sqrt(geometry.squared_distance(mesh, tdim, nearest, points[outside]))
+            distance[outside] = np.sqrt(
+                geometry.squared_distance(mesh, tdim, nearest, points[outside])
+            )
         except RuntimeError:  # GJK again: the distance is only reported, so bound it
             distance[outside] = [
                 np.linalg.norm(mesh.geometry.x[mesh.geometry.dofmap.links(c)] - x, axis=1).min()
-                for c, x in zip(nearest, points[outside])
+                for c, x in zip(nearest, points[outside], strict=True)
             ]
         log.debug(
             "%d of %d points outside the mesh, at most %.3g m away",
-            outside.size, len(points), distance.max(),
+            outside.size,
+            len(points),
+            distance.max(),
         )
     values = u.eval(points, cells)
     return np.asarray(values).reshape(len(points), -1), distance
 
 
 def _most_inside_cell(mesh: Any, tree: Any, x: np.ndarray) -> int:
-    """The cell whose vertex tetrahedron holds ``x`` best (largest smallest barycentric
-    coordinate) among the bounding-box candidates, or the nearest by centroid.
+    """The candidate cell that holds ``x`` best, or the nearest by centroid.
+
+    Best: the largest smallest barycentric coordinate of ``x`` in the cell's vertex
+    tetrahedron, among the bounding-box candidates.
 
     The fallback for a point whose exact (GJK) location fails: it needs no GJK, it is
     exact for straight cells, and for a curved cell it picks a cell at or next to the
@@ -124,7 +130,9 @@ def _closest_cells(mesh: Any, tree: Any, points: np.ndarray) -> np.ndarray:
     n_cells = mesh.topology.index_map(tdim).size_local
     midpoints = geometry.create_midpoint_tree(mesh, tdim, np.arange(n_cells, dtype=np.int32))
     try:
-        return np.asarray(geometry.compute_closest_entity(tree, midpoints, mesh, points), dtype=np.int32)
+        return np.asarray(
+            geometry.compute_closest_entity(tree, midpoints, mesh, points), dtype=np.int32
+        )
     except RuntimeError as err:
         log.debug("closest-cell search failed (%s); using the most-inside cell", err)
     return np.array([_most_inside_cell(mesh, tree, x) for x in points], dtype=np.int32)

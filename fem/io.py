@@ -62,7 +62,9 @@ def node_to_vertex_dof(mesh: Any, V: fem.FunctionSpace) -> np.ndarray:
     return node_to_dof
 
 
-def _gather_by_node(mesh: Any, nodes: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+def _gather_by_node(
+    mesh: Any, nodes: np.ndarray, values: np.ndarray
+) -> tuple[np.ndarray, np.ndarray] | None:
     """Gather per-vertex values to rank 0, ordered by mesh-file node index."""
     index = np.asarray(mesh.geometry.input_global_indices, dtype=np.int64)[nodes]
     gathered = mesh.comm.gather((index, values), root=0)

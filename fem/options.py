@@ -152,7 +152,9 @@ def default_parameters(preset: str = "direct") -> dict[str, Any]:
     return {**_NEWTON, **SOLVER_PRESETS[preset]}
 
 
-def solver_options(preset: str = "direct", overrides: dict[str, Any] | None = None) -> dict[str, Any]:
+def solver_options(
+    preset: str = "direct", overrides: dict[str, Any] | None = None
+) -> dict[str, Any]:
     """The preset's defaults with ``overrides`` applied, checked.
 
     Raises:
@@ -172,7 +174,9 @@ def solver_options(preset: str = "direct", overrides: dict[str, Any] | None = No
         raise InvalidParameterError(
             f"refactor_above_its must be a non-negative integer, got {lag!r}"
         )
-    if lag and (options.get("pc_type") not in _FACTORISATIONS or options.get("ksp_type") == "preonly"):
+    if lag and (
+        options.get("pc_type") not in _FACTORISATIONS or options.get("ksp_type") == "preonly"
+    ):
         raise InvalidParameterError(
             f"refactor_above_its = {lag} reuses a factorisation as a Krylov preconditioner: it "
             f"needs pc_type lu or cholesky and a Krylov ksp_type, not pc_type "

@@ -143,14 +143,20 @@ class GravityProblem:
         self.kappa = fem.Constant(mesh, scalar(discretisation.bulk_ratio))
         psi = strain_energy(F, p, self.C1, discretisation, self.kappa)
 
-        dx = ufl.Measure("dx", domain=mesh, metadata={"quadrature_degree": discretisation.quadrature})
+        dx = ufl.Measure(
+            "dx", domain=mesh, metadata={"quadrature_degree": discretisation.quadrature}
+        )
         self.dx = dx
         potential = psi * dx - ufl.dot(self.body_force, u) * dx
         self.contact = contact
         self._contact_nodes = np.zeros(0, dtype=np.int64)  # owned skin vertices in the zone
         if contact is not None:
-            ds = ufl.Measure("ds", domain=mesh, subdomain_data=facet_tags,
-                             metadata={"quadrature_degree": discretisation.quadrature})
+            ds = ufl.Measure(
+                "ds",
+                domain=mesh,
+                subdomain_data=facet_tags,
+                metadata={"quadrature_degree": discretisation.quadrature},
+            )
             x = ufl.SpatialCoordinate(mesh)
             potential += contact.energy(x, u, self.C1) * ds(int(Boundary.SKIN))
             skin = boundary_vertex_nodes(mesh, facet_tags, [Boundary.SKIN])

@@ -228,7 +228,9 @@ class NewtonSolver:
         with b.localForm() as b_local:
             b_local.set(0.0)
         fem_petsc.assemble_vector(b, self.problem.residual)
-        fem_petsc.apply_lifting(b, [self.problem.tangent], bcs=[self.problem.bcs], x0=[x], scale=-1.0)
+        fem_petsc.apply_lifting(
+            b, [self.problem.tangent], bcs=[self.problem.bcs], x0=[x], scale=-1.0
+        )
         b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         fem_petsc.set_bc(b, self.problem.bcs, x, -1.0)
         self.timings.residual += time.perf_counter() - start
@@ -407,8 +409,11 @@ def _single_field(options: dict[str, Any]) -> dict[str, Any]:
     out = {k: v for k, v in options.items() if not k.startswith(("pc_fieldsplit_", "fieldsplit_"))}
     prefix = "fieldsplit_u_"
     out.update(
-        {k[len(prefix):]: v for k, v in options.items()
-         if k.startswith(prefix) and k != prefix + "ksp_type"}
+        {
+            k[len(prefix) :]: v
+            for k, v in options.items()
+            if k.startswith(prefix) and k != prefix + "ksp_type"
+        }
     )
     return out
 

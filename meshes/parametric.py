@@ -262,8 +262,11 @@ class BreastGeometry:
 def add_elliptic_cylinder(
     model: Any, geometry: BreastGeometry, offset: float, z_from: float, height: float
 ) -> int:
-    """Add the rib-cage ellipse grown by ``offset`` (semi-axes a + offset, b + offset),
-    extruded along z from ``z_from`` over ``height``; returns the volume tag."""
+    """Add the rib-cage ellipse grown by ``offset``, extruded along z; return the volume tag.
+
+    The ellipse has semi-axes a + offset, b + offset; it is extruded from ``z_from`` over
+    ``height``.
+    """
     occ, g = model.occ, geometry
     a, b = g.rib_depth + offset, g.rib_half_width + offset
     # gmsh's addEllipse needs r1 >= r2; orient the major axis explicitly.
@@ -296,8 +299,11 @@ def curve_points(model: Any, curve: int, n: int) -> np.ndarray:
 
 
 def fold_curves(model: Any, geometry: BreastGeometry, volume: int) -> list[int]:
-    """Curves of ``volume`` (synchronised) that lie on both the mound ellipsoid and the
-    skin layer's outer cylinder: the crease of the inframammary fold."""
+    """The crease of the inframammary fold: curves of ``volume`` on mound and skin layer.
+
+    The curves of the (synchronised) volume that lie on both the mound ellipsoid and the
+    skin layer's outer cylinder.
+    """
     g = geometry
     base, axis = g.mound_frame()
     centre = base + g.mound_offset * axis
@@ -318,8 +324,9 @@ def fold_curves(model: Any, geometry: BreastGeometry, volume: int) -> list[int]:
 
 
 def round_fold(model: Any, geometry: BreastGeometry, volume: int) -> int:
-    """Fillet the crease between the mound and the skin layer of ``volume`` with
-    ``geometry.fold_radius`` (nothing to do at 0); returns the new volume's tag.
+    """Fillet the crease between the mound and the skin layer; return the new volume's tag.
+
+    The fillet radius is ``geometry.fold_radius`` (nothing to do at 0).
 
     Raises:
         GeometryError: if the crease is not found or OpenCASCADE cannot round it.

@@ -109,8 +109,10 @@ def _positive_part(expr: str) -> str:
 
 
 def _mound_coordinates(geometry: BreastGeometry) -> list[tuple[str, float]]:
-    """MathEval coordinates along the mound ellipsoid's three axes (from its centre),
-    each with its semi-axis."""
+    """MathEval coordinates along the mound ellipsoid's three axes, each with its semi-axis.
+
+    The coordinates are measured from the ellipsoid's centre.
+    """
     base, axis = geometry.mound_frame()
     centre = base + geometry.mound_offset * axis
     rel = f"(x - {_num(centre[0])})", f"(y - {_num(centre[1])})", f"(z - {_num(centre[2])})"
@@ -140,8 +142,10 @@ def mound_distance_expression(geometry: BreastGeometry) -> str:
 
 
 def _elliptic_cylinder_distance(geometry: BreastGeometry, offset: float) -> str:
-    """First-order distance |f| / |grad f| from the elliptic cylinder of the rib
-    offset outwards by ``offset`` (0: the rib; ``layer_thickness``: the layer's skin)."""
+    """First-order distance |f| / |grad f| from the rib's elliptic cylinder, offset outwards.
+
+    ``offset`` 0 is the rib; ``layer_thickness`` is the layer's skin.
+    """
     c, a, b = geometry.rib_depth, geometry.rib_depth + offset, geometry.rib_half_width + offset
     u, v = f"((x - {_num(c)}) / {_num(a)})", f"(y / {_num(b)})"
     f = f"({u}^2 + {v}^2 - 1)"

@@ -31,10 +31,22 @@ def coarse_mesh(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
-def snakemake(workdir: Path, *args: str, config: Path = REPO / "tests" / "config.yaml") -> subprocess.CompletedProcess:
+def snakemake(
+    workdir: Path, *args: str, config: Path = REPO / "tests" / "config.yaml"
+) -> subprocess.CompletedProcess:
     """Run the project's Snakefile in ``workdir`` with the venv's Snakemake."""
-    cmd = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-d", str(workdir),
-           "--configfile", str(config), *args]
+    cmd = [
+        sys.executable,
+        "-m",
+        "snakemake",
+        "-s",
+        str(REPO / "Snakefile"),
+        "-d",
+        str(workdir),
+        "--configfile",
+        str(config),
+        *args,
+    ]
     return subprocess.run(cmd, capture_output=True, text=True, cwd=workdir)
 
 
@@ -46,8 +58,10 @@ def job_counts(output: str) -> dict[str, int]:
 
 @pytest.fixture(scope="session")
 def small_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The whole workflow (``all``: sweep, dataset, FE study, surrogate study, report) run once
-    on tests/config.yaml; tests only read it."""
+    """The whole workflow run once on tests/config.yaml; tests only read it.
+
+    The target is ``all``: sweep, dataset, FE study, surrogate study, report.
+    """
     workdir = tmp_path_factory.mktemp("workflow")
     run = snakemake(workdir, "-j2")
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]

@@ -28,15 +28,29 @@ def _mpirun(nprocs: int, *args: str) -> subprocess.CompletedProcess:
 
 @pytest.mark.skipif(MPIRUN is None, reason="mpirun is not installed")
 @pytest.mark.parametrize("solver", ["direct", "iterative"])
-def test_two_processes_give_the_serial_displacement(coarse_mesh: Path, tmp_path: Path, solver: str) -> None:
+def test_two_processes_give_the_serial_displacement(
+    coarse_mesh: Path, tmp_path: Path, solver: str
+) -> None:
     from fem.case import run_case
     from fem.dataset import read_points
     from fem.parameters import SolverSettings
     from fem.sweep import Case
 
-    serial = run_case(coarse_mesh, Case(1.0, 180.0), tmp_path / "serial", SolverSettings(solver=solver))
-    run = _mpirun(2, str(coarse_mesh), "--c1", "1.0", "--phi", "180", "--solver", solver,
-                  "--out", str(tmp_path / "mpi"))
+    serial = run_case(
+        coarse_mesh, Case(1.0, 180.0), tmp_path / "serial", SolverSettings(solver=solver)
+    )
+    run = _mpirun(
+        2,
+        str(coarse_mesh),
+        "--c1",
+        "1.0",
+        "--phi",
+        "180",
+        "--solver",
+        solver,
+        "--out",
+        str(tmp_path / "mpi"),
+    )
     assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
     summary = json.loads((tmp_path / "mpi" / "summary.json").read_text())
     assert summary["status"] == "converged" and summary["mpi_size"] == 2
@@ -66,8 +80,18 @@ def test_two_processes_give_the_serial_contact(coarse_mesh: Path, tmp_path: Path
     (tmp_path / "config.yaml").write_text(json.dumps(config))  # JSON is YAML
     settings = SolverSettings.from_config(config)
     serial = run_case(coarse_mesh, Case(0.6, 15.0), tmp_path / "serial", settings)
-    run = _mpirun(2, str(coarse_mesh), "--c1", "0.6", "--phi", "15",
-                  "--config", str(tmp_path / "config.yaml"), "--out", str(tmp_path / "mpi"))
+    run = _mpirun(
+        2,
+        str(coarse_mesh),
+        "--c1",
+        "0.6",
+        "--phi",
+        "15",
+        "--config",
+        str(tmp_path / "config.yaml"),
+        "--out",
+        str(tmp_path / "mpi"),
+    )
     assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
     summary = json.loads((tmp_path / "mpi" / "summary.json").read_text())
     assert summary["status"] == serial["status"] == "converged"

@@ -16,7 +16,9 @@ from fem.sweep import Case
 pytestmark = pytest.mark.solve
 
 
-def test_unconvergeable_case_ends_failed_with_fraction_and_reason(coarse_mesh: Path, tmp_path: Path) -> None:
+def test_unconvergeable_case_ends_failed_with_fraction_and_reason(
+    coarse_mesh: Path, tmp_path: Path
+) -> None:
     from fem.case import run_case
 
     # 0.02 kPa is 40x softer than the paper's softest tissue: the breast would fold over.
@@ -57,8 +59,9 @@ def test_the_last_resort_goes_on_where_the_steps_fail(coarse_mesh: Path) -> None
     # one Newton iteration reaches no step; the last resort's 60 do
     crippled = {"snes_max_it": 1}
     case = Case(2.0, 180.0)
-    without = CaseRunner(coarse_mesh, SolverSettings(loading=Loading(rescue=False),
-                                                     petsc_options=crippled))
+    without = CaseRunner(
+        coarse_mesh, SolverSettings(loading=Loading(rescue=False), petsc_options=crippled)
+    )
     failed, _ = without.solve(case)
     assert not failed.converged and not failed.rescued and "min_step" in failed.reason
     runner = CaseRunner(coarse_mesh, SolverSettings(petsc_options=crippled))
@@ -101,9 +104,14 @@ def test_unknown_angle_unit_is_named() -> None:
     assert np.allclose(Gravity(phi=math.pi, unit="rad").vector, [-9.81, 0.0, 0.0])
 
 
-def _rewrite_mesh(source: Path, target: Path, move_vertex: bool = False, drop_tag: int | None = None) -> None:
-    """Copy an XDMF mesh, optionally pushing one interior vertex through its neighbours
-    (inverting cells) or removing one facet tag."""
+def _rewrite_mesh(
+    source: Path, target: Path, move_vertex: bool = False, drop_tag: int | None = None
+) -> None:
+    """Copy an XDMF mesh, optionally breaking it.
+
+    Either one interior vertex is pushed through its neighbours (inverting cells), or one
+    facet tag is removed.
+    """
     from dolfinx.io import XDMFFile
     from dolfinx.mesh import exterior_facet_indices, meshtags
     from mpi4py import MPI
@@ -115,7 +123,9 @@ def _rewrite_mesh(source: Path, target: Path, move_vertex: bool = False, drop_ta
     if move_vertex:
         mesh.topology.create_connectivity(2, 0)
         boundary_nodes = np.unique(
-            mesh.topology.connectivity(2, 0).array.reshape(-1, 3)[exterior_facet_indices(mesh.topology)]
+            mesh.topology.connectivity(2, 0).array.reshape(-1, 3)[
+                exterior_facet_indices(mesh.topology)
+            ]
         )
         x = mesh.geometry.x
         interior = np.setdiff1d(np.arange(len(x)), boundary_nodes)
@@ -142,7 +152,9 @@ def test_bad_mesh_is_named_and_nothing_is_written(
     from fem.case import run_case
 
     bad = tmp_path / "bad.xdmf"
-    _rewrite_mesh(coarse_mesh, bad, move_vertex=kind == "inverted", drop_tag=1 if kind == "no-rib" else None)
+    _rewrite_mesh(
+        coarse_mesh, bad, move_vertex=kind == "inverted", drop_tag=1 if kind == "no-rib" else None
+    )
     with pytest.raises(MeshError, match=message):
         run_case(bad, Case(1.0, 0.0), tmp_path / "case")
     assert not (tmp_path / "case").exists()

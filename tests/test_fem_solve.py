@@ -50,7 +50,14 @@ def test_run_case_writes_complete_outputs(coarse_mesh: Path, tmp_path: Path) -> 
     for key in ("C1", "phi", "theta", "load_steps", "newton_iterations", "final_residual",
                 "max_disp_mm", "mean_disp_mm", "volume_change", "factorization_equivalents"):
         assert on_disk[key] is not None, key
-    assert set(on_disk["wall_s"]) >= {"setup", "solve", "assembly", "linear_solve", "output", "total"}
+    assert set(on_disk["wall_s"]) >= {
+        "setup",
+        "solve",
+        "assembly",
+        "linear_solve",
+        "output",
+        "total",
+    }
     assert on_disk["self_overlap"]["overlapping_vertices"] == 0
     assert on_disk["self_overlap"]["boundary_vertices"] > 0
     points = read_points(tmp_path / "case" / "points.h5")

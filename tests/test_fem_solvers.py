@@ -48,7 +48,9 @@ def reference(coarse_mesh: Path) -> np.ndarray:
         ("direct", {"snes_linesearch_type": "basic"}),
     ],
 )
-def test_solver_options_agree(coarse_mesh: Path, reference: np.ndarray, solver: str, options: dict) -> None:
+def test_solver_options_agree(
+    coarse_mesh: Path, reference: np.ndarray, solver: str, options: dict
+) -> None:
     u, result = _displacement(coarse_mesh, solver=solver, petsc_options=options)
     assert np.max(np.abs(u - reference)) <= 1e-7 * np.abs(reference).max()
     if solver == "iterative":
@@ -68,14 +70,20 @@ def test_default_keeps_its_factorisation_across_newton_iterations(coarse_mesh: P
         runner = CaseRunner(coarse_mesh, SolverSettings(solver=preset))
         result, timings = runner.solve(CASE)
         assert result.converged, result.reason
-        counts[preset] = (timings["preconditioner_builds"], timings["jacobian_evaluations"],
-                          result.linear_iterations, result.total_iterations)
+        counts[preset] = (
+            timings["preconditioner_builds"],
+            timings["jacobian_evaluations"],
+            result.linear_iterations,
+            result.total_iterations,
+        )
         runner.solver.destroy()
     builds, jacobians, krylov, newton = counts["direct"]
     # a tangent at every Newton iteration, factorised fewer times, GMRES doing the rest
     assert jacobians == newton and 1 <= builds < jacobians and krylov > newton
     # exact Newton factorises every tangent; the Krylov tolerance leaves Newton's path intact
-    assert counts["direct-refactor"][0] == counts["direct-refactor"][1] == counts["direct-refactor"][3]
+    assert (
+        counts["direct-refactor"][0] == counts["direct-refactor"][1] == counts["direct-refactor"][3]
+    )
     assert counts["direct-refactor"][3] == newton
 
 
@@ -103,7 +111,10 @@ def test_higher_order_and_quadrature_change_the_answer_only_slightly(
     # P3/P2 and the P1-penalty baseline, compared at the P2 dof nodes
     x = CaseRunner(coarse_mesh).problem.V.tabulate_dof_coordinates()
     solutions = {}
-    for name, disc in (("p3p2", Discretisation(degree=3)), ("p1", Discretisation(element="p1-penalty"))):
+    for name, disc in (
+        ("p3p2", Discretisation(degree=3)),
+        ("p1", Discretisation(element="p1-penalty")),
+    ):
         runner = CaseRunner(coarse_mesh, SolverSettings(discretisation=disc))
         result, _ = runner.solve(CASE)
         assert result.converged, (disc, result.reason)
@@ -123,8 +134,10 @@ def test_higher_order_and_quadrature_change_the_answer_only_slightly(
         ({"petsc_options": {"refactor_above_its": -1}}, "non-negative integer, got -1"),
         ({"petsc_options": {"refactor_above_its": 2.5}}, "non-negative integer, got 2.5"),
         ({"petsc_options": {"ksp_type": "preonly"}}, "needs pc_type lu or cholesky and a Krylov"),
-        ({"solver": "iterative", "petsc_options": {"refactor_above_its": 5}},
-         "not pc_type 'fieldsplit'"),
+        (
+            {"solver": "iterative", "petsc_options": {"refactor_above_its": 5}},
+            "not pc_type 'fieldsplit'",
+        ),
     ],
 )
 def test_unknown_solver_options_are_named(settings: dict, message: str) -> None:

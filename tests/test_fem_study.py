@@ -1,5 +1,6 @@
 """The FE study: its pieces (variant names, Pareto front, lowest converging C1, reference
-storage, convergence rate) and its workflow rules end to end on tests/config.yaml."""
+storage, convergence rate) and its workflow rules end to end on tests/config.yaml.
+"""
 
 from __future__ import annotations
 
@@ -156,7 +157,8 @@ def mesh_ladder(tmp_path_factory: pytest.TempPathFactory) -> dict[float, Path]:
 
     The default breast's 1 cm fillet is not resolved by uniform 2-6 cm elements: on this
     ladder its RMS errors fall at rates of only 0.31 and 0.41 (pre-asymptotic), so the ladder
-    keeps the sharp crease, whose singularity is present at every size."""
+    keeps the sharp crease, whose singularity is present at every size.
+    """
     from meshes.build import write_parametric_mesh
     from meshes.parametric import BreastGeometry
     from meshes.sizing import MeshSize
@@ -237,7 +239,8 @@ def test_the_default_discretisation_does_not_rerun_the_study_variants(
     small_run: Path, tmp_path: Path, change: dict
 ) -> None:
     """The reference and the speed-accuracy variants set their own element, quadrature and
-    solver: changing the default's re-solves the sweep and the clinical benchmark only."""
+    solver: changing the default's re-solves the sweep and the clinical benchmark only.
+    """
     config = yaml.safe_load((REPO / "tests" / "config.yaml").read_text())
     fe = config.setdefault("fe", {})
     for key, value in change.items():

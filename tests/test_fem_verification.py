@@ -47,7 +47,10 @@ class UniaxialStretch:
         )
         cell = self.mesh.ufl_cell()
         element = ufl.MixedElement(
-            [ufl.VectorElement("Lagrange", cell, degree), ufl.FiniteElement("Lagrange", cell, degree - 1)]
+            [
+                ufl.VectorElement("Lagrange", cell, degree),
+                ufl.FiniteElement("Lagrange", cell, degree - 1),
+            ]
         )
         self.W = fem.FunctionSpace(self.mesh, element)
         self.V, _ = self.W.sub(0).collapse()
@@ -62,7 +65,12 @@ class UniaxialStretch:
         self.residual, self.tangent = fem.form(residual), fem.form(tangent)
         self.bcs = []
         fdim = self.mesh.topology.dim - 1
-        for comp, plane, value in ((0, 0.0, 0.0), (0, 1.0, stretch - 1.0), (1, 0.0, 0.0), (2, 0.0, 0.0)):
+        for comp, plane, value in (
+            (0, 0.0, 0.0),
+            (0, 1.0, stretch - 1.0),
+            (1, 0.0, 0.0),
+            (2, 0.0, 0.0),
+        ):
             facets = dmesh.locate_entities_boundary(
                 self.mesh, fdim, lambda x, c=comp, v=plane: np.isclose(x[c], v)
             )
@@ -113,7 +121,9 @@ def mirrored_block(length: float = 0.1, half_width: float = 0.05, height: float 
     discretisation error. Facets on x = 0 are tagged as the rib (clamped).
     """
     half = dmesh.create_box(
-        MPI.COMM_SELF, [np.zeros(3), np.array([length, half_width, height])], [n, n, n],
+        MPI.COMM_SELF,
+        [np.zeros(3), np.array([length, half_width, height])],
+        [n, n, n],
         dmesh.CellType.tetrahedron,
     )
     x = half.geometry.x
@@ -131,11 +141,15 @@ def mirrored_block(length: float = 0.1, half_width: float = 0.05, height: float 
     if MPI.COMM_WORLD.rank == 0:
         mesh = dmesh.create_mesh(MPI.COMM_WORLD, inverse.reshape(-1, 4), points[used], domain)
     else:
-        mesh = dmesh.create_mesh(MPI.COMM_WORLD, np.empty((0, 4), np.int64), np.empty((0, 3)), domain)
+        mesh = dmesh.create_mesh(
+            MPI.COMM_WORLD, np.empty((0, 4), np.int64), np.empty((0, 3)), domain
+        )
     fdim = 2
     mesh.topology.create_connectivity(fdim, 3)
     facets = dmesh.locate_entities_boundary(mesh, fdim, lambda p: np.isclose(p[0], 0.0))
-    tags = dmesh.meshtags(mesh, fdim, np.sort(facets), np.full(len(facets), int(Boundary.RIB), np.int32))
+    tags = dmesh.meshtags(
+        mesh, fdim, np.sort(facets), np.full(len(facets), int(Boundary.RIB), np.int32)
+    )
     return mesh, tags
 
 

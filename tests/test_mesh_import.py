@@ -421,8 +421,10 @@ def test_clamping_a_surface_no_rule_names_is_refused() -> None:
 
 
 def test_a_dolfinx_xdmf_mesh_round_trips_with_its_tags(coarse_mesh: Path, tmp_path: Path) -> None:
-    """This project's own mesh.xdmf (several grids, which meshio cannot read) imports with
-    its facet tags as groups: every area is kept."""
+    """This project's own mesh.xdmf imports with its facet tags as groups: every area is kept.
+
+    It holds several grids, which meshio cannot read.
+    """
     original = json.loads((coarse_mesh.parent / "quality.json").read_text())
     rules = {b.label: {"group": b.label} for b in Boundary if b != Boundary.SKIN}
     report = write_imported_mesh(

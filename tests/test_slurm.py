@@ -85,25 +85,40 @@ def slurm_cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str
     for sub in ("munge", "spool", "state", "log"):
         (root / sub).mkdir()
     (root / "munge").chmod(0o700)
-    subprocess.run(["/usr/sbin/mungekey", "-c", "-f", "-k", str(root / "munge/munge.key")], check=True)
+    subprocess.run(
+        ["/usr/sbin/mungekey", "-c", "-f", "-k", str(root / "munge/munge.key")], check=True
+    )
     conf = root / "slurm.conf"
     conf.write_text(_slurm_conf(root))
     env = {**os.environ, "SLURM_CONF": str(conf)}
-    subprocess.run(["/usr/sbin/munged", "--force", f"--key-file={root}/munge/munge.key",
-                    f"--socket={root}/munge/munge.socket", f"--pid-file={root}/munge/munged.pid",
-                    f"--log-file={root}/log/munged.log", f"--seed-file={root}/munge/munged.seed"],
-                   check=True)
+    subprocess.run(
+        [
+            "/usr/sbin/munged",
+            "--force",
+            f"--key-file={root}/munge/munge.key",
+            f"--socket={root}/munge/munge.socket",
+            f"--pid-file={root}/munge/munged.pid",
+            f"--log-file={root}/log/munged.log",
+            f"--seed-file={root}/munge/munged.seed",
+        ],
+        check=True,
+    )
     subprocess.run(["/usr/sbin/slurmctld", "-f", str(conf)], check=True, env=env)
     subprocess.run(["/usr/sbin/slurmd", "-f", str(conf)], check=True, env=env)
     try:
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline:
-            state = subprocess.run(["sinfo", "-h", "-o", "%T"], capture_output=True, text=True, env=env)
+            state = subprocess.run(
+                ["sinfo", "-h", "-o", "%T"], capture_output=True, text=True, env=env
+            )
             if state.stdout.strip() == "idle":
                 break
             time.sleep(0.5)
         else:
-            pytest.fail(f"the test cluster did not come up: {(root / 'log/slurmctld.log').read_text()[-2000:]}")
+            pytest.fail(
+                "the test cluster did not come up: "
+                f"{(root / 'log/slurmctld.log').read_text()[-2000:]}"
+            )
         yield env
     finally:
         for pidfile in (root / "slurmd.pid", root / "slurmctld.pid", root / "munge/munged.pid"):
@@ -115,17 +130,32 @@ def slurm_cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str
 
 
 def test_small_sweep_runs_through_slurm(slurm_cluster: dict[str, str], tmp_path: Path) -> None:
-    cmd = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-d", str(tmp_path),
-           "--configfile", str(REPO / "tests/config.yaml"),
-           "--workflow-profile", str(REPO / "workflow/profiles/slurm"),
-           # poll sooner than a real cluster needs, to keep the test short
-           "--slurm-init-seconds-before-status-checks", "2",
-           "results/dataset/dataset.h5"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "snakemake",
+        "-s",
+        str(REPO / "Snakefile"),
+        "-d",
+        str(tmp_path),
+        "--configfile",
+        str(REPO / "tests/config.yaml"),
+        "--workflow-profile",
+        str(REPO / "workflow/profiles/slurm"),
+        # poll sooner than a real cluster needs, to keep the test short
+        "--slurm-init-seconds-before-status-checks",
+        "2",
+        "results/dataset/dataset.h5",
+    ]
     run = subprocess.run(cmd, capture_output=True, text=True, env=slurm_cluster, timeout=900)
     assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-4000:]
     # every job really went through the scheduler: mesh + 6 solves + aggregate
-    states = subprocess.run(["squeue", "--states=all", "-h", "-o", "%T"], capture_output=True,
-                            text=True, env=slurm_cluster).stdout.split()
+    states = subprocess.run(
+        ["squeue", "--states=all", "-h", "-o", "%T"],
+        capture_output=True,
+        text=True,
+        env=slurm_cluster,
+    ).stdout.split()
     assert states.count("COMPLETED") == 8, states
     with h5py.File(tmp_path / "results/dataset/dataset.h5") as h5:
         assert h5["displacement"].shape[0] == 6

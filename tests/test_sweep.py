@@ -38,7 +38,9 @@ def test_default_config_is_the_papers_688_cases() -> None:
     assert 0.0 in phis  # the supine clinical cases are part of the sweep
 
 
-@pytest.mark.parametrize("phi, expected", [(0.0, [9.81, 0, 0]), (180.0, [-9.81, 0, 0]), (90.0, [0, 9.81, 0])])
+@pytest.mark.parametrize(
+    "phi, expected", [(0.0, [9.81, 0, 0]), (180.0, [-9.81, 0, 0]), (90.0, [0, 9.81, 0])]
+)
 def test_gravity_follows_eq1(phi: float, expected: list[float]) -> None:
     np.testing.assert_allclose(Gravity(phi).vector, expected, atol=1e-12)
 
@@ -67,10 +69,16 @@ def test_unknown_loading_key_is_named() -> None:
 
 def test_solver_settings_from_config() -> None:
     settings = SolverSettings.from_config(
-        {"fe": {"discretisation": {"degree": 3}}, "mesh": {"fixed": {"rib": "all", "cranial": ["z"]}}}
+        {
+            "fe": {"discretisation": {"degree": 3}},
+            "mesh": {"fixed": {"rib": "all", "cranial": ["z"]}},
+        }
     )
     assert settings.discretisation.degree == 3
-    assert dict((b.label, c) for b, c in settings.fixed.items()) == {"rib": (0, 1, 2), "cranial": (2,)}
+    assert dict((b.label, c) for b, c in settings.fixed.items()) == {
+        "rib": (0, 1, 2),
+        "cranial": (2,),
+    }
 
 
 def test_paper_angles_cluster_about_the_poles() -> None:
