@@ -75,7 +75,7 @@ def test_dataset_schema_and_contents(tmp_path: Path) -> None:
 
 def test_report_says_whether_the_sweep_had_contact() -> None:
     """The report's sweep sentence reads the dataset's contact column: NaN is no contact."""
-    from report.build import _sweep_contact_and_overlap
+    from report.sections.stability import sweep_contact_and_overlap as _sweep_contact_and_overlap
 
     columns = {"C1": np.array([0.8, 0.9, 5.0]), "phi": np.array([-90.0, -120.0, 180.0]),
                "self_overlap": np.array([2, 0, 0])}

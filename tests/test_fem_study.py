@@ -14,7 +14,7 @@ import pytest
 import yaml
 
 from fem.exceptions import InvalidParameterError
-from report.build import variant_label
+from report.common import variant_label
 from studies.fe_speed_accuracy import pareto_front, summarise_variants
 from studies.fe_variants import VARIANT_ID_PATTERN, MeshSpec, Variant, expand_variants
 from studies.stability import lowest_converging, sweep_records

@@ -1,0 +1,118 @@
+"""What every section reads: the workflow's results, loaded once, and where figures go.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from report.common import case_id
+from report.html import figure
+
+log = logging.getLogger(__name__)
+
+#: Input names :func:`build_report` reads (the report rule's named inputs).
+INPUT_NAMES = (
+    "dataset", "quality", "mesh_png", "model", "history", "table2", "variants", "clinical",
+    "extrapolation", "benchmark", "clinical_fields", "fe_clinical", "fe_speed_accuracy",
+    "fe_stability",
+)
+
+
+JSON_INPUTS = ("quality", "model", "history", "table2", "variants", "clinical", "extrapolation",
+               "benchmark", "fe_clinical", "fe_speed_accuracy", "fe_stability")
+
+
+def read_json(path: Path | None) -> dict[str, Any] | None:
+    if path is None:
+        return None
+    if not path.is_file():
+        log.warning("report input %s does not exist", path)
+        return None
+    return json.loads(path.read_text())
+
+
+def as_path(value: Any) -> Path | None:
+    if value is None or value == "" or (isinstance(value, (list, tuple)) and not value):
+        return None
+    if isinstance(value, (list, tuple)):
+        value = value[0]
+    return Path(str(value))
+
+
+@dataclass
+class Context:
+    """What every section builder reads: the loaded inputs and where figures go."""
+
+    out_dir: Path
+    clinical: list[dict[str, Any]]
+    paths: dict[str, Path | None]
+    clinical_fields: list[Path]
+    json: dict[str, dict[str, Any] | None] = field(default_factory=dict)
+    _dataset: Any = None
+    _cases: dict[str, np.ndarray] | None = None
+
+    def dataset(self) -> Any:
+        """The dataset (:func:`surrogate.data.load_dataset`), read once; None if absent."""
+        if self._dataset is None and self.paths.get("dataset") is not None:
+            from surrogate.data import load_dataset
+
+            if self.paths["dataset"].is_file():
+                self._dataset = load_dataset(self.paths["dataset"])
+        return self._dataset
+
+    def case_columns(self) -> dict[str, np.ndarray]:
+        """Every per-case column under the dataset's ``/cases``, read once; {} if absent.
+
+        Strings come back as ``str`` arrays. A column an older dataset lacks is simply not
+        a key, so each section checks for the columns it needs.
+        """
+        if self._cases is None:
+            self._cases = {}
+            path = self.paths.get("dataset")
+            if path is not None and path.is_file():
+                import h5py
+
+                with h5py.File(path, "r") as h5:
+                    group = h5.get("cases")
+                    for key, column in (group.items() if group is not None else ()):
+                        if isinstance(column, h5py.Dataset):
+                            self._cases[key] = (column.asstr()[...] if column.dtype.kind == "O"
+                                                else column[...])
+        return self._cases
+
+    def figure(self, name: str, draw: Callable[[Path], None], alt: str, caption: str) -> str:
+        """Draw a figure into the report folder and return its HTML."""
+        draw(self.out_dir / name)
+        return figure(name, alt, caption)
+
+    def case_label(self, cid: str) -> str:
+        """The config's label of a clinical case, or its id."""
+        for item in self.clinical:
+            if case_id(item) == cid:
+                return str(item.get("label", cid))
+        return cid
+
+    @classmethod
+    def load(
+        cls, inputs: Mapping[str, Any], out_dir: Path, clinical: Sequence[Mapping[str, Any]]
+    ) -> Context:
+        """Read every result among ``inputs`` (paths by :data:`INPUT_NAMES`) once."""
+        fields = inputs.get("clinical_fields") or []
+        if isinstance(fields, str | Path):
+            fields = [fields]
+        ctx = cls(
+            out_dir=out_dir,
+            clinical=[dict(c) for c in clinical],
+            paths={name: as_path(inputs.get(name)) for name in INPUT_NAMES
+                   if name != "clinical_fields"},
+            clinical_fields=[Path(str(p)) for p in fields],
+        )
+        ctx.json = {name: read_json(ctx.paths.get(name)) for name in JSON_INPUTS}
+        return ctx

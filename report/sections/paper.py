@@ -1,0 +1,206 @@
+"""The paper side by side: its Tables 2-4 and Fig. 5 beside ours.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from report.common import GOAL_NAMES, case_id, predict_s
+from report.context import Context
+from report.html import finite, fmt, h3, missing, para, pm, seconds, span, table, times, yes
+from studies import paper
+from studies.figures import surrogate as surrogate_plots
+from surrogate.config import parse_architecture
+
+def _table2(ctx: Context) -> str:
+    study = ctx.json.get("table2")
+    if study is None:
+        return missing("results/surrogate/study/table2.json")
+    ours = study.get("rows") or {}
+    selected = study.get("selected_architecture")
+    names = sorted(set(ours) | set(paper.TABLE2), key=parse_architecture)
+    rows, highlight = [], []
+    for i, name in enumerate(names):
+        row = ours.get(name) or {}
+        published = paper.TABLE2.get(name) or {}
+        err, train = row.get("validation_error_mm") or {}, row.get("train_s") or {}
+        p_err, p_train = published.get("validation_error_mm"), published.get("train_s")
+        mark = []
+        if name == selected:
+            mark.append("selected by us")
+            highlight.append(i)
+        if name == paper.BEST_ARCHITECTURE:
+            mark.append("selected by the paper")
+        if name == study.get("most_accurate_architecture") and name != selected:
+            mark.append("most accurate, over the prediction budget")
+        rows.append([name, fmt(row.get("parameters"), "d"), fmt(row.get("runs"), "d"),
+                     pm(err.get("mean"), err.get("sd"), ".3f"),
+                     pm(*p_err, ".2f") if p_err else "n/a",
+                     pm(train.get("mean"), train.get("sd"), ".3g"),
+                     pm(*p_train, ".0f") if p_train else "n/a",
+                     fmt((row.get("epochs") or {}).get("mean"), ".0f"),
+                     fmt(1e3 * predict_s(row) if predict_s(row) is not None else None, ".3g"),
+                     "; ".join(mark)])
+    return "".join([
+        h3("Table 2: architecture study"),
+        para("Validation error (mean |u − û| over the validation points, mean ± SD over the "
+           "repeats) and training time per architecture (hidden layers × width), ours beside "
+           "the paper's (trained on an NVIDIA V100). Our prediction time is one whole-field "
+           "prediction on one CPU core. The highlighted row is our selection: "
+           f"{study.get('rule', 'n/a')}.", "caption"),
+        table(["architecture", "parameters", "runs", "validation error (mm)",
+                "paper: validation error (mm)", "training time (s)", "paper: training time (s)",
+                "epochs", "prediction (ms)", "selected"], rows, highlight, table_id="table2"),
+    ])
+
+
+def _table3(ctx: Context) -> str:
+    clinical = ctx.json.get("clinical")
+    out = [h3("Table 3: clinical cases")]
+    if clinical is None:
+        return "".join(out) + missing("results/surrogate/clinical.json")
+    out.append(para(
+        "Mean displacement and displacement range of the FE and the surrogate, and the "
+        "surrogate's error as the paper's Eq. 3 (mean over the points of |u − û|, ± SD), "
+        "ours beside the paper's, for each clinical case. The by-sample model trained on "
+        "points of every case (the paper's split); the by-case model never saw the clinical "
+        "cases.", "caption"))
+    for split in ("by_sample", "by_case"):
+        block = clinical.get(split)
+        if not block or not block.get("rows"):
+            continue
+        cases = block["rows"]
+        published = [paper.table3_row(r["C1"], r["phi"]) or {} for r in cases]
+        metrics = [
+            ("FE mean displacement (mm)", lambda r: fmt(r.get("fe_mean_mm"), ".3g"),
+             lambda p: fmt(p.get("fe_mean_mm"), ".3g")),
+            ("FE displacement range (mm)", lambda r: span(r.get("fe_range_mm")),
+             lambda p: span(p.get("fe_range_mm"))),
+            ("surrogate mean displacement (mm)", lambda r: fmt(r.get("surrogate_mean_mm"), ".3g"),
+             lambda p: fmt(p.get("surrogate_mean_mm"), ".3g")),
+            ("RMSE ± SD (mm, Eq. 3)", lambda r: pm(r.get("rmse_mm"), r.get("sd_mm")),
+             lambda p: pm(p.get("rmse_mm"), p.get("sd_mm"))),
+            ("surrogate displacement range (mm)", lambda r: span(r.get("surrogate_range_mm")),
+             lambda p: span(p.get("surrogate_range_mm"))),
+        ]
+        rows = []
+        for name, ours, theirs in metrics:
+            rows.append([f"{name}: ours"] + [ours(r) for r in cases])
+            rows.append([f"{name}: paper"] + [theirs(p) for p in published])
+        rows.append(["max error (mm): ours"] + [fmt(r.get("max_error_mm"), ".3g") for r in cases])
+        rows.append(["max error (mm): paper (Fig. 5 caption)"] + [
+            fmt(paper.fig5_max_error_mm(r["C1"], r["phi"]), ".3g") for r in cases])
+        out.append(para(f"{split.replace('_', '-')} model ({block.get('architecture', 'n/a')}, "
+                      f"boundary: {block.get('boundary', 'n/a')}):"))
+        out.append(table(["metric"] + [r.get("label", r["case"]) for r in cases], rows,
+                          highlight=range(0, len(rows), 2), table_id=f"table3-{split}"))
+    return "".join(out)
+
+
+def _table4(ctx: Context) -> str:
+    bench = ctx.json.get("benchmark")
+    out = [h3("Table 4: wall time per case")]
+    if bench is None:
+        return "".join(out) + missing("results/surrogate/benchmark.json")
+    speed = bench.get("speed") or []
+    if not speed:
+        return "".join(out) + para("The benchmark holds no timed case.", "note")
+    items = {case_id(c): c for c in ctx.clinical}
+    published = []
+    for row in speed:
+        item = items.get(row["case"])
+        published.append(paper.table4_row(item["C1"], item["phi"]) if item else None)
+    out.append(para(
+        "Wall time of one FE solve (set-up excluded) and one surrogate prediction, both on the "
+        "same pinned CPU core in one job, ours beside the paper's (an Intel Core i7 at 2.3 GHz, "
+        "mean ± SD), and the speed-up FE / surrogate.", "caption"))
+    rows = [
+        ["FE: ours"] + [seconds(r.get("fe_solve_s")) for r in speed],
+        ["FE: paper"] + [pm(*p["fe_s"], ".3g") + " s" if p else "n/a" for p in published],
+        ["surrogate: ours"] + [seconds(1e-3 * r["surrogate_ms"]) if finite(r.get("surrogate_ms"))
+                               else "n/a" for r in speed],
+        ["surrogate: paper"] + [pm(*p["surrogate_s"], ".3g") + " s" if p else "n/a"
+                                for p in published],
+        ["speed-up: ours"] + [times(r.get("speedup")) for r in speed],
+        ["speed-up: paper"] + [times(p["fe_s"][0] / p["surrogate_s"][0]) if p else "n/a"
+                               for p in published],
+    ]
+    out.append(table(["model"] + [ctx.case_label(r["case"]) for r in speed], rows,
+                      highlight=(0, 2, 4), table_id="table4"))
+    machine = bench.get("machine") or {}
+    out.append(para(f"Machine: {machine.get('processor', 'n/a')}, {machine.get('cpus', 'n/a')} CPUs, "
+                  f"pinned core {machine.get('pinned_core', 'n/a')}, load average "
+                  f"{fmt((machine.get('loadavg') or [None])[0], '.2f')}.", "note"))
+    goals = bench.get("goals") or {}
+    if goals:
+        out.append(table(["benchmark goal", "value", "goal", "met"],
+                          [[GOAL_NAMES.get(k, k.replace("_", " ")), fmt(g.get("value"), ".4g"),
+                            fmt(g.get("goal"), "g"),
+                            yes(g.get("met"))] for k, g in goals.items()], table_id="goals"))
+    return "".join(out)
+
+
+def _read_point_fields(path: Path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    import meshio
+
+    mesh = meshio.read(str(path))
+    return np.asarray(mesh.points), {k: np.asarray(v) for k, v in mesh.point_data.items()}
+
+
+def _figure5(ctx: Context) -> str:
+    out = [h3("Figure 5: displacement and surrogate error on the material points")]
+    by_key = {(p.parent.name, p.stem): p for p in ctx.clinical_fields if p.suffix == ".xdmf"}
+    clinical = ctx.json.get("clinical") or {}
+    rows = {s: {r["case"]: r for r in (clinical.get(s) or {}).get("rows") or []}
+            for s in ("by_sample", "by_case")}
+    out.append(para(
+        "For each clinical case, the material points seen from the front (projected on the "
+        "y–z plane, the front-most point of each line of sight drawn on top): the FE "
+        "displacement magnitude |u|, and the magnitude of the surrogate's error |u − û| for "
+        "the by-sample and the by-case model. Each panel has its own colour bar in mm; the "
+        "table below gives the largest error beside the paper's Fig. 5 caption.", "caption"))
+    figures, table_rows = [], []
+    for item in ctx.clinical:
+        cid = case_id(item)
+        label = str(item.get("label", cid))
+        panels: list[tuple[np.ndarray, str]] = []
+        X = None
+        for split in ("by_sample", "by_case"):
+            path = by_key.get((split, cid))
+            if path is None or not path.is_file():
+                continue
+            points, data = _read_point_fields(path)
+            if X is None:
+                X = points
+                panels.append((data["fe_displacement_norm_mm"], "FE displacement |u|"))
+            panels.append((data["error_norm_mm"], f"{split.replace('_', '-')} error |u − û|"))
+        if X is None:
+            figures.append(para(f"{label}: no error field among the inputs.", "note"))
+            continue
+        name = f"fig5_{re.sub(r'[^A-Za-z0-9.-]+', '_', cid)}.png"
+        figures.append(ctx.figure(name, lambda p, X=X, panels=panels, label=label:
+                                  surrogate_plots.plot_point_fields(X, panels, p, label),
+                                  f"FE displacement and surrogate error, {label}",
+                                  f"{label}: FE |u| and surrogate error, seen from the front."))
+        paper_max = paper.fig5_max_error_mm(item["C1"], item["phi"])
+        table_rows.append([label] + [
+            fmt(rows[s].get(cid, {}).get("max_error_mm"), ".3g") for s in ("by_sample", "by_case")
+        ] + [fmt(paper_max, ".3g")])
+    out += figures
+    if table_rows:
+        out.append(table(["case", "by-sample: max error (mm)", "by-case: max error (mm)",
+                           "paper (Fig. 5 caption): max error (mm)"], table_rows,
+                          table_id="fig5"))
+    return "".join(out)
+
+
+def paper_section(ctx: Context) -> str:
+    return "".join([
+        para("The paper's Tables 2–4 and Fig. 5 with our figures beside theirs. Our mesh, "
+           "training data and hardware differ from the paper's, so agreement is expected in "
+           "magnitude and trend, not digit by digit.", "caption"),
+        _table2(ctx), _table3(ctx), _table4(ctx), _figure5(ctx),
+    ])

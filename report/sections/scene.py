@@ -1,0 +1,200 @@
+"""Model no more than a scene needs: the cheapest model that meets an accuracy need, and C1's effect.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from report.common import NEEDS_MM, meets, predict_s, variant_label, worst_case
+from report.context import Context
+from report.html import fmt, finite, h3, missing, para, seconds, table
+from studies.figures import fe as fem_plots
+
+@dataclass(frozen=True, slots=True)
+class Candidate:
+    """A model that can answer a query, with its worst clinical-case errors and its cost.
+
+    Attributes:
+        name: readable name.
+        max_error_mm: the largest point error over the clinical cases.
+        mean_error_mm: the largest per-case mean point error over the clinical cases.
+        cost_s: seconds per prediction (surrogate) or per solve (FE), one core.
+        against: what the errors are measured against.
+    """
+
+    name: str
+    max_error_mm: float | None
+    mean_error_mm: float | None
+    cost_s: float | None
+    against: str
+
+
+def candidates(ctx: Context) -> list[Candidate]:
+    """Every model with clinical-case errors and a cost on record."""
+    out = []
+    clinical = ctx.json.get("clinical") or {}
+    bench = ctx.json.get("benchmark") or {}
+    study = ctx.json.get("table2") or {}
+    for split, name in (("by_sample", "surrogate, by-sample split"),
+                        ("by_case", "surrogate, by-case split (clinical cases unseen)")):
+        block = clinical.get(split)
+        if not block or not block.get("rows"):
+            continue
+        rows = block["rows"]
+        max_err = [r.get("max_error_mm") for r in rows]
+        mean_err = [r.get("rmse_mm") for r in rows]
+        cost = None
+        if split == "by_sample" and bench.get("selected_architecture") == block.get("architecture"):
+            cost = predict_s(bench)
+        if cost is None:  # the same architecture's timing in the study
+            cost = predict_s((study.get("rows") or {}).get(block.get("architecture"), {}))
+        out.append(Candidate(
+            f"{name} ({block.get('architecture', '?')})",
+            max(max_err) if all(finite(v) for v in max_err) else None,
+            max(mean_err) if all(finite(v) for v in mean_err) else None,
+            cost, "FE default solution"))
+    fe = ctx.json.get("fe_clinical")
+    if fe is not None:
+        cases = fe.get("cases") or []
+        out.append(Candidate("FE default configuration", worst_case(cases, "max_error_mm"),
+                             worst_case(cases, "mean_error_mm"),
+                             (fe.get("summary") or {}).get("median_wall_s"),
+                             "refined FE reference"))
+    sa = ctx.json.get("fe_speed_accuracy") or {}
+    for v in sa.get("variants") or []:
+        if v.get("skipped"):
+            continue
+        cases = v.get("cases") or []
+        default = (" (the default's discretisation)"
+                   if v["variant"] == sa.get("default_variant") else "")
+        out.append(Candidate(f"FE {variant_label(v['variant'])}{default}",
+                             worst_case(cases, "max_error_mm"),
+                             worst_case(cases, "mean_error_mm"), v.get("median_wall_s"),
+                             "refined FE reference"))
+    return out
+
+
+def c1_effect(
+    C1: np.ndarray, phi: np.ndarray, theta: np.ndarray, displacement: np.ndarray,
+    converged: np.ndarray,
+) -> dict[str, np.ndarray]:
+    """How much C1 changes the displacement at each gravity direction of a sweep.
+
+    For each (Φ, θ) with at least two converged C1 values: ``spread_mm``, the largest
+    point difference between the softest and the stiffest case; ``single_mm``, the
+    error of the best single C1 (for each candidate C1, the largest point difference to
+    any other C1 at that angle; the smallest over the candidates); ``relative``, the
+    spread over the largest |u| at that angle; ``best_C1``, the candidate achieving
+    ``single_mm``.
+
+    Args:
+        C1: per case, kPa.
+        phi: per case, degrees.
+        theta: per case, degrees.
+        displacement: (cases, points, 3), mm.
+        converged: per case.
+    """
+    keys = sorted({(round(float(p), 6), round(float(t), 6)) for p, t in zip(phi, theta)})
+    out: dict[str, list[float]] = {k: [] for k in ("phi", "theta", "spread_mm", "single_mm",
+                                                   "relative", "best_C1", "C1_min", "C1_max")}
+    for p, t in keys:
+        cases = np.flatnonzero(np.isclose(phi, p) & np.isclose(theta, t) & converged)
+        if len(np.unique(C1[cases])) < 2:
+            continue
+        cases = cases[np.argsort(C1[cases])]
+        u = displacement[cases]
+        spread = float(np.linalg.norm(u[-1] - u[0], axis=1).max())
+        worst = np.array([np.linalg.norm(u - u[i], axis=2).max() for i in range(len(cases))])
+        best = int(np.argmin(worst))
+        peak = float(np.linalg.norm(u, axis=2).max())
+        for key, value in (("phi", p), ("theta", t), ("spread_mm", spread),
+                           ("single_mm", float(worst[best])),
+                           ("relative", spread / peak if peak > 0 else np.nan),
+                           ("best_C1", float(C1[cases[best]])), ("C1_min", float(C1[cases[0]])),
+                           ("C1_max", float(C1[cases[-1]]))):
+            out[key].append(value)
+    return {k: np.asarray(v, float) for k, v in out.items()}
+
+
+def scene_needs_section(ctx: Context) -> str:
+    cands = candidates(ctx)
+    out = [para(
+        "Which model is enough for a given accuracy need? For each model: its worst "
+        "error over the clinical cases (the largest error at any material point, and the "
+        "largest per-case mean error) and its cost per answer on one core. The surrogates' "
+        "errors are measured against the default FE solution (so they add to the FE "
+        "default's own error against the refined reference, listed in its row); the FE "
+        "variants' errors are against the refined reference. A surrogate's cost is one "
+        "whole-field prediction on one pinned core (the by-case model's is its "
+        "architecture's timing in the architecture study); an FE model's is the median "
+        "wall time of a clinical-case solve, set-up excluded. A model meets a need when its "
+        "error is at most the need; the cheapest such model is named. The paper's "
+        "clinically accepted error is 5 mm.", "caption")]
+    if not cands:
+        out.append(para("No model has clinical-case errors on record.", "note"))
+    else:
+        rows = [[c.name, fmt(c.max_error_mm, ".3g"), fmt(c.mean_error_mm, ".3g"),
+                 seconds(c.cost_s), c.against] for c in sorted(
+                     cands, key=lambda c: (c.cost_s is None, c.cost_s or 0.0))]
+        out.append(table(["model", "worst max error (mm)", "worst mean error (mm)",
+                           "cost per answer", "errors against"], rows, table_id="candidates"))
+        rows = []
+        for need in NEEDS_MM:
+            row = [f"{need:g} mm"]
+            for attr in ("max_error_mm", "mean_error_mm"):
+                meeting = [c for c in cands if meets(getattr(c, attr), need)]
+                costed = [c for c in meeting if finite(c.cost_s)]
+                cheapest = min(costed, key=lambda c: c.cost_s) if costed else None
+                row.append("; ".join(c.name for c in meeting) or "none")
+                row.append("none" if cheapest is None
+                           else f"{cheapest.name} ({seconds(cheapest.cost_s)})")
+            rows.append(row)
+        out.append(table(["accuracy need", "meet it at every point", "cheapest (every point)",
+                           "meet it on average", "cheapest (on average)"], rows,
+                          table_id="needs"))
+    out.append(h3("Can C1's effect be skipped?"))
+    ds = ctx.dataset()
+    if ds is None:
+        out.append(missing("results/dataset/dataset.h5"))
+        return "".join(out)
+    effect = c1_effect(ds.C1, ds.phi, ds.theta, ds.displacement, ds.converged)
+    if effect["phi"].size == 0:
+        out.append(para("The sweep has fewer than two converged C1 values at every angle, so "
+                      "C1's effect cannot be measured.", "note"))
+        return "".join(out)
+    C1_range = (float(effect["C1_min"].min()), float(effect["C1_max"].max()))
+    out.append(para(
+        "For each gravity angle Φ of the sweep: the largest difference, over the material "
+        "points, between the displacement of the softest and the stiffest tissue (circles), "
+        "and the error left if one modelled that angle with a single, best-chosen C1 "
+        "(squares: the largest difference from it to any other C1 of the sweep). A scene "
+        "whose accuracy need (grey lines) lies above the squares can use one C1 at that "
+        "angle. Right: the spread as a share of the largest displacement at that angle.",
+        "caption"))
+    out.append(ctx.figure(
+        "c1_effect.png",
+        lambda p: fem_plots.plot_c1_effect(effect["phi"], effect["spread_mm"], effect["single_mm"],
+                                           effect["relative"], p, NEEDS_MM, C1_range),
+        "C1's effect on the displacement per gravity angle",
+        "Displacement spread across the C1 range against the gravity angle Φ."))
+    sentences = []
+    for need in NEEDS_MM:
+        ok = effect["single_mm"] <= need
+        if ok.all():
+            sentences.append(f"For a {need:g} mm need, every angle can use a single C1.")
+        elif not ok.any():
+            sentences.append(f"For a {need:g} mm need, no angle can use a single C1 (the "
+                             f"smallest single-C1 error is {effect['single_mm'].min():.3g} mm).")
+        else:
+            angles = ", ".join(f"{p:g}°" for p in effect["phi"][ok])
+            sentences.append(f"For a {need:g} mm need, a single C1 is enough at Φ = {angles}.")
+    out.append(para(f"Over C1 = {C1_range[0]:g}–{C1_range[1]:g} kPa: " + " ".join(sentences)))
+    rows = [[f"{p:g}", f"{t:g}", f"{s:.3g}", f"{100 * r:.3g}", f"{w:.3g}", f"{b:g}"]
+            for p, t, s, r, w, b in zip(effect["phi"], effect["theta"], effect["spread_mm"],
+                                        effect["relative"], effect["single_mm"], effect["best_C1"])]
+    out.append(table(["Φ (deg)", "θ (deg)", "spread (mm)", "spread / max |u| (%)",
+                       "best single-C1 error (mm)", "best single C1 (kPa)"], rows,
+                      table_id="c1-effect"))
+    return "".join(out)

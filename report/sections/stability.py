@@ -1,0 +1,166 @@
+"""Stability: where the FE solve fails (the study's grid and the sweep itself), and the surrogate outside its data.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from report.common import PAPER_C1_RANGE
+from report.context import Context
+from report.html import fmt, h3, missing, para, pct, table
+from report.sections.extrapolation import extrapolation_section
+from studies.figures import fe as fem_plots
+
+def stability_section(ctx: Context) -> str:
+    out = []
+    stab = ctx.json.get("fe_stability")
+    if stab is None:
+        out.append(missing("results/fe_study/stability.json"))
+    else:
+        records = stab.get("records") or []
+        schemes = stab.get("schemes") or {}
+        described = "; ".join(
+            f"{name}: " + (f"{s.get('fixed_steps')} equal load steps"
+                           if s.get("fixed_steps") else
+                           f"adaptive steps from {s.get('initial_step', 'n/a')} of the load, "
+                           f"cut back on failure down to {fmt(s.get('min_step'), '.3g')}")
+            for name, s in schemes.items())
+        out.append(para(
+            "Where the nonlinear FE solve struggles or fails: each cell is one solve from rest "
+            "at a tissue stiffness C1 (rows) and gravity angle Φ (columns), extended below the "
+            f"paper's range (C1 ≥ {PAPER_C1_RANGE[0]:g} kPa, dashed line). One column of panels "
+            "per loading scheme, the same colour scale along each row: accepted load steps, "
+            "Newton iterations over all attempts, and rejected load steps (attempts that "
+            "failed and were retried with a smaller step). A cross marks a case that did not "
+            "reach the full load; its colour names the first failure. "
+            f"Schemes — {described}. Mesh: {Path(str(stab.get('mesh', 'n/a'))).parent.name}, "
+            f"{fmt(stab.get('dofs'), 'd')} DOFs.", "caption"))
+        if records:
+            out.append(ctx.figure(
+                "stability_maps.png",
+                lambda p: fem_plots.plot_stability_maps(records, p, PAPER_C1_RANGE[0]),
+                "stability maps over C1 and gravity angle",
+                "Load steps, Newton iterations and rejected steps over (Φ, C1) per scheme."))
+        lowest = stab.get("lowest_converging") or {}
+        if lowest:
+            out.append(para("The lowest C1 from which every stiffer C1 of the grid converged, per "
+                          "scheme and angle, and what went wrong at the next C1 below "
+                          "(\"—\": nothing failed down to the grid's lowest C1).", "caption"))
+            out.append(lowest_converging_table(lowest, "lowest-converging"))
+        failed = [r for r in records if not r.get("converged")]
+        if failed:
+            out.append(table(
+                ["scheme", "C1 (kPa)", "Φ (deg)", "load reached (%)", "first failure",
+                 "failure kinds (count)", "reason"],
+                [[r["scheme"], f"{r['C1']:g}", f"{r['phi']:g}",
+                  pct(r.get("load_fraction")),
+                  r.get("first_failure") or "n/a",
+                  ", ".join(f"{k} {v}" for k, v in (r.get("failure_kinds") or {}).items()) or "n/a",
+                  r.get("reason", "")] for r in failed], table_id="failed-cases"))
+        else:
+            out.append(para("Every case of the stability grid converged under every scheme."))
+    out.append(h3("The sweep on its own mesh"))
+    out.append(_sweep_stability(ctx))
+    out.append(h3("Surrogate outside its training data"))
+    out.append(extrapolation_section(ctx))
+    return "".join(out)
+
+
+def lowest_converging_table(lowest: Mapping[str, Any], table_id: str) -> str:
+    """Per Φ and scheme: the lowest converging C1 and the first failure below it."""
+    names = list(lowest)
+    phis = sorted({k for s in lowest.values() for k in s if k != "all_phi"}, key=float)
+    rows = []
+    for phi in phis:
+        row = [f"{float(phi):g}"]
+        for name in names:
+            item = lowest[name].get(phi) or {}
+            below = item.get("failed_below")
+            row.append(fmt(item.get("lowest_C1"), "g"))
+            row.append("—" if not below else
+                       f"C1 {fmt(below.get('C1'), 'g')}: "
+                       f"{below.get('first_failure') or 'n/a'} at "
+                       f"{pct(below.get('load_fraction'))} % of the load")
+        rows.append(row)
+    rows.append(["every Φ"] + [v for name in names
+                               for v in (fmt(lowest[name].get("all_phi"), "g"), "")])
+    header = ["Φ (deg)"] + [h for name in names
+                            for h in (f"{name}: lowest converging C1 (kPa)",
+                                      f"{name}: first failure below it")]
+    return table(header, rows, highlight=[len(rows) - 1], table_id=table_id)
+
+
+def _sweep_stability(ctx: Context) -> str:
+    """The sweep's convergence over (C1, Φ), on the mesh the dataset was solved on."""
+    from studies.stability import lowest_converging, sweep_records
+
+    columns = ctx.case_columns()
+    if not columns:
+        return missing("results/dataset/dataset.h5")
+    keys = ("C1", "phi", "theta", "converged", "load_fraction", "first_failure", "reason",
+            "min_detF")
+    if any(k not in columns for k in keys):
+        return para("The dataset predates the first-failure record; rebuild it "
+                  "(snakemake --forcerun aggregate) to map the sweep's failures.", "note")
+    cases = {k: columns[k] for k in keys}
+    records = sweep_records(cases)
+    if not records:
+        return para("The sweep has no case at θ = 0, so there is no (C1, Φ) map of it.", "note")
+    failed = ~cases["converged"].astype(bool)
+    out = [para(
+        f"The sweep itself is a stability map at the paper's resolution, solved on the mesh "
+        f"of the dataset: {int(failed.sum())} of {len(failed)} cases did not reach the full "
+        "load. Per Φ: the lowest C1 from which every stiffer C1 of the sweep converged, and "
+        "what failed first at the next C1 below it (\"—\": every C1 of the sweep converged).",
+        "caption")]
+    out.append(lowest_converging_table(lowest_converging(records), "sweep-lowest-converging"))
+    if failed.any():
+        rows = [[f"{cases['C1'][i]:g}", f"{cases['phi'][i]:g}", f"{cases['theta'][i]:g}",
+                 pct(cases["load_fraction"][i]), cases["first_failure"][i] or "n/a",
+                 fmt(cases["min_detF"][i], ".2g"), cases["reason"][i]]
+                for i in np.flatnonzero(failed)]
+        out.append(table(["C1 (kPa)", "Φ (deg)", "θ (deg)", "load reached (%)",
+                           "first failure", "min det F of the last converged state", "reason"],
+                          rows, table_id="sweep-failed-cases"))
+    out.append(sweep_contact_and_overlap(columns, failed))
+    return "".join(out)
+
+
+def _cases_end(n: int) -> str:
+    """'1 case ends' or 'n cases end'."""
+    return f"{n} case ends" if n == 1 else f"{n} cases end"
+
+
+def sweep_contact_and_overlap(columns: dict[str, np.ndarray], failed: np.ndarray) -> str:
+    """Which cases end in contact with the chest, and which pass through themselves."""
+    def case(i: int) -> str:
+        return f"C1 = {columns['C1'][i]:g} kPa at Φ = {columns['phi'][i]:g}°"
+
+    out = []
+    if "contact_force_N" in columns:
+        force = np.asarray(columns["contact_force_N"], dtype=float)
+        if np.isnan(force).all():
+            out.append("The sweep was solved without contact (fe.contact): nothing "
+                       "keeps the skin out of the chest below the fold.")
+        else:
+            touching = np.flatnonzero(np.nan_to_num(force) > 0)
+            largest = (f", the largest force {force[touching].max():.2g} N "
+                       f"({case(touching[np.argmax(force[touching])])})" if len(touching) else "")
+            out.append("Solved with contact of the skin with the chest: "
+                       f"{_cases_end(len(touching))} in contact{largest}.")
+    if "self_overlap" in columns:
+        overlap = np.asarray(columns["self_overlap"])
+        through = np.flatnonzero(overlap > 0)
+        if len(through):
+            itself = "itself" if len(through) == 1 else "themselves"
+            out.append(f"{_cases_end(len(through))} passing through {itself} (boundary vertices "
+                       "inside another cell: the fold's skin creasing into itself), "
+                       + ", ".join(f"{case(i)} ({overlap[i]}{', failed' if failed[i] else ''})"
+                                   for i in through) + ".")
+        else:
+            out.append("No case ends passing through itself.")
+    return para(" ".join(out), "caption") if out else ""

@@ -1,0 +1,43 @@
+"""The sweep's cost: the FE solve time of every case over (C1, Phi), and the totals.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from report.context import Context
+from report.html import missing, para, seconds, table
+from studies.figures import fe as fem_plots
+
+def sweep_cost_section(ctx: Context) -> str:
+    ds = ctx.dataset()
+    if ds is None:
+        return missing("results/dataset/dataset.h5")
+    columns = ctx.case_columns()
+    wall = columns.get("wall_s")
+    steps = columns.get("load_steps")
+    its = columns.get("newton_iterations")
+    if wall is None:
+        return para("The dataset holds no solve times.", "note")
+    out = [para(
+        "The FE solve wall time of every case of the sweep over stiffness C1 and gravity "
+        "angle Φ: one square per case, its colour the time in seconds (colour bar); a red "
+        "cross marks a case that failed. The table gives the totals.", "caption")]
+    out.append(ctx.figure(
+        "sweep_cost.png",
+        lambda p: fem_plots.plot_sweep_map(ds.C1, ds.phi, wall, p, "FE solve wall time (s)",
+                                           failed=~ds.converged, title="FE cost per case"),
+        "FE solve time per case over C1 and gravity angle", "FE solve time per case."))
+    rows = [
+        ["cases", f"{len(wall)}"],
+        ["converged", f"{int(ds.converged.sum())}"],
+        ["total solve time", seconds(float(np.nansum(wall)))],
+        ["median per case", seconds(float(np.nanmedian(wall)))],
+        ["slowest case", seconds(float(np.nanmax(wall)))],
+    ]
+    if steps is not None:
+        rows.append(["load steps (min–max)", f"{int(steps.min())}–{int(steps.max())}"])
+    if its is not None:
+        rows.append(["Newton iterations (min–max)", f"{int(its.min())}–{int(its.max())}"])
+    out.append(table(["sweep", "value"], rows, table_id="sweep-cost"))
+    return "".join(out)
