@@ -1,5 +1,4 @@
-"""What several sections share: the needs and ranges they judge by, names, and small measures.
-"""
+"""What several sections share: the needs and ranges they judge by, names, and small measures."""
 
 from __future__ import annotations
 
@@ -49,8 +48,10 @@ _VARIANT_ID = re.compile(
 
 
 def variant_label(variant_id: str) -> str:
-    """A short, readable name of an FE study variant, e.g. ``P2/P1, h 15/10 mm, direct``
-    (``h 15/10/4 mm`` with 4 mm elements over the fold)."""
+    """A short, readable name of an FE study variant, e.g. ``P2/P1, h 15/10 mm, direct``.
+
+    With elements of 4 mm over the fold the sizes read ``h 15/10/4 mm``.
+    """
     match = _VARIANT_ID.match(str(variant_id))
     if match is None:
         return str(variant_id)
@@ -66,6 +67,7 @@ def variant_label(variant_id: str) -> str:
 
 
 def case_id(item: Mapping[str, Any]) -> str:
+    """The case folder name of a config ``clinical`` entry."""
     return Case(float(item["C1"]), float(item["phi"]), float(item.get("theta", 0.0))).id
 
 
@@ -78,9 +80,11 @@ def worst_case(cases: Sequence[Mapping[str, Any]], key: str) -> float | None:
 
 
 def meets(error: Any, target: Any) -> bool:
+    """Whether ``error`` is at most ``target`` (both finite)."""
     return finite(error) and finite(target) and error <= target
 
 
 def predict_s(row: Mapping[str, Any]) -> float | None:
+    """Seconds of one whole-field prediction on one core (the API's median), or None."""
     ms = ((row.get("predict_one_core") or {}).get("api") or {}).get("median_ms")
     return 1e-3 * ms if finite(ms) else None

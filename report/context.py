@@ -1,5 +1,4 @@
-"""What every section reads: the workflow's results, loaded once, and where figures go.
-"""
+"""What every section reads: the workflow's results, loaded once, and where figures go."""
 
 from __future__ import annotations
 
@@ -30,6 +29,7 @@ JSON_INPUTS = ("quality", "model", "history", "table2", "variants", "clinical", 
 
 
 def read_json(path: Path | None) -> dict[str, Any] | None:
+    """The parsed JSON of ``path``, or None (with a warning) if it does not exist."""
     if path is None:
         return None
     if not path.is_file():
@@ -39,6 +39,7 @@ def read_json(path: Path | None) -> dict[str, Any] | None:
 
 
 def as_path(value: Any) -> Path | None:
+    """A report input (a path or a one-element list of paths) as a Path, or None."""
     if value is None or value == "" or (isinstance(value, (list, tuple)) and not value):
         return None
     if isinstance(value, (list, tuple)):

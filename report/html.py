@@ -11,7 +11,9 @@ import math
 from collections.abc import Iterable, Sequence
 from typing import Any
 
+
 def finite(value: Any) -> bool:
+    """Whether ``value`` is a finite int or float (not a bool, None or NaN)."""
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
@@ -21,6 +23,7 @@ def fmt(value: Any, spec: str = ".3g", suffix: str = "") -> str:
 
 
 def pm(mean: Any, sd: Any, spec: str = ".3g") -> str:
+    """``mean ± sd``, the mean alone without an SD, or n/a."""
     if not finite(mean):
         return "n/a"
     return f"{mean:{spec}} ± {sd:{spec}}" if finite(sd) else f"{mean:{spec}}"
@@ -52,16 +55,19 @@ def pct(fraction: Any, spec: str = ".3g") -> str:
 
 
 def span(values: Any, spec: str = ".3g") -> str:
+    """A ``[low, high]`` pair formatted, or n/a."""
     if not values or len(values) != 2 or not all(finite(v) for v in values):
         return "n/a"
     return f"[{values[0]:{spec}}, {values[1]:{spec}}]"
 
 
 def yes(flag: Any) -> str:
+    """The flag as yes, no or n/a."""
     return "n/a" if flag is None else ("yes" if flag else "no")
 
 
 def esc(text: Any) -> str:
+    """HTML-escaped text."""
     return html.escape(str(text))
 
 
@@ -71,6 +77,7 @@ def para(text: str, cls: str = "") -> str:
 
 
 def h3(text: str) -> str:
+    """A third-level heading (escaped)."""
     return f"<h3>{esc(text)}</h3>"
 
 
@@ -88,9 +95,11 @@ def table(header: Sequence[str], rows: Iterable[Sequence[Any]], highlight: Itera
 
 
 def figure(src: str, alt: str, caption: str) -> str:
+    """An image with its caption."""
     return (f'<figure><img src="{esc(src)}" alt="{esc(alt)}">'
             f"<figcaption>{esc(caption)}</figcaption></figure>")
 
 
 def missing(what: str) -> str:
+    """A note that an input file was not found."""
     return para(f"Not available: {what} was not found among the report's inputs.", "note")

@@ -1,5 +1,4 @@
-"""The surrogate asked about cases outside its training data, against FE solutions of them.
-"""
+"""The surrogate asked about cases outside its training data, against FE solutions of them."""
 
 from __future__ import annotations
 
@@ -8,7 +7,9 @@ from report.context import Context
 from report.html import fmt, missing, para, table
 from studies.figures import surrogate as surrogate_plots
 
+
 def extrapolation_section(ctx: Context) -> str:
+    """The surrogate outside its training data, against FE solutions of those cases."""
     extra = ctx.json.get("extrapolation")
     if extra is None:
         return missing("results/surrogate/extrapolation.json")
@@ -44,7 +45,7 @@ def extrapolation_section(ctx: Context) -> str:
         "surrogate error outside the training data",
         "Mean error per extrapolation case (log), next to the nearest sweep case's error."))
     rows = []
-    for cid, label in zip(ids, labels):
+    for cid, label in zip(ids, labels, strict=True):
         fe_range = first[cid].get("fe_range_mm") or [None, None]
         row = [label.split("\n")[0], fmt(fe_range[-1], ".3g")]
         for s in splits:

@@ -1,5 +1,4 @@
-"""FE speed against accuracy: the study's variants, the Pareto front, the default on the clinical cases.
-"""
+"""FE speed against accuracy: the variants, their Pareto front, the default on clinical cases."""
 
 from __future__ import annotations
 
@@ -8,8 +7,9 @@ from typing import Any
 
 from report.common import COST_LABELS, TARGET_NAMES, meets, variant_label
 from report.context import Context
-from report.html import fmt, finite, h3, missing, para, pct, seconds, table, yes
+from report.html import finite, fmt, h3, missing, para, pct, seconds, table, yes
 from studies.figures import fe as fem_plots
+
 
 def _fe_variant_points(sa: Mapping[str, Any]) -> list[dict[str, Any]]:
     """The solved variants of the speed-accuracy study, as points of its chart."""
@@ -146,6 +146,7 @@ def _fe_clinical_tables(ctx: Context) -> str:
 
 
 def fe_speed_accuracy_section(ctx: Context) -> str:
+    """The FE speed-accuracy section: chart, verdict, variant table and the clinical tables."""
     sa = ctx.json.get("fe_speed_accuracy")
     out = []
     if sa is None:

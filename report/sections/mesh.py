@@ -1,14 +1,15 @@
-"""The mesh: its size and quality, and its picture.
-"""
+"""The mesh: its size and quality, and its picture."""
 
 from __future__ import annotations
 
 import shutil
 
 from report.context import Context
-from report.html import fmt, finite, figure, missing, para, seconds, table
+from report.html import figure, finite, fmt, missing, para, seconds, table
+
 
 def mesh_section(ctx: Context) -> str:
+    """The mesh section: size and quality table, and the picture of the named surfaces."""
     quality = ctx.json.get("quality")
     if quality is None:
         return missing("results/mesh/quality.json")

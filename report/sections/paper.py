@@ -1,5 +1,4 @@
-"""The paper side by side: its Tables 2-4 and Fig. 5 beside ours.
-"""
+"""The paper side by side: its Tables 2-4 and Fig. 5 beside ours."""
 
 from __future__ import annotations
 
@@ -14,6 +13,7 @@ from report.html import finite, fmt, h3, missing, para, pm, seconds, span, table
 from studies import paper
 from studies.figures import surrogate as surrogate_plots
 from surrogate.config import parse_architecture
+
 
 def _table2(ctx: Context) -> str:
     study = ctx.json.get("table2")
@@ -131,7 +131,8 @@ def _table4(ctx: Context) -> str:
     out.append(table(["model"] + [ctx.case_label(r["case"]) for r in speed], rows,
                       highlight=(0, 2, 4), table_id="table4"))
     machine = bench.get("machine") or {}
-    out.append(para(f"Machine: {machine.get('processor', 'n/a')}, {machine.get('cpus', 'n/a')} CPUs, "
+    out.append(para(f"Machine: {machine.get('processor', 'n/a')}, "
+                    f"{machine.get('cpus', 'n/a')} CPUs, "
                   f"pinned core {machine.get('pinned_core', 'n/a')}, load average "
                   f"{fmt((machine.get('loadavg') or [None])[0], '.2f')}.", "note"))
     goals = bench.get("goals") or {}
@@ -198,6 +199,7 @@ def _figure5(ctx: Context) -> str:
 
 
 def paper_section(ctx: Context) -> str:
+    """The paper side by side: Tables 2-4 and Fig. 5 beside ours."""
     return "".join([
         para("The paper's Tables 2–4 and Fig. 5 with our figures beside theirs. Our mesh, "
            "training data and hardware differ from the paper's, so agreement is expected in "

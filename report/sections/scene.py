@@ -1,5 +1,4 @@
-"""Model no more than a scene needs: the cheapest model that meets an accuracy need, and C1's effect.
-"""
+"""Model no more than a scene needs: the cheapest model meeting an accuracy need; C1's effect."""
 
 from __future__ import annotations
 
@@ -9,8 +8,9 @@ import numpy as np
 
 from report.common import NEEDS_MM, meets, predict_s, variant_label, worst_case
 from report.context import Context
-from report.html import fmt, finite, h3, missing, para, seconds, table
+from report.html import finite, fmt, h3, missing, para, seconds, table
 from studies.figures import fe as fem_plots
+
 
 @dataclass(frozen=True, slots=True)
 class Candidate:
@@ -96,7 +96,9 @@ def c1_effect(
         displacement: (cases, points, 3), mm.
         converged: per case.
     """
-    keys = sorted({(round(float(p), 6), round(float(t), 6)) for p, t in zip(phi, theta)})
+    keys = sorted(
+        {(round(float(p), 6), round(float(t), 6)) for p, t in zip(phi, theta, strict=True)}
+    )
     out: dict[str, list[float]] = {k: [] for k in ("phi", "theta", "spread_mm", "single_mm",
                                                    "relative", "best_C1", "C1_min", "C1_max")}
     for p, t in keys:
@@ -119,6 +121,7 @@ def c1_effect(
 
 
 def scene_needs_section(ctx: Context) -> str:
+    """The scene-needs section: the cheapest model per accuracy need, and C1's effect."""
     cands = candidates(ctx)
     out = [para(
         "Which model is enough for a given accuracy need? For each model: its worst "
@@ -193,7 +196,8 @@ def scene_needs_section(ctx: Context) -> str:
     out.append(para(f"Over C1 = {C1_range[0]:g}–{C1_range[1]:g} kPa: " + " ".join(sentences)))
     rows = [[f"{p:g}", f"{t:g}", f"{s:.3g}", f"{100 * r:.3g}", f"{w:.3g}", f"{b:g}"]
             for p, t, s, r, w, b in zip(effect["phi"], effect["theta"], effect["spread_mm"],
-                                        effect["relative"], effect["single_mm"], effect["best_C1"])]
+                                        effect["relative"], effect["single_mm"], effect["best_C1"],
+                                        strict=True)]
     out.append(table(["Φ (deg)", "θ (deg)", "spread (mm)", "spread / max |u| (%)",
                        "best single-C1 error (mm)", "best single C1 (kPa)"], rows,
                       table_id="c1-effect"))

@@ -1,5 +1,4 @@
-"""Stability: where the FE solve fails (the study's grid and the sweep itself), and the surrogate outside its data.
-"""
+"""Stability: where the FE solve fails, on the study's grid and in the sweep itself."""
 
 from __future__ import annotations
 
@@ -15,7 +14,9 @@ from report.html import fmt, h3, missing, para, pct, table
 from report.sections.extrapolation import extrapolation_section
 from studies.figures import fe as fem_plots
 
+
 def stability_section(ctx: Context) -> str:
+    """The stability section: the study's grid, the sweep's own failures, extrapolation."""
     out = []
     stab = ctx.json.get("fe_stability")
     if stab is None:

@@ -1,5 +1,4 @@
-"""Surrogate speed against accuracy: the architectures beside the FE, and the training variants.
-"""
+"""Surrogate speed against accuracy: the architectures beside the FE, and the training variants."""
 
 from __future__ import annotations
 
@@ -8,8 +7,9 @@ from typing import Any
 
 from report.common import predict_s, variant_label, worst_case
 from report.context import Context
-from report.html import fmt, finite, h3, missing, para, pm, table
+from report.html import finite, fmt, h3, missing, para, pm, table
 from studies.figures import surrogate as surrogate_plots
+
 
 def fe_points_for_surrogate(ctx: Context) -> list[dict[str, Any]]:
     """FE configurations as (solve time per case, worst clinical-case mean error)."""
@@ -33,6 +33,7 @@ def fe_points_for_surrogate(ctx: Context) -> list[dict[str, Any]]:
 
 
 def surrogate_speed_accuracy_section(ctx: Context) -> str:
+    """The surrogate speed-accuracy section: architectures beside the FE, and the variants."""
     study = ctx.json.get("table2")
     if study is None:
         return missing("results/surrogate/study/table2.json")

@@ -1,5 +1,4 @@
-"""The sweep's cost: the FE solve time of every case over (C1, Phi), and the totals.
-"""
+"""The sweep's cost: the FE solve time of every case over (C1, Phi), and the totals."""
 
 from __future__ import annotations
 
@@ -9,7 +8,9 @@ from report.context import Context
 from report.html import missing, para, seconds, table
 from studies.figures import fe as fem_plots
 
+
 def sweep_cost_section(ctx: Context) -> str:
+    """The sweep's cost: solve time per case over (C1, Phi) and the totals."""
     ds = ctx.dataset()
     if ds is None:
         return missing("results/dataset/dataset.h5")

@@ -1,5 +1,4 @@
-"""The selected surrogate's training: loss and validation error per epoch, and its settings.
-"""
+"""The selected surrogate's training: loss and validation error per epoch, and its settings."""
 
 from __future__ import annotations
 
@@ -10,7 +9,9 @@ from report.context import Context
 from report.html import finite, fmt, missing, para, seconds, span, table
 from studies.figures import surrogate as surrogate_plots
 
+
 def training_section(ctx: Context) -> str:
+    """The selected model's training history and settings."""
     history = ctx.json.get("history")
     if history is None:
         return missing("results/surrogate/model/history.json")
