@@ -31,8 +31,10 @@ def displacement_errors(u: np.ndarray, reference: np.ndarray) -> dict[str, float
 def observed_rates(sizes: list[float], errors: list[float]) -> list[float]:
     """Convergence rates log(e_i / e_(i+1)) / log(h_i / h_(i+1)) between successive meshes."""
     rates = []
-    for (h0, e0), (h1, e1) in zip(zip(sizes, errors), zip(sizes[1:], errors[1:])):
-        rates.append(float(np.log(e0 / e1) / np.log(h0 / h1)) if e0 > 0 and e1 > 0 else float("nan"))
+    pairs = list(zip(sizes, errors, strict=True))
+    for (h0, e0), (h1, e1) in zip(pairs, pairs[1:], strict=False):
+        rate = np.log(e0 / e1) / np.log(h0 / h1) if e0 > 0 and e1 > 0 else np.nan
+        rates.append(float(rate))
     return rates
 
 

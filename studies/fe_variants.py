@@ -23,8 +23,9 @@ ELEMENTS: dict[str, dict[str, Any]] = {
 
 @dataclass(frozen=True, slots=True)
 class MeshSpec:
-    """Element sizes (m) and geometric order of a study mesh; the rest of the mesh
-    configuration (geometry, grading) is the workflow's.
+    """Element sizes (m) and geometric order of a study mesh.
+
+    The rest of the mesh configuration (geometry, grading) is the workflow's.
 
     ``fold_size`` is the element size over the inframammary fold (``None``: no
     refinement there, whatever the workflow's own mesh asks for).
@@ -118,9 +119,11 @@ class Variant:
 
     @staticmethod
     def base_config(config: dict[str, Any]) -> dict[str, Any]:
-        """The workflow config sections (``fe``, ``material``, ``mesh``) that a variant's
-        solve depends on: without the default's element, degree, quadrature and solver
-        preset, which :meth:`settings` replaces, so that changing them reruns no study solve."""
+        """The workflow config sections (``fe``, ``material``, ``mesh``) a variant's solve uses.
+
+        Without the default's element, degree, quadrature and solver preset, which
+        :meth:`settings` replaces, so that changing them reruns no study solve.
+        """
         fe = {key: value for key, value in config.get("fe", {}).items() if key != "solver"}
         fe["discretisation"] = {
             key: value

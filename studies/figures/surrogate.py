@@ -176,7 +176,7 @@ def plot_point_fields(
     fig, axes = plt.subplots(1, len(panels), figsize=(4.6 * len(panels), 4.6), squeeze=False,
                              constrained_layout=True, sharex=True, sharey=True)
     size = float(np.clip(9000.0 / max(len(X_mm), 1), 2.0, 30.0))
-    for ax, (values, name) in zip(axes[0], panels):
+    for ax, (values, name) in zip(axes[0], panels, strict=True):
         sc = ax.scatter(X_mm[order, 1], X_mm[order, 2], c=np.asarray(values)[order], s=size,
                         cmap="viridis" if "error" not in name else "magma", linewidths=0)
         fig.colorbar(sc, ax=ax, label="mm", shrink=0.85)
