@@ -28,7 +28,8 @@ Layout (units in attributes; M cases, N material points)::
 
 Root attributes hold a description, the creation time, the provenance (config
 sections, package versions, git commit) as JSON strings. This module imports
-neither dolfinx nor jax, so any tool can read the format.
+neither dolfinx nor jax, so any tool can read the format: :func:`build_dataset` writes it,
+:func:`read_dataset` and :func:`read_case_columns` read it.
 """
 
 from __future__ import annotations
@@ -40,7 +41,7 @@ import subprocess
 import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -57,7 +58,7 @@ REQUIRED_POINT_FIELDS = ("node_index", "X", "u", "fixed")
 
 
 class DatasetError(ValueError):
-    """A case file is missing, truncated or inconsistent with the others (the message names it)."""
+    """A case file or the dataset is missing, truncated or inconsistent (the message names it)."""
 
 
 def write_points(
@@ -112,7 +113,9 @@ class SplitFractions:
     def __post_init__(self) -> None:
         values = (self.train, self.validation, self.test)
         if any(v < 0 for v in values) or self.train <= 0 or self.validation <= 0:
-            raise DatasetError("split fractions must be non-negative, train and validation positive")
+            raise DatasetError(
+                "split fractions must be non-negative, train and validation positive"
+            )
         if abs(sum(values) - 1.0) > 1e-9:
             raise DatasetError(f"split fractions must add up to 1, got {sum(values):g}")
 
@@ -131,7 +134,16 @@ class SplitFractions:
 def provenance(config: dict[str, Any] | None = None) -> dict[str, Any]:
     """Package versions, git commit and (optionally) the config that produced the data."""
     packages = {}
-    for name in ("fenics-dolfinx", "petsc4py", "numpy", "h5py", "gmsh", "snakemake", "jax", "optax"):
+    for name in (
+        "fenics-dolfinx",
+        "petsc4py",
+        "numpy",
+        "h5py",
+        "gmsh",
+        "snakemake",
+        "jax",
+        "optax",
+    ):
         try:
             packages[name] = metadata.version(name)
         except metadata.PackageNotFoundError:
@@ -139,7 +151,10 @@ def provenance(config: dict[str, Any] | None = None) -> dict[str, Any]:
     repo = Path(__file__).resolve().parent.parent
     try:
         commit = subprocess.run(
-            ["git", "-C", str(repo), "rev-parse", "HEAD"], capture_output=True, text=True, check=True
+            ["git", "-C", str(repo), "rev-parse", "HEAD"],
+            capture_output=True,
+            text=True,
+            check=True,
         ).stdout.strip()
         dirty = bool(
             subprocess.run(
@@ -166,6 +181,12 @@ def build_dataset(
     """Gather case files into one HDF5 dataset, written atomically.
 
     Args:
+        summary_paths: each case's ``summary.json``.
+        point_paths: each case's ``points.h5``, in the same order.
+        output: the dataset file to write.
+        split: fractions of the train, validation and test parts.
+        seed: seed of the random split.
+        config: the config sections to record as provenance.
         test_cases: (C1, Φ, θ) of setups the by-case split always holds out as test
             (the clinical cases: a by-case model is then judged on setups it never saw);
             the other converged cases are partitioned by ``split``.
@@ -190,7 +211,9 @@ def build_dataset(
         if not np.array_equal(points["node_index"], reference["node_index"]) or not np.allclose(
             points["X"], reference["X"], rtol=0, atol=1e-12
         ):
-            raise DatasetError(f"case {case}: {path} lists different material points (another mesh?)")
+            raise DatasetError(
+                f"case {case}: {path} lists different material points (another mesh?)"
+            )
         if summary["status"] == "converged":
             if not np.all(np.isfinite(points["u"])):
                 raise DatasetError(f"case {case}: converged but its displacement has NaN/inf")
@@ -209,7 +232,9 @@ def build_dataset(
     by_case["test"] = np.sort(np.concatenate([by_case["test"], good_cases[forced]]))
 
     def column(key: str, default: Any = np.nan) -> np.ndarray:
-        return np.array([s.get(key, default) if s.get(key) is not None else default for s in summaries])
+        return np.array(
+            [s.get(key, default) if s.get(key) is not None else default for s in summaries]
+        )
 
     wall = np.array([s.get("wall_s", {}).get("solve", np.nan) for s in summaries], dtype=float)
     iterations = np.array([sum(s.get("newton_iterations", [])) for s in summaries], dtype=np.int64)
@@ -237,8 +262,16 @@ def build_dataset(
         "wall_s": wall,
         "max_disp_mm": column("max_disp_mm").astype(float),
     }
-    units = {"C1": "kPa", "phi": "deg", "theta": "deg", "gravity": "m/s^2", "wall_s": "s",
-             "max_disp_mm": "mm", "load_fraction": "1", "contact_force_N": "N"}
+    units = {
+        "C1": "kPa",
+        "phi": "deg",
+        "theta": "deg",
+        "gravity": "m/s^2",
+        "wall_s": "s",
+        "max_disp_mm": "mm",
+        "load_fraction": "1",
+        "contact_force_N": "N",
+    }
     kind = np.where(reference["fixed"], BOUNDARY, DOMAIN).astype(np.int8)
     _write_atomically(
         Path(output),
@@ -277,7 +310,7 @@ def _write_atomically(
             h5.attrs["title"] = "Breast displacement under rotated gravity (FE sweep)"
             h5.attrs["description"] = __doc__
             h5.attrs["format_version"] = FORMAT_VERSION
-            h5.attrs["created"] = datetime.now(timezone.utc).isoformat()
+            h5.attrs["created"] = datetime.now(UTC).isoformat()
             h5.attrs["provenance"] = json.dumps(prov, default=str)
             pts = h5.create_group("points")
             pts.create_dataset("X", data=reference["X"]).attrs["units"] = "m"
@@ -287,8 +320,9 @@ def _write_atomically(
             cases = h5.create_group("cases")
             for name, values in fields.items():
                 if values.dtype == object:
-                    ds = cases.create_dataset(name, data=values.astype(str).astype(object),
-                                              dtype=h5py.string_dtype())
+                    ds = cases.create_dataset(
+                        name, data=values.astype(str).astype(object), dtype=h5py.string_dtype()
+                    )
                 else:
                     ds = cases.create_dataset(name, data=values)
                 if name in units:
@@ -317,3 +351,159 @@ def _write_atomically(
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+# -- reading -----------------------------------------------------------------------------
+@dataclass
+class Dataset:
+    """The dataset in memory: points, cases, displacements (mm) and splits.
+
+    Attributes:
+        X: reference coordinates of the material points (N, 3), m.
+        boundary: True where the point lies on a clamped surface (N,).
+        C1: per case, kPa (M,).
+        phi: per case, degrees (M,).
+        theta: per case, degrees (M,).
+        direction: unit gravity direction per case (M, 3).
+        displacement: (M, N, 3) in mm; NaN rows for failed cases.
+        converged: (M,) bool.
+        splits: ``{"by_sample": {...}, "by_case": {...}}`` index arrays.
+        ids: case identifiers (M,).
+        node_index: index of each point in the mesh file (N,), for writing fields.
+    """
+
+    X: np.ndarray
+    boundary: np.ndarray
+    C1: np.ndarray
+    phi: np.ndarray
+    theta: np.ndarray
+    direction: np.ndarray
+    displacement: np.ndarray
+    converged: np.ndarray
+    splits: dict[str, dict[str, np.ndarray]]
+    ids: np.ndarray
+    node_index: np.ndarray | None = None
+
+    @property
+    def n_points(self) -> int:
+        """Material points per case."""
+        return self.X.shape[0]
+
+    def case_index(self, C1: float, phi: float, theta: float = 0.0) -> int:
+        """Index of the case with these parameters.
+
+        Raises:
+            KeyError: if the dataset has no such case.
+        """
+        hit = np.flatnonzero(
+            np.isclose(self.C1, C1) & np.isclose(self.phi, phi) & np.isclose(self.theta, theta)
+        )
+        if hit.size == 0:
+            raise KeyError(f"no case with C1={C1} kPa, phi={phi} deg, theta={theta} deg")
+        return int(hit[0])
+
+    def sample_indices(self, split: str, part: str) -> np.ndarray:
+        """Flat sample indices (case * N + point) of a split part."""
+        indices = self.splits[split][part]
+        if split == "by_case":
+            return (indices[:, None] * self.n_points + np.arange(self.n_points)[None, :]).ravel()
+        return indices
+
+
+def gravity_direction(phi_deg: np.ndarray, theta_deg: np.ndarray) -> np.ndarray:
+    """Unit gravity direction of the paper's Eq. 1, shape (..., 3)."""
+    phi, theta = np.radians(phi_deg), np.radians(theta_deg)
+    return np.stack(
+        [np.cos(phi), np.sin(phi) * np.cos(theta), np.sin(phi) * np.sin(theta)], axis=-1
+    )
+
+
+def read_dataset(path: str | Path) -> Dataset:
+    """Read and check the HDF5 dataset written by :func:`build_dataset`.
+
+    Raises:
+        DatasetError: if the file is missing, empty, has NaN in a converged
+            case, or lacks a split.
+    """
+    import h5py
+
+    path = Path(path)
+    if not path.is_file():
+        raise DatasetError(f"dataset {path} does not exist")
+    try:
+        with h5py.File(path, "r") as h5:
+            for key in ("points/X", "points/kind", "cases/C1", "cases/phi", "displacement"):
+                if key not in h5:
+                    raise DatasetError(f"dataset {path} lacks /{key}")
+            splits: dict[str, dict[str, np.ndarray]] = {}
+            for kind in ("by_sample", "by_case"):
+                for part in SPLITS:
+                    key = f"splits/{kind}/{part}"
+                    if key not in h5:
+                        raise DatasetError(f"dataset {path} lacks the split /{key}")
+                    splits.setdefault(kind, {})[part] = h5[key][...]
+            ds = Dataset(
+                X=h5["points/X"][...],
+                boundary=h5["points/kind"][...] == BOUNDARY,
+                C1=h5["cases/C1"][...],
+                phi=h5["cases/phi"][...],
+                theta=h5["cases/theta"][...],
+                direction=gravity_direction(h5["cases/phi"][...], h5["cases/theta"][...]),
+                displacement=1e3 * h5["displacement"][...],
+                converged=h5["cases/converged"][...].astype(bool),
+                splits=splits,
+                ids=h5["cases/id"].asstr()[...],
+                node_index=h5["points/node_index"][...] if "points/node_index" in h5 else None,
+            )
+    except OSError as err:
+        raise DatasetError(f"dataset {path} is unreadable ({err})") from None
+    if ds.X.shape[0] == 0 or ds.C1.shape[0] == 0:
+        raise DatasetError(f"dataset {path} is empty")
+    if ds.displacement.shape != (ds.C1.shape[0], ds.X.shape[0], 3):
+        raise DatasetError(
+            f"dataset {path}: /displacement has shape {ds.displacement.shape}, expected "
+            f"({ds.C1.shape[0]}, {ds.X.shape[0]}, 3)"
+        )
+    if not ds.converged.any():
+        raise DatasetError(f"dataset {path} has no converged case")
+    if not np.all(np.isfinite(ds.displacement[ds.converged])):
+        raise DatasetError(f"dataset {path} has NaN or inf displacements in converged cases")
+    n_samples = {"by_sample": ds.C1.shape[0] * ds.X.shape[0], "by_case": ds.C1.shape[0]}
+    for kind, parts in splits.items():
+        if parts["train"].size == 0 or parts["validation"].size == 0:
+            raise DatasetError(
+                f"dataset {path}: split {kind} has an empty train or validation part"
+            )
+        for part, idx in parts.items():
+            if idx.size and (idx.min() < 0 or idx.max() >= n_samples[kind]):
+                raise DatasetError(f"dataset {path}: split {kind}/{part} has out-of-range indices")
+            cases = idx // ds.X.shape[0] if kind == "by_sample" else idx
+            if idx.size and not ds.converged[cases].all():
+                raise DatasetError(f"dataset {path}: split {kind}/{part} includes failed cases")
+    return ds
+
+
+def read_case_columns(path: str | Path) -> dict[str, np.ndarray]:
+    """Every per-case column under ``/cases``; strings come back as ``str`` arrays.
+
+    A column an older dataset lacks is simply not a key, so a reader checks for the columns
+    it needs.
+
+    Raises:
+        DatasetError: if the file is missing or unreadable.
+    """
+    import h5py
+
+    path = Path(path)
+    if not path.is_file():
+        raise DatasetError(f"dataset {path} does not exist")
+    columns = {}
+    try:
+        with h5py.File(path, "r") as h5:
+            group = h5.get("cases")
+            for key, column in group.items() if group is not None else ():
+                if isinstance(column, h5py.Dataset):
+                    columns[key] = column.asstr()[...] if column.dtype.kind == "O" else column[...]
+    except OSError as err:
+        raise DatasetError(f"dataset {path} is unreadable ({err})") from None
+    return columns

@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from fem.dataset import read_case_columns, read_dataset
 from report.common import case_id
 from report.html import figure
 
@@ -60,12 +61,10 @@ class Context:
     _cases: dict[str, np.ndarray] | None = None
 
     def dataset(self) -> Any:
-        """The dataset (:func:`surrogate.data.load_dataset`), read once; None if absent."""
+        """The dataset (:func:`fem.dataset.read_dataset`), read once; None if absent."""
         if self._dataset is None and self.paths.get("dataset") is not None:
-            from surrogate.data import load_dataset
-
             if self.paths["dataset"].is_file():
-                self._dataset = load_dataset(self.paths["dataset"])
+                self._dataset = read_dataset(self.paths["dataset"])
         return self._dataset
 
     def case_columns(self) -> dict[str, np.ndarray]:
@@ -78,14 +77,7 @@ class Context:
             self._cases = {}
             path = self.paths.get("dataset")
             if path is not None and path.is_file():
-                import h5py
-
-                with h5py.File(path, "r") as h5:
-                    group = h5.get("cases")
-                    for key, column in (group.items() if group is not None else ()):
-                        if isinstance(column, h5py.Dataset):
-                            self._cases[key] = (column.asstr()[...] if column.dtype.kind == "O"
-                                                else column[...])
+                self._cases = read_case_columns(path)
         return self._cases
 
     def figure(self, name: str, draw: Callable[[Path], None], alt: str, caption: str) -> str:

@@ -1,6 +1,6 @@
 """The architecture study (the paper's Table 2), model selection and variant comparisons.
 
-Each training run is a model folder (see :mod:`surrogate.predict`) whose
+Each training run is a model folder (see :mod:`surrogate.checkpoint`) whose
 ``model.json`` holds its metrics. This module only reads those folders: it groups
 runs by architecture, gives mean ± SD of validation error, training time and
 epochs, selects the architecture with the lowest mean validation error (the
@@ -21,8 +21,8 @@ import numpy as np
 
 from studies import paper
 from surrogate.config import parse_architecture
-from surrogate.data import Dataset, write_json
-from surrogate.predict import HISTORY_JSON, MODEL_JSON, PARAMS_NPZ, unconverged_cases
+from fem.dataset import Dataset
+from surrogate.checkpoint import HISTORY_JSON, MODEL_JSON, PARAMS_NPZ, unconverged_cases, write_json
 
 
 class StudyError(ValueError):

@@ -18,8 +18,10 @@ from typing import Any
 import numpy as np
 
 from studies import paper
-from surrogate.data import Dataset
-from surrogate.predict import ExtrapolationWarning, Surrogate, write_point_fields_xdmf
+from fem.dataset import Dataset
+from surrogate.exceptions import ExtrapolationWarning
+from surrogate.fields import write_point_fields_xdmf
+from surrogate.predict import Surrogate
 
 
 def error_metrics(pred: np.ndarray, fe: np.ndarray) -> dict[str, Any]:
@@ -192,7 +194,7 @@ def evaluate_clinical(
 
 def nearest_case(ds: Dataset, C1: float, phi: float, theta: float = 0.0) -> int:
     """The converged dataset case closest in (log C1, gravity direction)."""
-    from surrogate.data import gravity_direction
+    from fem.dataset import gravity_direction
 
     g = gravity_direction(np.asarray(phi, float), np.asarray(theta, float))
     angle = np.degrees(np.arccos(np.clip(ds.direction @ g, -1.0, 1.0)))

@@ -1,7 +1,9 @@
 """JAX/optax Siamese-MLP surrogate of the FE breast model (domain + boundary networks).
 
-:mod:`surrogate.config` holds the hyperparameters, :mod:`surrogate.data` loads the
-FE dataset, :mod:`surrogate.model` defines the networks and the paper's loss,
-:mod:`surrogate.train` fits them and :mod:`surrogate.predict` saves, loads and
-queries a trained model.
+:mod:`surrogate.config` holds the hyperparameters, :mod:`surrogate.data` turns the FE
+dataset (read by :mod:`fem.dataset`) into network inputs, :mod:`surrogate.model` defines
+the networks and the paper's loss, :mod:`surrogate.train` fits them,
+:mod:`surrogate.checkpoint` saves and loads a model folder, :mod:`surrogate.predict`
+queries a loaded model, :mod:`surrogate.fields` writes fields for ParaView,
+:mod:`surrogate.cli` is the command line and :mod:`surrogate.exceptions` its errors.
 """

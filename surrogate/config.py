@@ -6,16 +6,14 @@ import math
 from dataclasses import asdict, dataclass, fields, replace
 from typing import Any
 
+from surrogate.exceptions import SurrogateConfigError
+
 ACTIVATIONS = ("tanh", "relu", "gelu", "silu")
 SPLIT_KINDS = ("by_sample", "by_case")
 BOUNDARY_MODES = ("network", "shared", "exact")
 LR_SCHEDULES = ("constant", "cosine", "exponential")
 C1_ENCODINGS = ("linear", "log", "inverse")
 OUTPUT_SCALINGS = ("none", "compliance")
-
-
-class SurrogateConfigError(ValueError):
-    """A surrogate hyperparameter is out of range (the message names it)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -78,7 +76,9 @@ class SurrogateConfig:
         for name in ("hidden_layers", "width", "batch_size", "max_epochs", "patience"):
             value = getattr(self, name)
             if not isinstance(value, int) or value < 1:
-                raise SurrogateConfigError(f"surrogate.{name} must be a positive integer, got {value!r}")
+                raise SurrogateConfigError(
+                    f"surrogate.{name} must be a positive integer, got {value!r}"
+                )
         if self.activation not in ACTIVATIONS:
             raise SurrogateConfigError(
                 f"surrogate.activation must be one of {ACTIVATIONS}, got {self.activation!r}"
@@ -95,9 +95,13 @@ class SurrogateConfig:
                     f"surrogate.{name} must be one of {allowed}, got {getattr(self, name)!r}"
                 )
         if not (isinstance(self.bc_length, (int, float)) and 0 < self.bc_length <= 100):
-            raise SurrogateConfigError(f"surrogate.bc_length must lie in (0, 100], got {self.bc_length!r}")
+            raise SurrogateConfigError(
+                f"surrogate.bc_length must lie in (0, 100], got {self.bc_length!r}"
+            )
         if not (isinstance(self.lr_final, (int, float)) and 0 < self.lr_final <= 1):
-            raise SurrogateConfigError(f"surrogate.lr_final must lie in (0, 1], got {self.lr_final!r}")
+            raise SurrogateConfigError(
+                f"surrogate.lr_final must lie in (0, 1], got {self.lr_final!r}"
+            )
         if not (math.isfinite(self.alpha) and self.alpha >= 0):
             raise SurrogateConfigError(f"surrogate.alpha must be >= 0, got {self.alpha!r}")
         if not (math.isfinite(self.learning_rate) and self.learning_rate > 0):

@@ -1,4 +1,6 @@
-"""Load the FE dataset and turn (point, case) pairs into normalised network inputs.
+"""Turn (point, case) pairs of the FE dataset into normalised network inputs.
+
+The dataset file is read by :func:`fem.dataset.read_dataset`, its owner.
 
 Inputs of one sample (7 numbers): the material point's reference coordinates,
 standardised; C1, mapped linearly to [-1, 1] over the training range; and the
@@ -9,147 +11,14 @@ by one scalar scale, so the loss's L2 norm stays isotropic.
 
 from __future__ import annotations
 
-import json
 from dataclasses import asdict, dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from fem.dataset import BOUNDARY, SPLITS
+from fem.dataset import Dataset, DatasetError
 
 N_INPUTS = 7
-
-
-class DatasetFormatError(ValueError):
-    """The dataset cannot be used for training (the message names the problem)."""
-
-
-@dataclass
-class Dataset:
-    """The parts of the HDF5 dataset the surrogate needs, in memory.
-
-    Attributes:
-        X: reference coordinates of the material points (N, 3), m.
-        boundary: True where the point lies on a clamped surface (N,).
-        C1: per case, kPa (M,).
-        phi: per case, degrees (M,).
-        theta: per case, degrees (M,).
-        direction: unit gravity direction per case (M, 3).
-        displacement: (M, N, 3) in mm; NaN rows for failed cases.
-        converged: (M,) bool.
-        splits: ``{"by_sample": {...}, "by_case": {...}}`` index arrays.
-        ids: case identifiers (M,).
-        node_index: index of each point in the mesh file (N,), for writing fields.
-    """
-
-    X: np.ndarray
-    boundary: np.ndarray
-    C1: np.ndarray
-    phi: np.ndarray
-    theta: np.ndarray
-    direction: np.ndarray
-    displacement: np.ndarray
-    converged: np.ndarray
-    splits: dict[str, dict[str, np.ndarray]]
-    ids: np.ndarray
-    node_index: np.ndarray | None = None
-
-    @property
-    def n_points(self) -> int:
-        """Material points per case."""
-        return self.X.shape[0]
-
-    def case_index(self, C1: float, phi: float, theta: float = 0.0) -> int:
-        """Index of the case with these parameters.
-
-        Raises:
-            KeyError: if the dataset has no such case.
-        """
-        hit = np.flatnonzero(
-            np.isclose(self.C1, C1) & np.isclose(self.phi, phi) & np.isclose(self.theta, theta)
-        )
-        if hit.size == 0:
-            raise KeyError(f"no case with C1={C1} kPa, phi={phi} deg, theta={theta} deg")
-        return int(hit[0])
-
-    def sample_indices(self, split: str, part: str) -> np.ndarray:
-        """Flat sample indices (case * N + point) of a split part."""
-        indices = self.splits[split][part]
-        if split == "by_case":
-            return (indices[:, None] * self.n_points + np.arange(self.n_points)[None, :]).ravel()
-        return indices
-
-
-def gravity_direction(phi_deg: np.ndarray, theta_deg: np.ndarray) -> np.ndarray:
-    """Unit gravity direction of the paper's Eq. 1, shape (..., 3)."""
-    phi, theta = np.radians(phi_deg), np.radians(theta_deg)
-    return np.stack(
-        [np.cos(phi), np.sin(phi) * np.cos(theta), np.sin(phi) * np.sin(theta)], axis=-1
-    )
-
-
-def load_dataset(path: str | Path) -> Dataset:
-    """Read and check the HDF5 dataset written by :func:`fem.dataset.build_dataset`.
-
-    Raises:
-        DatasetFormatError: if the file is missing, empty, has NaN in a converged
-            case, or lacks a split.
-    """
-    import h5py
-
-    path = Path(path)
-    if not path.is_file():
-        raise DatasetFormatError(f"dataset {path} does not exist")
-    try:
-        with h5py.File(path, "r") as h5:
-            for key in ("points/X", "points/kind", "cases/C1", "cases/phi", "displacement"):
-                if key not in h5:
-                    raise DatasetFormatError(f"dataset {path} lacks /{key}")
-            splits: dict[str, dict[str, np.ndarray]] = {}
-            for kind in ("by_sample", "by_case"):
-                for part in SPLITS:
-                    key = f"splits/{kind}/{part}"
-                    if key not in h5:
-                        raise DatasetFormatError(f"dataset {path} lacks the split /{key}")
-                    splits.setdefault(kind, {})[part] = h5[key][...]
-            ds = Dataset(
-                X=h5["points/X"][...],
-                boundary=h5["points/kind"][...] == BOUNDARY,
-                C1=h5["cases/C1"][...],
-                phi=h5["cases/phi"][...],
-                theta=h5["cases/theta"][...],
-                direction=gravity_direction(h5["cases/phi"][...], h5["cases/theta"][...]),
-                displacement=1e3 * h5["displacement"][...],
-                converged=h5["cases/converged"][...].astype(bool),
-                splits=splits,
-                ids=h5["cases/id"].asstr()[...],
-                node_index=h5["points/node_index"][...] if "points/node_index" in h5 else None,
-            )
-    except OSError as err:
-        raise DatasetFormatError(f"dataset {path} is unreadable ({err})") from None
-    if ds.X.shape[0] == 0 or ds.C1.shape[0] == 0:
-        raise DatasetFormatError(f"dataset {path} is empty")
-    if ds.displacement.shape != (ds.C1.shape[0], ds.X.shape[0], 3):
-        raise DatasetFormatError(
-            f"dataset {path}: /displacement has shape {ds.displacement.shape}, expected "
-            f"({ds.C1.shape[0]}, {ds.X.shape[0]}, 3)"
-        )
-    if not ds.converged.any():
-        raise DatasetFormatError(f"dataset {path} has no converged case")
-    if not np.all(np.isfinite(ds.displacement[ds.converged])):
-        raise DatasetFormatError(f"dataset {path} has NaN or inf displacements in converged cases")
-    n_samples = {"by_sample": ds.C1.shape[0] * ds.X.shape[0], "by_case": ds.C1.shape[0]}
-    for kind, parts in splits.items():
-        if parts["train"].size == 0 or parts["validation"].size == 0:
-            raise DatasetFormatError(f"dataset {path}: split {kind} has an empty train or validation part")
-        for part, idx in parts.items():
-            if idx.size and (idx.min() < 0 or idx.max() >= n_samples[kind]):
-                raise DatasetFormatError(f"dataset {path}: split {kind}/{part} has out-of-range indices")
-            cases = idx // ds.X.shape[0] if kind == "by_sample" else idx
-            if idx.size and not ds.converged[cases].all():
-                raise DatasetFormatError(f"dataset {path}: split {kind}/{part} includes failed cases")
-    return ds
 
 
 @dataclass(frozen=True)
@@ -180,7 +49,11 @@ class Normalisation:
 
     @classmethod
     def fit(
-        cls, ds: Dataset, cases: np.ndarray, c1_encoding: str = "linear", output_scaling: str = "none"
+        cls,
+        ds: Dataset,
+        cases: np.ndarray,
+        c1_encoding: str = "linear",
+        output_scaling: str = "none",
     ) -> Normalisation:
         """Fit on the given (training) cases."""
         c1 = ds.C1[cases]
@@ -240,7 +113,7 @@ def _encode_c1(C1: np.ndarray, encoding: str) -> np.ndarray:
 
 
 def dirichlet_factor(X: np.ndarray, boundary: np.ndarray, length: float) -> np.ndarray:
-    """Smooth factor that vanishes exactly on the clamped points: φ = 1 − exp(−d / (length · d_max)).
+    """Smooth factor that vanishes exactly on the clamped points, φ = 1 − exp(−d / (length d_max)).
 
     ``d`` is each point's distance to the nearest clamped point and ``d_max`` its
     largest value, so φ rises linearly off the rib (as the displacement does) and
@@ -253,12 +126,12 @@ def dirichlet_factor(X: np.ndarray, boundary: np.ndarray, length: float) -> np.n
         length: length scale as a fraction of ``d_max``.
 
     Raises:
-        DatasetFormatError: if no point is clamped.
+        DatasetError: if no point is clamped.
     """
     from scipy.spatial import cKDTree
 
     if not np.any(boundary):
-        raise DatasetFormatError("an exact Dirichlet condition needs clamped (boundary) points")
+        raise DatasetError("an exact Dirichlet condition needs clamped (boundary) points")
     d, _ = cKDTree(X[boundary]).query(X)
     d_max = float(d.max()) if d.max() > 0 else 1.0
     phi = 1.0 - np.exp(-d / (length * d_max))
@@ -311,10 +184,3 @@ def sample_arrays(
     if point_factor is not None:
         gain = gain * point_factor[point]
     return Samples(inputs, targets, gain.astype(np.float32), ds.boundary[point])
-
-
-def write_json(path: str | Path, payload: dict[str, Any]) -> None:
-    """Write JSON with a trailing newline."""
-    with open(path, "w") as fh:
-        json.dump(payload, fh, indent=2)
-        fh.write("\n")

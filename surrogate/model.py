@@ -62,7 +62,8 @@ def layer_sizes(config: SurrogateConfig) -> list[int]:
 def init_mlp(key: jax.Array, sizes: list[int]) -> Layers:
     """Glorot-uniform weights and zero biases."""
     layers = []
-    for k, (n_in, n_out) in zip(jax.random.split(key, len(sizes) - 1), zip(sizes[:-1], sizes[1:])):
+    keys = jax.random.split(key, len(sizes) - 1)
+    for k, (n_in, n_out) in zip(keys, zip(sizes[:-1], sizes[1:], strict=False), strict=True):
         limit = np.sqrt(6.0 / (n_in + n_out))
         W = jax.random.uniform(k, (n_in, n_out), jnp.float32, -limit, limit)
         layers.append((W, jnp.zeros((n_out,), jnp.float32)))
@@ -73,7 +74,8 @@ def init_params(key: jax.Array, config: SurrogateConfig) -> Params:
     """Independent initial weights of the networks (split from one key)."""
     keys = jax.random.split(key, len(NETWORKS))
     sizes = layer_sizes(config)
-    return {net: init_mlp(k, sizes) for net, k in zip(NETWORKS, keys) if net in network_names(config)}
+    names = network_names(config)
+    return {net: init_mlp(k, sizes) for net, k in zip(NETWORKS, keys, strict=True) if net in names}
 
 
 def mlp(layers: Layers, x: jax.Array, activation: str) -> jax.Array:
@@ -175,7 +177,7 @@ def from_arrays(arrays: dict[str, Any], config: SurrogateConfig) -> Params:
     params: Params = {}
     for net in names:
         layers = []
-        for i, (n_in, n_out) in enumerate(zip(sizes[:-1], sizes[1:])):
+        for i, (n_in, n_out) in enumerate(zip(sizes[:-1], sizes[1:], strict=False)):
             try:
                 W, b = arrays[f"{net}/{i}/W"], arrays[f"{net}/{i}/b"]
             except KeyError:

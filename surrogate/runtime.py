@@ -47,6 +47,9 @@ def configure_cpu(classic_runtime: bool = True, single_thread: bool = False) -> 
             flags.insert(0 if flag.startswith("--") else len(flags), flag)
     value = " ".join(flags)
     if _backend_started():
-        log.warning("JAX's backend is already running; XLA_FLAGS=%r takes effect only in new processes", value)
+        log.warning(
+            "JAX's backend is already running; XLA_FLAGS=%r takes effect only in new processes",
+            value,
+        )
     os.environ["XLA_FLAGS"] = value
     return value

@@ -24,8 +24,9 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from fem.dataset import Dataset
 from surrogate.config import SurrogateConfig
-from surrogate.data import Dataset, Normalisation, Samples, dirichlet_factor, sample_arrays
+from surrogate.data import Normalisation, Samples, dirichlet_factor, sample_arrays
 from surrogate.model import Params, boundary_network, init_params, mlp, pointwise_error, split_loss
 
 log = logging.getLogger(__name__)
@@ -86,7 +87,9 @@ class TrainResult:
         }
 
 
-def init(config: SurrogateConfig, steps_per_epoch: int) -> tuple[Params, optax.GradientTransformation, Any, jax.Array]:
+def init(
+    config: SurrogateConfig, steps_per_epoch: int
+) -> tuple[Params, optax.GradientTransformation, Any, jax.Array]:
     """Initial weights, optimiser, its state, and the key of the shuffling.
 
     Both the weights and the shuffling key are split from ``config.seed``.
@@ -102,7 +105,9 @@ def learning_rate_schedule(config: SurrogateConfig, steps_per_epoch: int) -> opt
     """Learning rate per optimisation step."""
     if config.lr_schedule == "cosine":
         return optax.cosine_decay_schedule(
-            config.learning_rate, decay_steps=config.max_epochs * steps_per_epoch, alpha=config.lr_final
+            config.learning_rate,
+            decay_steps=config.max_epochs * steps_per_epoch,
+            alpha=config.lr_final,
         )
     if config.lr_schedule == "exponential":
         return optax.exponential_decay(
@@ -114,9 +119,13 @@ def learning_rate_schedule(config: SurrogateConfig, steps_per_epoch: int) -> opt
     return optax.constant_schedule(config.learning_rate)
 
 
-def make_optimizer(config: SurrogateConfig, steps_per_epoch: int = 1) -> optax.GradientTransformation:
+def make_optimizer(
+    config: SurrogateConfig, steps_per_epoch: int = 1
+) -> optax.GradientTransformation:
     """Adam with the configured step size (or schedule) and moment decay rates."""
-    return optax.adam(learning_rate_schedule(config, steps_per_epoch), b1=config.beta1, b2=config.beta2)
+    return optax.adam(
+        learning_rate_schedule(config, steps_per_epoch), b1=config.beta1, b2=config.beta2
+    )
 
 
 Part = tuple[jax.Array, jax.Array, jax.Array]
@@ -170,7 +179,12 @@ def train_epoch(
         i_d, i_b = idx
         part_b = None if boundary is None else tuple(a[i_b] for a in boundary)
         params, opt_state, value = train_step(
-            params, opt_state, tuple(a[i_d] for a in domain), part_b, config=config, optimizer=optimizer
+            params,
+            opt_state,
+            tuple(a[i_d] for a in domain),
+            part_b,
+            config=config,
+            optimizer=optimizer,
         )
         return (params, opt_state), value
 
@@ -197,8 +211,10 @@ def error_sums(params: Params, samples: Samples, config: SurrogateConfig) -> tup
         for start in range(0, len(part), EVAL_CHUNK):
             stop = min(start + EVAL_CHUNK, len(part))
             pad = EVAL_CHUNK - (stop - start)
-            chunk = [np.concatenate([a[start:stop], np.zeros((pad, *a.shape[1:]), a.dtype)])
-                     for a in (part.x, part.y, part.gain)]
+            chunk = [
+                np.concatenate([a[start:stop], np.zeros((pad, *a.shape[1:]), a.dtype)])
+                for a in (part.x, part.y, part.gain)
+            ]
             w = np.concatenate([np.ones(stop - start, np.float32), np.zeros(pad, np.float32)])
             layers = None if net is None else params[net]
             total += float(_error_sum(layers, *chunk, w, net=net, activation=config.activation))
@@ -243,8 +259,18 @@ def prepare(
         raise ValueError(f"split {config.split!r} has no training or validation samples")
     train_cases = np.unique(train_idx // ds.n_points)
     norm = Normalisation.fit(ds, train_cases, config.c1_encoding, config.output_scaling)
-    phi = dirichlet_factor(ds.X, ds.boundary, config.bc_length) if config.boundary == "exact" else None
-    return norm, phi, sample_arrays(ds, train_idx, norm, phi), sample_arrays(ds, val_idx, norm, phi), train_cases
+    phi = (
+        dirichlet_factor(ds.X, ds.boundary, config.bc_length)
+        if config.boundary == "exact"
+        else None
+    )
+    return (
+        norm,
+        phi,
+        sample_arrays(ds, train_idx, norm, phi),
+        sample_arrays(ds, val_idx, norm, phi),
+        train_cases,
+    )
 
 
 def train_and_evaluate(
@@ -278,16 +304,27 @@ def train_and_evaluate(
     b_arrays = tuple(jnp.asarray(a) for a in (bset.x, bset.y, bset.gain)) if use_boundary else None
     kwargs = dict(config=config, optimizer=optimizer, per_step=per_step, steps=steps)
 
-    result = TrainResult(params=params, config=config, normalisation=norm, point_factor=phi,
-                         train_cases=train_cases,
-                         held_out_cases=None if holdout is None else np.asarray(holdout))
+    result = TrainResult(
+        params=params,
+        config=config,
+        normalisation=norm,
+        point_factor=phi,
+        train_cases=train_cases,
+        held_out_cases=None if holdout is None else np.asarray(holdout),
+    )
     t0 = time.perf_counter()
     epoch_fn = train_epoch.lower(params, opt_state, key, d_arrays, b_arrays, **kwargs).compile()
     result.compile_s = time.perf_counter() - t0
     log.info(
         "%s (%s boundary): %d training samples (%d on the rib), %d steps of %s per epoch, "
-        "compiled in %.1f s", config.architecture, config.boundary, len(train), len(bset), steps,
-        per_step, result.compile_s,
+        "compiled in %.1f s",
+        config.architecture,
+        config.boundary,
+        len(train),
+        len(bset),
+        steps,
+        per_step,
+        result.compile_s,
     )
 
     best_loss, best_params, best_epoch, since_best = float("inf"), params, 0, 0
@@ -298,17 +335,22 @@ def train_and_evaluate(
         params, opt_state, train_loss = epoch_fn(params, opt_state, epoch_key, d_arrays, b_arrays)
         train_loss = float(train_loss)
         metrics = evaluate(params, val, config, norm.u_scale)
-        result.history.append({
-            "epoch": epoch,
-            "train_loss": train_loss,
-            "validation_loss": metrics["loss"],
-            "validation_error_mm": metrics["error_mm"],
-            "learning_rate": float(schedule((epoch - 1) * steps)),
-            "epoch_s": time.perf_counter() - t0,
-        })
+        result.history.append(
+            {
+                "epoch": epoch,
+                "train_loss": train_loss,
+                "validation_loss": metrics["loss"],
+                "validation_error_mm": metrics["error_mm"],
+                "learning_rate": float(schedule((epoch - 1) * steps)),
+                "epoch_s": time.perf_counter() - t0,
+            }
+        )
         if bar is not None:
-            bar.set_postfix(train=f"{train_loss:.4g}", val=f"{metrics['loss']:.4g}",
-                            err_mm=f"{metrics['error_mm']:.4f}")
+            bar.set_postfix(
+                train=f"{train_loss:.4g}",
+                val=f"{metrics['loss']:.4g}",
+                err_mm=f"{metrics['error_mm']:.4f}",
+            )
             bar.update(1)
         if not np.isfinite(train_loss):
             log.warning("training diverged at epoch %d (loss %s)", epoch, train_loss)
@@ -323,14 +365,22 @@ def train_and_evaluate(
     if bar is not None:
         bar.close()
     result.train_s = time.perf_counter() - start
-    result.params, result.best_validation_loss, result.best_epoch = best_params, best_loss, best_epoch
+    result.params, result.best_validation_loss, result.best_epoch = (
+        best_params,
+        best_loss,
+        best_epoch,
+    )
     final = evaluate(best_params, val, config, norm.u_scale)
     result.validation_error_mm = final["error_mm"]
     result.validation_error_domain_mm = final["domain_error_mm"]
     log.info(
         "%s: best epoch %d of %d, validation error %.4f mm (%.4f mm off the rib), %.1f s",
-        config.architecture, best_epoch, len(result.history), result.validation_error_mm,
-        result.validation_error_domain_mm, result.train_s,
+        config.architecture,
+        best_epoch,
+        len(result.history),
+        result.validation_error_mm,
+        result.validation_error_domain_mm,
+        result.train_s,
     )
     return result
 
@@ -341,61 +391,3 @@ def _progress(total: int, enabled: bool, label: str) -> Any:
     from tqdm import tqdm
 
     return tqdm(total=total, desc=f"{label} epochs", unit="epoch", mininterval=1.0)
-
-
-def main(argv: list[str] | None = None) -> int:
-    """Command-line entry point: train one model outside the workflow and print its figures.
-
-    ``python -m surrogate.train results/dataset/dataset.h5 --config config.yaml
-    --set activation=tanh --set max_epochs=50 --out /tmp/model`` trains the config's
-    ``surrogate`` settings with the overrides on one core and prints one JSON line
-    (validation error, best epoch, training time).
-    """
-    import argparse
-    import json
-    import sys
-
-    import yaml
-
-    from surrogate.runtime import configure_cpu
-
-    parser = argparse.ArgumentParser(description=main.__doc__.splitlines()[0])
-    parser.add_argument("dataset", help="the sweep's HDF5 dataset")
-    parser.add_argument("--config", default="config.yaml", help="config whose `surrogate` section is the base")
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                        help="override one surrogate setting (YAML value), e.g. lr_schedule=cosine")
-    parser.add_argument("--out", help="save the model in this folder")
-    parser.add_argument("--progress", action="store_true", help="show a progress bar")
-    args = parser.parse_args(argv)
-    configure_cpu(single_thread=True)  # before JAX's first computation: one core
-    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
-    from surrogate.config import SurrogateConfigError
-    from surrogate.data import DatasetFormatError, load_dataset
-    from surrogate.predict import save_model
-
-    try:
-        overrides = {}
-        for item in args.set:
-            key, sep, value = item.partition("=")
-            if not sep:
-                raise SurrogateConfigError(f"--set {item!r} is not KEY=VALUE")
-            overrides[key.strip()] = yaml.safe_load(value)
-        with open(args.config) as fh:
-            base = (yaml.safe_load(fh) or {}).get("surrogate") or {}
-        config = SurrogateConfig.from_mapping({**base, **overrides})
-        dataset = load_dataset(args.dataset)
-        result = train_and_evaluate(dataset, config, progress=args.progress)
-    except (OSError, SurrogateConfigError, DatasetFormatError, ValueError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
-    if args.out:
-        save_model(args.out, result, dataset)
-    print(json.dumps({"overrides": overrides, "architecture": config.architecture,
-                      "validation_error_mm": result.validation_error_mm,
-                      "best_epoch": result.best_epoch, "epochs": len(result.history),
-                      "train_s": result.train_s}))
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -22,32 +22,63 @@ def _write_case(folder: Path, C1: float, phi: float, status: str = "converged", 
     fixed = np.arange(n) < 5
     u = np.where(fixed[:, None], 0.0, rng.normal(size=(n, 3)) * 1e-3 / C1)
     write_points(folder / "points.h5", np.arange(n), X, u, fixed)
-    summary = {"status": status, "reason": "converged" if status == "converged" else "diverged",
-               "case": folder.name, "C1": C1, "phi": phi, "theta": 0.0,
-               "gravity_vector": [9.81 * np.cos(np.radians(phi)), 9.81 * np.sin(np.radians(phi)), 0.0],
-               "load_fraction": 1.0 if status == "converged" else 0.5, "load_steps": 1,
-               "first_failure": "" if status == "converged" else "diverged_max_it",
-               "min_detF": 0.9 if status == "converged" else 0.05,
-               "newton_iterations": [5], "wall_s": {"solve": 1.0}, "max_disp_mm": 1.0,
-               "self_overlap": {"overlapping_vertices": 0}, "contact": None, **extra}
+    summary = {
+        "status": status,
+        "reason": "converged" if status == "converged" else "diverged",
+        "case": folder.name,
+        "C1": C1,
+        "phi": phi,
+        "theta": 0.0,
+        "gravity_vector": [9.81 * np.cos(np.radians(phi)), 9.81 * np.sin(np.radians(phi)), 0.0],
+        "load_fraction": 1.0 if status == "converged" else 0.5,
+        "load_steps": 1,
+        "first_failure": "" if status == "converged" else "diverged_max_it",
+        "min_detF": 0.9 if status == "converged" else 0.05,
+        "newton_iterations": [5],
+        "wall_s": {"solve": 1.0},
+        "max_disp_mm": 1.0,
+        "self_overlap": {"overlapping_vertices": 0},
+        "contact": None,
+        **extra,
+    }
     (folder / "summary.json").write_text(json.dumps(summary))
     return folder / "summary.json", folder / "points.h5"
 
 
-def _cases(tmp_path: Path, overrides: dict[int, dict] | None = None) -> tuple[list[Path], list[Path]]:
+def _cases(
+    tmp_path: Path, overrides: dict[int, dict] | None = None
+) -> tuple[list[Path], list[Path]]:
     overrides = overrides or {}
-    paths = [_write_case(tmp_path / f"c{i}", 1.0 + i, 30.0 * i, **overrides.get(i, {}))
-             for i in range(5)]
+    paths = [
+        _write_case(tmp_path / f"c{i}", 1.0 + i, 30.0 * i, **overrides.get(i, {})) for i in range(5)
+    ]
     return [p[0] for p in paths], [p[1] for p in paths]
 
 
 def test_dataset_schema_and_contents(tmp_path: Path) -> None:
-    contact = {"force_N": 0.25, "vertices": 392, "vertices_in_contact": 2, "max_penetration_mm": 0.1}
-    summaries, points = _cases(tmp_path, {3: {"status": "failed"}, 1: {"contact": contact},
-                                          2: {"self_overlap": {"overlapping_vertices": 13}},
-                                          4: {"self_overlap": None}})  # None: solved under MPI
-    info = build_dataset(summaries, points, tmp_path / "ds.h5", SplitFractions(), seed=1,
-                         config={"sweep": {"phi_deg": [0]}})
+    contact = {
+        "force_N": 0.25,
+        "vertices": 392,
+        "vertices_in_contact": 2,
+        "max_penetration_mm": 0.1,
+    }
+    summaries, points = _cases(
+        tmp_path,
+        {
+            3: {"status": "failed"},
+            1: {"contact": contact},
+            2: {"self_overlap": {"overlapping_vertices": 13}},
+            4: {"self_overlap": None},
+        },
+    )  # None: solved under MPI
+    info = build_dataset(
+        summaries,
+        points,
+        tmp_path / "ds.h5",
+        SplitFractions(),
+        seed=1,
+        config={"sweep": {"phi_deg": [0]}},
+    )
     assert info["failed"] == ["c3"]
     with h5py.File(tmp_path / "ds.h5") as h5:
         assert h5["displacement"].shape == (5, N, 3)
@@ -69,7 +100,9 @@ def test_dataset_schema_and_contents(tmp_path: Path) -> None:
         assert len(allidx) == len(np.unique(allidx)) == 4 * N  # failed case excluded
         assert not np.any(allidx // N == 3)
         assert len(by_sample[0]) == pytest.approx(0.8 * 4 * N, abs=1)
-        by_case = np.concatenate([h5[f"splits/by_case/{k}"][...] for k in ("train", "validation", "test")])
+        by_case = np.concatenate(
+            [h5[f"splits/by_case/{k}"][...] for k in ("train", "validation", "test")]
+        )
         assert sorted(by_case) == [0, 1, 2, 4]
 
 
@@ -77,8 +110,11 @@ def test_report_says_whether_the_sweep_had_contact() -> None:
     """The report's sweep sentence reads the dataset's contact column: NaN is no contact."""
     from report.sections.stability import sweep_contact_and_overlap as _sweep_contact_and_overlap
 
-    columns = {"C1": np.array([0.8, 0.9, 5.0]), "phi": np.array([-90.0, -120.0, 180.0]),
-               "self_overlap": np.array([2, 0, 0])}
+    columns = {
+        "C1": np.array([0.8, 0.9, 5.0]),
+        "phi": np.array([-90.0, -120.0, 180.0]),
+        "self_overlap": np.array([2, 0, 0]),
+    }
     failed = np.array([True, False, False])
     without = _sweep_contact_and_overlap({**columns, "contact_force_N": np.full(3, np.nan)}, failed)
     assert "solved without contact" in without

@@ -69,11 +69,12 @@ def test_loss_is_eq2() -> None:
 
 
 def test_training_reduces_the_loss_and_round_trips(dataset_path: Path, tmp_path: Path) -> None:
-    from surrogate.data import load_dataset
-    from surrogate.predict import Surrogate, save_model
+    from fem.dataset import read_dataset
+    from surrogate.checkpoint import save_model
+    from surrogate.predict import Surrogate
     from surrogate.train import train_and_evaluate
 
-    ds = load_dataset(dataset_path)
+    ds = read_dataset(dataset_path)
     config = SurrogateConfig(hidden_layers=2, width=16, batch_size=256, max_epochs=40, patience=40)
     result = train_and_evaluate(ds, config, progress=False)
     losses = [h["validation_loss"] for h in result.history]
@@ -92,12 +93,16 @@ def test_training_reduces_the_loss_and_round_trips(dataset_path: Path, tmp_path:
 
 
 def test_bad_inputs_are_named(dataset_path: Path, tmp_path: Path) -> None:
-    from surrogate.data import DatasetFormatError, load_dataset
-    from surrogate.predict import ExtrapolationWarning, ModelFileError, Surrogate, save_model
+    from fem.dataset import DatasetError, read_dataset
+    from surrogate.checkpoint import save_model
+    from surrogate.exceptions import ExtrapolationWarning, ModelFileError
+    from surrogate.predict import Surrogate
     from surrogate.train import train_and_evaluate
 
-    ds = load_dataset(dataset_path)
-    result = train_and_evaluate(ds, SurrogateConfig(hidden_layers=1, width=4, max_epochs=1), progress=False)
+    ds = read_dataset(dataset_path)
+    result = train_and_evaluate(
+        ds, SurrogateConfig(hidden_layers=1, width=4, max_epochs=1), progress=False
+    )
     save_model(tmp_path / "m", result, ds)
     model = Surrogate.load(tmp_path / "m")
     with pytest.raises(ValueError, match="C1 must be a finite number"):
@@ -117,16 +122,18 @@ def test_bad_inputs_are_named(dataset_path: Path, tmp_path: Path) -> None:
     broken.write_bytes(dataset_path.read_bytes())
     with h5py.File(broken, "a") as h5:
         h5["displacement"][0, 0, 0] = np.nan
-    with pytest.raises(DatasetFormatError, match="NaN"):
-        load_dataset(broken)
+    with pytest.raises(DatasetError, match="NaN"):
+        read_dataset(broken)
     broken.write_bytes(dataset_path.read_bytes())
     with h5py.File(broken, "a") as h5:
         del h5["splits/by_case/validation"]
-    with pytest.raises(DatasetFormatError, match="by_case/validation"):
-        load_dataset(broken)
+    with pytest.raises(DatasetError, match="by_case/validation"):
+        read_dataset(broken)
 
 
-def test_prediction_warns_where_the_sweep_did_not_converge(dataset_path: Path, tmp_path: Path) -> None:
+def test_prediction_warns_where_the_sweep_did_not_converge(
+    dataset_path: Path, tmp_path: Path
+) -> None:
     """A model knows the sweep's failed cases and warns at or below their C1 beside their Φ.
 
     save_model records them; copy_model (the workflow's selection) records them from the
@@ -135,13 +142,17 @@ def test_prediction_warns_where_the_sweep_did_not_converge(dataset_path: Path, t
     import dataclasses
     import warnings
 
+    from fem.dataset import read_dataset
     from studies.architecture import copy_model
-    from surrogate.data import load_dataset
-    from surrogate.predict import ExtrapolationWarning, Surrogate, save_model
+    from surrogate.checkpoint import save_model
+    from surrogate.exceptions import ExtrapolationWarning
+    from surrogate.predict import Surrogate
     from surrogate.train import train_and_evaluate
 
-    ds = load_dataset(dataset_path)
-    result = train_and_evaluate(ds, SurrogateConfig(hidden_layers=1, width=4, max_epochs=1), progress=False)
+    ds = read_dataset(dataset_path)
+    result = train_and_evaluate(
+        ds, SurrogateConfig(hidden_layers=1, width=4, max_epochs=1), progress=False
+    )
     converged = ds.converged.copy()
     converged[[ds.case_index(1.0, -90.0), ds.case_index(2.0, -90.0)]] = False
     failed = dataclasses.replace(ds, converged=converged)
@@ -153,7 +164,9 @@ def test_prediction_warns_where_the_sweep_did_not_converge(dataset_path: Path, t
         model = Surrogate.load(tmp_path / folder)
         assert sorted(model.training_range["unconverged"]) == [[1.0, -90.0, 0.0], [2.0, -90.0, 0.0]]
     with pytest.raises(ValueError, match="not trained on this dataset"):
-        copy_model(tmp_path / "run", tmp_path / "other", dataset=dataclasses.replace(ds, X=ds.X[:10]))
+        copy_model(
+            tmp_path / "run", tmp_path / "other", dataset=dataclasses.replace(ds, X=ds.X[:10])
+        )
     # at the failed angle, and between it and its neighbours (0° and 180°), up to 2 kPa
     for C1, phi in ((2.0, -90.0), (1.5, 270.0), (1.2, -45.0), (2.0, -135.0)):
         with pytest.warns(ExtrapolationWarning, match="did not converge at C1 = 2 kPa, Φ = -90°"):
@@ -169,10 +182,22 @@ def test_selection_takes_the_most_accurate_architecture_within_the_prediction_bu
     from studies.architecture import StudyError, architecture_table, select_architecture
 
     runs = [
-        {"folder": f"{arch}/r{r}", "architecture": arch, "seed": r, "boundary": "network",
-         "split": "by_sample", "validation_error_mm": err + 0.01 * r, "validation_error_domain_mm": err,
-         "train_s": 1.0, "compile_s": 0.1, "epochs": 10, "best_epoch": 9, "parameters": 1}
-        for arch, err in (("2x32", 0.3), ("3x32", 0.2), ("3x128", 0.1)) for r in (0, 1)
+        {
+            "folder": f"{arch}/r{r}",
+            "architecture": arch,
+            "seed": r,
+            "boundary": "network",
+            "split": "by_sample",
+            "validation_error_mm": err + 0.01 * r,
+            "validation_error_domain_mm": err,
+            "train_s": 1.0,
+            "compile_s": 0.1,
+            "epochs": 10,
+            "best_epoch": 9,
+            "parameters": 1,
+        }
+        for arch, err in (("2x32", 0.3), ("3x32", 0.2), ("3x128", 0.1))
+        for r in (0, 1)
     ]
     table = architecture_table(runs)
     assert table["selected_architecture"] == "3x128" and table["prediction_budget_ms"] is None
@@ -190,22 +215,116 @@ def test_selection_takes_the_most_accurate_architecture_within_the_prediction_bu
 
 
 def test_train_command_line_trains_saves_and_names_bad_settings(
-    dataset_path: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
+    dataset_path: Path,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture,
 ) -> None:
+    from surrogate.cli import main
     from surrogate.predict import Surrogate
-    from surrogate.train import main
 
     monkeypatch.setenv("XLA_FLAGS", "")  # main() sets its one-core flags; keep them to this test
     config = tmp_path / "config.yaml"
     config.write_text("surrogate: {hidden_layers: 1, width: 4, batch_size: 64}\n")
-    args = [str(dataset_path), "--config", str(config), "--set", "max_epochs=2", "--set", "activation=silu"]
+    args = [
+        "train",
+        str(dataset_path),
+        "--config",
+        str(config),
+        "--set",
+        "max_epochs=2",
+        "--set",
+        "activation=silu",
+    ]
     assert main([*args, "--out", str(tmp_path / "m")]) == 0
     printed = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert printed["architecture"] == "1x4" and printed["epochs"] == 2
     assert printed["overrides"] == {"max_epochs": 2, "activation": "silu"}
     assert np.isfinite(printed["validation_error_mm"])
     assert Surrogate.load(tmp_path / "m").predict(2.0, 90.0).shape == (N, 3)
+    # ... and the model answers from the command line, as the API does
+    capsys.readouterr()
+    assert (
+        main(
+            [
+                "predict",
+                str(tmp_path / "m"),
+                "--c1",
+                "2",
+                "--phi",
+                "90",
+                "-o",
+                str(tmp_path / "u.npy"),
+            ]
+        )
+        == 0
+    )
+    np.testing.assert_array_equal(
+        np.load(tmp_path / "u.npy"), Surrogate.load(tmp_path / "m").predict(2.0, 90.0)
+    )
+    assert "max |u|" in capsys.readouterr().out
+    assert main(["predict", str(tmp_path / "m"), "--c1", "-1", "--phi", "90"]) == 2
+    assert "C1 must be positive" in capsys.readouterr().err
+    assert main(["predict", str(tmp_path / "nowhere"), "--c1", "1", "--phi", "90"]) == 2
+    assert "cannot read a surrogate model" in capsys.readouterr().err
     assert main([*args, "--set", "activation=sigmoid"]) == 2
     assert "surrogate.activation must be one of" in capsys.readouterr().err
     assert main([*args, "--set", "widthx"]) == 2
     assert "not KEY=VALUE" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("boundary", ["network", "shared", "exact"])
+def test_fast_prediction_is_the_plain_network(
+    dataset_path: Path, tmp_path: Path, boundary: str
+) -> None:
+    """``Surrogate.predict`` gives the plain forward pass of the saved networks at every point.
+
+    The fast path precomputes the first layer's point part, runs in float32 and gathers the
+    points per network; ``model.apply`` is the plain forward pass.
+    """
+    import warnings
+
+    import jax.numpy as jnp
+
+    from fem.dataset import gravity_direction, read_dataset
+    from surrogate.checkpoint import save_model
+    from surrogate.exceptions import ExtrapolationWarning
+    from surrogate.model import apply
+    from surrogate.predict import Surrogate
+    from surrogate.train import train_and_evaluate
+
+    ds = read_dataset(dataset_path)
+    config = SurrogateConfig(
+        hidden_layers=2,
+        width=16,
+        batch_size=256,
+        max_epochs=3,
+        patience=3,
+        boundary=boundary,
+        c1_encoding="log",
+        output_scaling="compliance",
+    )
+    save_model(tmp_path / "m", train_and_evaluate(ds, config, progress=False), ds)
+    model = Surrogate.load(tmp_path / "m")
+    norm = model.normalisation
+    factor = np.ones(N) if model.point_factor is None else model.point_factor
+    for C1, phi, theta in ((1.3, 20.0, 0.0), (4.2, -100.0, 25.0), (2.5, 180.0, -40.0)):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ExtrapolationWarning)  # theta != 0 is outside
+            fast = model.predict(C1, phi, theta)
+        direction = gravity_direction(np.full(N, phi), np.full(N, theta))
+        x = np.concatenate([norm.points(model.X), norm.case(np.full(N, C1), direction)], axis=1)
+        gain = norm.gain(np.full(N, C1)) * factor
+        plain = norm.u_scale * np.asarray(
+            apply(
+                model.params,
+                jnp.asarray(x, jnp.float32),
+                jnp.asarray(model.boundary),
+                jnp.asarray(gain, jnp.float32),
+                model.config,
+            )
+        )
+        assert np.abs(plain).max() > 0
+        np.testing.assert_allclose(fast, plain, rtol=0, atol=1e-5 * np.abs(plain).max())
+        if boundary == "exact":
+            assert np.all(fast[model.boundary] == 0.0)

@@ -87,10 +87,10 @@ def test_small_sweep_dataset_content(small_run: Path) -> None:
 
 
 def test_small_sweep_surrogate_predicts_the_fe(small_run: Path) -> None:
-    from surrogate.data import load_dataset
+    from fem.dataset import read_dataset
     from surrogate.predict import Surrogate
 
-    ds = load_dataset(small_run / "results/dataset/dataset.h5")
+    ds = read_dataset(small_run / "results/dataset/dataset.h5")
     model = Surrogate.load(small_run / "results/surrogate/model")
     total_err = total_norm = 0.0
     for case in range(len(ds.C1)):

@@ -1,4 +1,4 @@
-"""Snakemake adapter: the surrogate's goals measured in one job (FE and surrogate on the same core)."""
+"""Snakemake adapter: the surrogate's goals measured in one job, FE and surrogate on one core."""
 
 import json
 import logging
@@ -6,18 +6,24 @@ from pathlib import Path
 
 from fem.parameters import SolverSettings
 from fem.sweep import clinical_cases
+from studies.results import write_json
 from studies.surrogate_benchmark import format_benchmark, run_benchmark
-from surrogate.data import write_json
 
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
 
 settings = SolverSettings.from_config(
-    {"fe": snakemake.params.fe, "material": snakemake.params.material,
-     "mesh": {"fixed": snakemake.params.fixed}}
+    {
+        "fe": snakemake.params.fe,
+        "material": snakemake.params.material,
+        "mesh": {"fixed": snakemake.params.fixed},
+    }
 )
 cases = clinical_cases(snakemake.params.clinical)
 bench = run_benchmark(
-    Path(snakemake.input.model).parent, snakemake.input.mesh, cases, settings,
+    Path(snakemake.input.model).parent,
+    snakemake.input.mesh,
+    cases,
+    settings,
     json.loads(Path(snakemake.input.table).read_text()),
     json.loads(Path(snakemake.input.clinical).read_text()),
     repeats=snakemake.params.repeats,

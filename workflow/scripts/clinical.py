@@ -1,4 +1,4 @@
-"""Snakemake adapter: the paper's Table 3 for the clinical cases (by-sample and by-case models), error fields as XDMF."""
+"""Snakemake adapter: the paper's Table 3 for the clinical cases, and their error fields as XDMF."""
 
 import json
 import logging
@@ -8,19 +8,26 @@ from surrogate.runtime import configure_cpu
 
 configure_cpu()
 
+from fem.dataset import read_dataset  # noqa: E402
+from studies.results import write_json  # noqa: E402
 from studies.surrogate_evaluation import evaluate_clinical  # noqa: E402
-from surrogate.data import load_dataset, write_json  # noqa: E402
 from surrogate.predict import Surrogate  # noqa: E402
 
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
 
-dataset = load_dataset(snakemake.input.dataset)
-models = {"by_sample": Surrogate.load(snakemake.input.model),
-          "by_case": Surrogate.load(snakemake.input.model_by_case)}
+dataset = read_dataset(snakemake.input.dataset)
+models = {
+    "by_sample": Surrogate.load(snakemake.input.model),
+    "by_case": Surrogate.load(snakemake.input.model_by_case),
+}
 fe_wall = {}
 for path in snakemake.input.summaries:
     summary = json.loads(Path(path).read_text())
     fe_wall[summary["case"]] = summary["wall_s"]["solve"]
-fields = {(Path(p).parent.name, Path(p).stem): p for p in snakemake.output.fields if p.endswith(".xdmf")}
-result = evaluate_clinical(models, dataset, snakemake.params.clinical, fe_wall, snakemake.input.mesh, fields)
+fields = {
+    (Path(p).parent.name, Path(p).stem): p for p in snakemake.output.fields if p.endswith(".xdmf")
+}
+result = evaluate_clinical(
+    models, dataset, snakemake.params.clinical, fe_wall, snakemake.input.mesh, fields
+)
 write_json(snakemake.output.table, result)

@@ -6,14 +6,15 @@ from surrogate.runtime import configure_cpu
 
 configure_cpu()
 
+from fem.dataset import read_dataset  # noqa: E402
+from studies.results import write_json  # noqa: E402
 from studies.surrogate_evaluation import evaluate_extrapolation  # noqa: E402
-from surrogate.data import load_dataset, write_json  # noqa: E402
 from surrogate.predict import Surrogate  # noqa: E402
 
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
 
-dataset = load_dataset(snakemake.input.dataset)
+dataset = read_dataset(snakemake.input.dataset)
 models = {"by_sample": Surrogate.load(snakemake.input.model),
           "by_case": Surrogate.load(snakemake.input.model_by_case)}
-cases = list(zip(snakemake.input.summaries, snakemake.input.points))
+cases = list(zip(snakemake.input.summaries, snakemake.input.points, strict=True))
 write_json(snakemake.output[0], evaluate_extrapolation(models, dataset, cases))

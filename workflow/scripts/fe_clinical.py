@@ -1,5 +1,7 @@
-"""Snakemake adapter: the clinical benchmark (time, factorisation equivalents, fixed-step
-baseline, accuracy against the reference) at the workflow's default discretisation."""
+"""Snakemake adapter: the clinical benchmark at the workflow's default discretisation.
+
+Time, factorisation equivalents, the fixed-step baseline, accuracy against the reference.
+"""
 
 import json
 import logging
@@ -23,6 +25,9 @@ result = clinical_benchmark(
     baseline_steps=snakemake.params.study["baseline_fixed_steps"],
     repeats=snakemake.params.study["repeats"],
 )
-result["labels"] = {case.id: c.get("label", case.id) for case, c in zip(cases, snakemake.params.clinical)}
+clinical = snakemake.params.clinical
+result["labels"] = {
+    case.id: c.get("label", case.id) for case, c in zip(cases, clinical, strict=True)
+}
 with open(snakemake.output[0], "w") as fh:
     json.dump(result, fh, indent=2, default=float)

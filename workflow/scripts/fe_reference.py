@@ -1,4 +1,4 @@
-"""Snakemake adapter: solve one clinical case on the reference discretisation and store the field."""
+"""Snakemake adapter: solve one clinical case on the reference discretisation, store the field."""
 
 import logging
 
@@ -12,7 +12,9 @@ logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
 logging.info("BLAS on %d threads: %s", snakemake.threads, limit_blas_threads(snakemake.threads))
 
 ref = snakemake.params.reference
-variant = Variant(MeshSpec.from_mapping(ref["mesh"]), ref["element"], ref["solver"], ref["quadrature_degree"])
+variant = Variant(
+    MeshSpec.from_mapping(ref["mesh"]), ref["element"], ref["solver"], ref["quadrature_degree"]
+)
 w = snakemake.wildcards
 solve_reference(
     snakemake.input.mesh,

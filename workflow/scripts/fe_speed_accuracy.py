@@ -1,5 +1,7 @@
-"""Snakemake adapter: gather the speed-accuracy variants, mark the Pareto front and the
-cheapest variant meeting the accuracy target."""
+"""Snakemake adapter: gather the speed-accuracy variants and mark their Pareto front.
+
+Also the cheapest variant meeting the accuracy target.
+"""
 
 import json
 import logging

@@ -10,4 +10,9 @@ logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
 spec = MeshSpec.from_id(snakemake.wildcards.fe_mesh)
 mesh = dict(snakemake.params.mesh)
 mesh["size"] = {**mesh.get("size", {}), **spec.size_mapping()}
-make_mesh(MeshConfig.from_mapping(mesh), snakemake.output.xdmf, snakemake.output.quality, snakemake.output.png)
+make_mesh(
+    MeshConfig.from_mapping(mesh),
+    snakemake.output.xdmf,
+    snakemake.output.quality,
+    snakemake.output.png,
+)

@@ -1,17 +1,20 @@
-"""Snakemake adapter: the model used downstream is the study's selected run (copied, not retrained),
-with the dataset's failed cases recorded so that it warns where no FE solution backs it."""
+"""Snakemake adapter: the model used downstream is the study's selected run, copied.
+
+It is not retrained; the dataset's failed cases are recorded with it so that it warns where
+no FE solution backs it.
+"""
 
 import json
 import logging
 from pathlib import Path
 
+from fem.dataset import read_dataset
 from studies.architecture import copy_model
-from surrogate.data import load_dataset
 
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
 
 table = json.loads(Path(snakemake.input.table).read_text())
 copy_model(table["selected_run"], Path(snakemake.output.model).parent,
-           dataset=load_dataset(snakemake.input.dataset))
+           dataset=read_dataset(snakemake.input.dataset))
 logging.getLogger("select_model").info(
     "selected %s: %s", table["selected_architecture"], table["selected_run"])

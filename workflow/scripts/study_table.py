@@ -1,16 +1,18 @@
-"""Snakemake adapter: the architecture study's Table 2, the selection, and one-core prediction times."""
+"""Snakemake adapter: the architecture study's Table 2, the selection, one-core prediction times."""
 
 import logging
 
 from studies.architecture import architecture_table, read_run, select_architecture
+from studies.results import write_json
 from studies.timing import time_on_one_core
-from surrogate.data import write_json
 
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
 log = logging.getLogger("study_table")
 
 table = architecture_table(read_run(path) for path in snakemake.input.runs)
-queries = [(c["C1"], c["phi"], c.get("theta", 0.0)) for c in snakemake.params.clinical] or [(1.0, 0.0, 0.0)]
+queries = [(c["C1"], c["phi"], c.get("theta", 0.0)) for c in snakemake.params.clinical] or [
+    (1.0, 0.0, 0.0)
+]
 best_runs = {arch: row["best_run"] for arch, row in table["rows"].items()}
 timing = time_on_one_core(list(best_runs.values()), queries, repeats=snakemake.params.repeats)
 for arch, folder in best_runs.items():
@@ -19,7 +21,13 @@ table["timing"] = {k: v for k, v in timing.items() if k != "models"}
 select_architecture(table, snakemake.params.budget_ms)
 write_json(snakemake.output.table, table)
 for arch, row in table["rows"].items():
-    log.info("%s: %.4f ± %.4f mm, %.0f ± %.0f s, predict %.3f ms", arch,
-             row["validation_error_mm"]["mean"], row["validation_error_mm"]["sd"],
-             row["train_s"]["mean"], row["train_s"]["sd"], row["predict_one_core"]["api"]["median_ms"])
+    log.info(
+        "%s: %.4f ± %.4f mm, %.0f ± %.0f s, predict %.3f ms",
+        arch,
+        row["validation_error_mm"]["mean"],
+        row["validation_error_mm"]["sd"],
+        row["train_s"]["mean"],
+        row["train_s"]["sd"],
+        row["predict_one_core"]["api"]["median_ms"],
+    )
 log.info("selected %s (%s)", table["selected_architecture"], table["selected_run"])

@@ -1,4 +1,4 @@
-"""Snakemake adapter: one training run of the surrogate (a study repeat, a variant or the by-case model)."""
+"""Snakemake adapter: one training run (a study repeat, a variant or the by-case model)."""
 
 import json
 import logging
@@ -8,9 +8,9 @@ from surrogate.runtime import configure_cpu
 
 configure_cpu(single_thread=snakemake.threads == 1)  # before JAX starts: one core per job
 
+from fem.dataset import read_dataset  # noqa: E402
+from surrogate.checkpoint import save_model  # noqa: E402
 from surrogate.config import SurrogateConfig  # noqa: E402
-from surrogate.data import load_dataset  # noqa: E402
-from surrogate.predict import save_model  # noqa: E402
 from surrogate.train import train_and_evaluate  # noqa: E402
 
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
@@ -20,11 +20,15 @@ if hasattr(wildcards, "arch"):
     architecture = wildcards.arch
 else:  # variants and the by-case model use the architecture the study selected
     architecture = json.loads(Path(snakemake.input.table).read_text())["selected_architecture"]
-config = SurrogateConfig.from_mapping(dict(snakemake.params.surrogate)).with_architecture(architecture)
+config = SurrogateConfig.from_mapping(dict(snakemake.params.surrogate)).with_architecture(
+    architecture
+)
 # repeat r trains with seed + r: the same seeds in the study and in every variant
 config = config.replace(seed=config.seed + int(getattr(wildcards, "repeat", 0)))
 
-dataset = load_dataset(snakemake.input.dataset)
-holdout = [dataset.case_index(c["C1"], c["phi"], c.get("theta", 0.0)) for c in snakemake.params.holdout]
+dataset = read_dataset(snakemake.input.dataset)
+holdout = [
+    dataset.case_index(c["C1"], c["phi"], c.get("theta", 0.0)) for c in snakemake.params.holdout
+]
 result = train_and_evaluate(dataset, config, progress=False, holdout=holdout or None)
 save_model(Path(snakemake.output.model).parent, result, dataset)

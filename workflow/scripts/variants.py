@@ -1,11 +1,11 @@
-"""Snakemake adapter: each variant of the surrogate settings against the selected architecture's runs."""
+"""Snakemake adapter: each variant of the surrogate settings against the selected runs."""
 
 import json
 import logging
 from pathlib import Path
 
 from studies.architecture import compare_variants, read_run
-from surrogate.data import write_json
+from studies.results import write_json
 
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
 

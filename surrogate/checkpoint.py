@@ -1,0 +1,201 @@
+"""A trained surrogate on disk: save a model folder, and load and check it.
+
+A model folder holds ``model.json`` (format version, hyperparameters, normalisation,
+training range, metrics), ``params.npz`` (weights as named arrays, plus the material
+points, their boundary flags, mesh node indices and, in the exact Dirichlet mode, the
+factor φ) and ``history.json`` (the training history). Nothing is pickled; loading
+rebuilds the network skeleton from the JSON first and checks every array against it.
+This module is the format's one owner: the workflow and the studies read model folders
+through it.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from fem.dataset import Dataset
+from surrogate.config import SurrogateConfig
+from surrogate.data import Normalisation
+from surrogate.exceptions import ModelFileError, SurrogateConfigError
+from surrogate.model import Params, from_arrays, to_arrays
+
+if TYPE_CHECKING:  # training code is not needed to save or load a model
+    from surrogate.train import TrainResult
+
+FORMAT_VERSION = 2
+MODEL_JSON = "model.json"
+PARAMS_NPZ = "params.npz"
+HISTORY_JSON = "history.json"
+MODEL_FILES = (MODEL_JSON, PARAMS_NPZ, HISTORY_JSON)
+
+
+def write_json(path: str | Path, payload: dict[str, Any]) -> None:
+    """Write JSON (indented, trailing newline) atomically: a temporary file renamed into place."""
+    target = Path(path)
+    tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
+    tmp.write_text(json.dumps(payload, indent=2) + "\n")
+    os.replace(tmp, target)
+
+
+def training_range(ds: Dataset, cases: np.ndarray) -> dict[str, Any]:
+    """The C1, Φ and θ values of the given (training) cases.
+
+    ``unconverged`` lists the (C1, Φ, θ) of the dataset's cases whose FE solve failed:
+    holes in the range, where no FE solution backs a prediction.
+    """
+    return {
+        "C1_kPa": [float(ds.C1[cases].min()), float(ds.C1[cases].max())],
+        "phi_deg": sorted({float(v) for v in ds.phi[cases]}),
+        "theta_deg": sorted({float(v) for v in ds.theta[cases]}),
+        "unconverged": unconverged_cases(ds),
+    }
+
+
+def unconverged_cases(ds: Dataset) -> list[list[float]]:
+    """[C1 (kPa), Φ, θ (degrees)] of every case of ``ds`` whose FE solve failed."""
+    return [[float(ds.C1[i]), float(ds.phi[i]), float(ds.theta[i])]
+            for i in np.flatnonzero(~ds.converged)]
+
+
+def save_model(folder: str | Path, result: TrainResult, ds: Dataset) -> Path:
+    """Write a trained surrogate (and its training history) to ``folder``.
+
+    Returns:
+        The path of ``model.json``.
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    cases = result.train_cases if result.train_cases is not None else np.flatnonzero(ds.converged)
+    extra = {}
+    if result.point_factor is not None:
+        extra["points_factor"] = result.point_factor
+    node_index = ds.node_index if ds.node_index is not None else np.arange(ds.n_points)
+    np.savez(
+        folder / PARAMS_NPZ,
+        points_X=ds.X,
+        points_boundary=ds.boundary,
+        points_node_index=node_index,
+        **extra,
+        **to_arrays(result.params),
+    )
+    meta = {
+        "format_version": FORMAT_VERSION,
+        "config": result.config.as_dict(),
+        "normalisation": result.normalisation.as_dict(),
+        "n_points": int(ds.n_points),
+        "training_range": training_range(ds, cases),
+        "held_out_cases": [
+            str(ds.ids[c])
+            for c in (result.held_out_cases if result.held_out_cases is not None else [])
+        ],
+        "metrics": result.summary(),
+        "inputs": ["x", "y", "z", "C1 (encoded, scaled)", "g_x/|g|", "g_y/|g|", "g_z/|g|"],
+        "outputs": ["u_x", "u_y", "u_z (mm)"],
+    }
+    path = folder / MODEL_JSON
+    write_json(folder / HISTORY_JSON, {"summary": result.summary(), "history": result.history})
+    write_json(path, meta)  # model.json last: it marks the folder complete
+    return path
+
+
+@dataclass(frozen=True)
+class Checkpoint:
+    """What a model folder holds, checked against its architecture.
+
+    Attributes:
+        config: hyperparameters.
+        params: network weights.
+        normalisation: input/output scaling.
+        X: material points (N, 3), m.
+        boundary: boundary flags (N,).
+        training_range: the C1 / Φ / θ values it was trained on, and the failed cases.
+        point_factor: per-point output factor φ (exact Dirichlet mode), else None.
+        node_index: index of each point in the mesh file (N,), or None.
+        metrics: training metrics as saved.
+        held_out: ids of cases kept out of its training and validation.
+    """
+
+    config: SurrogateConfig
+    params: Params
+    normalisation: Normalisation
+    X: np.ndarray
+    boundary: np.ndarray
+    training_range: dict[str, Any]
+    point_factor: np.ndarray | None = None
+    node_index: np.ndarray | None = None
+    metrics: dict[str, Any] = field(default_factory=dict)
+    held_out: list[str] = field(default_factory=list)
+
+
+def load_checkpoint(folder: str | Path) -> Checkpoint:
+    """Load a model folder written by :func:`save_model` (or the path of its ``model.json``).
+
+    Raises:
+        ModelFileError: if files are missing or the weights do not fit the architecture.
+    """
+    folder = Path(folder)
+    if folder.suffix == ".json":
+        folder = folder.parent
+    try:
+        meta = json.loads((folder / MODEL_JSON).read_text())
+        with np.load(folder / PARAMS_NPZ, allow_pickle=False) as npz:
+            arrays = {k: npz[k] for k in npz.files}
+    except (OSError, json.JSONDecodeError, ValueError) as err:
+        raise ModelFileError(f"cannot read a surrogate model from {folder}: {err}") from None
+    try:
+        config = SurrogateConfig.from_mapping(meta["config"])
+        points = {k: arrays.pop(k) for k in list(arrays) if k.startswith("points_")}
+        params = from_arrays(arrays, config)
+        norm = Normalisation.from_dict(meta["normalisation"])
+        X, boundary = points["points_X"], points["points_boundary"]
+    except (KeyError, TypeError, ValueError, SurrogateConfigError) as err:
+        raise ModelFileError(f"{folder}: {err}") from None
+    if X.shape != (meta.get("n_points", X.shape[0]), 3) or boundary.shape != (X.shape[0],):
+        raise ModelFileError(f"{folder}: material points do not match n_points")
+    return Checkpoint(
+        config,
+        params,
+        norm,
+        X,
+        boundary,
+        meta.get("training_range", {}),
+        point_factor=points.get("points_factor"),
+        node_index=points.get("points_node_index"),
+        metrics=meta.get("metrics") or {},
+        held_out=list(meta.get("held_out_cases") or []),
+    )
+
+
+def read_model_card(folder: str | Path) -> dict[str, Any]:
+    """The ``model.json`` of a model folder (hyperparameters, training range, metrics).
+
+    Raises:
+        ModelFileError: if it is missing or not JSON.
+    """
+    return _read(Path(folder) / MODEL_JSON)
+
+
+def read_history(folder: str | Path) -> dict[str, Any]:
+    """The ``history.json`` of a model folder: ``{"summary": ..., "history": [...]}``.
+
+    Raises:
+        ModelFileError: if it is missing, not JSON or lacks either part.
+    """
+    history = _read(Path(folder) / HISTORY_JSON)
+    missing = [k for k in ("summary", "history") if k not in history]
+    if missing:
+        raise ModelFileError(f"{Path(folder) / HISTORY_JSON} lacks {', '.join(missing)}")
+    return history
+
+
+def _read(path: Path) -> dict[str, Any]:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as err:
+        raise ModelFileError(f"cannot read {path}: {err}") from None

@@ -1,0 +1,125 @@
+"""The surrogate's command line: predict one setup, or train one model outside the workflow.
+
+Examples::
+
+    python -m surrogate.cli predict results/surrogate/model --c1 1.0 --phi 180 -o u.xdmf
+    python -m surrogate.cli train results/dataset/dataset.h5 --set activation=tanh --out /tmp/m
+
+``predict`` prints the largest and mean displacement and writes the field with ``-o``:
+``.npy`` (the (N, 3) array in mm) or ``.xdmf`` (on the mesh of ``--mesh``, for ParaView).
+``train`` trains the ``surrogate`` settings of ``--config`` with the ``--set`` overrides on
+one core, saves the model with ``--out`` and prints one JSON line (validation error, best
+epoch, training time). Bad input exits with status 2 and a message naming it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from fem.dataset import DatasetError
+
+
+def predict(args: argparse.Namespace) -> int:
+    """``predict``: one whole-field prediction, printed and optionally written."""
+    from surrogate.exceptions import SurrogateError
+    from surrogate.fields import write_prediction_xdmf
+    from surrogate.predict import Surrogate
+
+    logging.captureWarnings(True)
+    output = Path(args.output) if args.output else None
+    if output is not None and output.suffix not in (".npy", ".xdmf"):
+        print(f"error: --output {output} must end in .npy or .xdmf", file=sys.stderr)
+        return 2
+    try:
+        model = Surrogate.load(args.model)
+        u = model.predict(args.c1, args.phi, args.theta)
+        if output is not None and output.suffix == ".xdmf":
+            write_prediction_xdmf(output, args.mesh, model, u)
+    except (SurrogateError, ValueError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    norms = np.linalg.norm(u, axis=1)
+    print(f"{u.shape[0]} points: max |u| = {norms.max():.3f} mm, mean |u| = {norms.mean():.3f} mm")
+    if output is not None and output.suffix == ".npy":
+        np.save(output, u)
+    return 0
+
+
+def train(args: argparse.Namespace) -> int:
+    """``train``: one model with the config's settings and the overrides, on one core."""
+    import yaml
+
+    from surrogate.runtime import configure_cpu
+
+    configure_cpu(single_thread=True)  # before JAX's first computation: one core
+    from fem.dataset import read_dataset
+    from surrogate.checkpoint import save_model
+    from surrogate.config import SurrogateConfig
+    from surrogate.exceptions import SurrogateError
+    from surrogate.train import train_and_evaluate
+
+    try:
+        overrides = {}
+        for item in args.set:
+            key, sep, value = item.partition("=")
+            if not sep:
+                raise SurrogateError(f"--set {item!r} is not KEY=VALUE")
+            overrides[key.strip()] = yaml.safe_load(value)
+        with open(args.config) as fh:
+            base = (yaml.safe_load(fh) or {}).get("surrogate") or {}
+        config = SurrogateConfig.from_mapping({**base, **overrides})
+        dataset = read_dataset(args.dataset)
+        result = train_and_evaluate(dataset, config, progress=args.progress)
+    except (OSError, SurrogateError, DatasetError, ValueError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    if args.out:
+        save_model(args.out, result, dataset)
+    print(json.dumps({"overrides": overrides, "architecture": config.architecture,
+                      "validation_error_mm": result.validation_error_mm,
+                      "best_epoch": result.best_epoch, "epochs": len(result.history),
+                      "train_s": result.train_s}))
+    return 0
+
+
+def parser() -> argparse.ArgumentParser:
+    """The argument parser with the ``predict`` and ``train`` subcommands."""
+    top = argparse.ArgumentParser(prog="python -m surrogate.cli",
+                                  description=__doc__.splitlines()[0])
+    sub = top.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("predict", help="predict the displacement of one setup")
+    p.add_argument("model", help="model folder (or its model.json)")
+    p.add_argument("--c1", type=float, required=True, help="C1 in kPa")
+    p.add_argument("--phi", type=float, required=True, help="gravity elevation angle, degrees")
+    p.add_argument("--theta", type=float, default=0.0, help="gravity azimuth angle, degrees")
+    p.add_argument("-o", "--output",
+                   help="write the displacement: .npy (array, mm) or .xdmf (on the mesh)")
+    p.add_argument("--mesh", default="results/mesh/mesh.xdmf", help="mesh for an .xdmf output")
+    p.set_defaults(run=predict)
+    t = sub.add_parser("train", help="train one model outside the workflow")
+    t.add_argument("dataset", help="the sweep's HDF5 dataset")
+    t.add_argument("--config", default="config.yaml",
+                   help="config whose `surrogate` section is the base")
+    t.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override one surrogate setting (YAML value), e.g. lr_schedule=cosine")
+    t.add_argument("--out", help="save the model in this folder")
+    t.add_argument("--progress", action="store_true", help="show a progress bar")
+    t.set_defaults(run=train)
+    return top
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command-line entry point; returns the exit status."""
+    args = parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    return args.run(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
