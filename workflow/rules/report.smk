@@ -22,7 +22,7 @@ rule report:
     output:
         html=REPORT,
     params:
-        clinical=config["clinical"],
+        clinical=CONFIG.section("clinical"),
     log:
         "results/logs/report.log",
     threads: 1
