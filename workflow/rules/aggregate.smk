@@ -21,5 +21,7 @@ rule aggregate:
     threads: 1
     resources:
         mem_mb=4000,
+    conda:
+        ENV
     script:
         "../scripts/aggregate.py"

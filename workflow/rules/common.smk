@@ -6,6 +6,9 @@ from studies.config import ConfigError, WorkflowConfig
 from studies.fe_variants import MESH_ID_PATTERN, VARIANT_ID_PATTERN, Variant
 from fem.sweep import ANGLE_PATTERN, C1_PATTERN
 
+# Every job's software under --use-conda (the env file says how it relates to `make setup`).
+ENV = "../envs/fenicsx-jax.yaml"
+
 try:
     CONFIG = WorkflowConfig.from_mapping(config, workflow.source_path("../schemas/config.schema.yaml"))
 except ConfigError as err:

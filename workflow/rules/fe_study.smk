@@ -27,6 +27,8 @@ rule fe_study_mesh:
     threads: 1
     resources:
         mem_mb=4000,
+    conda:
+        ENV
     script:
         "../scripts/fe_study_mesh.py"
 
@@ -48,6 +50,8 @@ rule fe_reference:
     threads: all_cores()
     resources:
         mem_mb=16000,
+    conda:
+        ENV
     script:
         "../scripts/fe_reference.py"
 
@@ -70,6 +74,8 @@ rule fe_clinical:
     threads: all_cores()
     resources:
         mem_mb=4000,
+    conda:
+        ENV
     script:
         "../scripts/fe_clinical.py"
 
@@ -90,6 +96,8 @@ rule fe_variant:
     threads: all_cores()  # timed: run alone (see fe_clinical)
     resources:
         mem_mb=8000,
+    conda:
+        ENV
     script:
         "../scripts/fe_variant.py"
 
@@ -106,6 +114,8 @@ rule fe_speed_accuracy:
     log:
         "results/logs/fe_study/speed_accuracy.log",
     threads: 1
+    conda:
+        ENV
     script:
         "../scripts/fe_speed_accuracy.py"
 
@@ -123,5 +133,7 @@ rule fe_stability:
     threads: 1
     resources:
         mem_mb=4000,
+    conda:
+        ENV
     script:
         "../scripts/fe_stability.py"

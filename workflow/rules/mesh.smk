@@ -20,5 +20,7 @@ rule mesh:
     threads: 1
     resources:
         mem_mb=2000,
+    conda:
+        ENV
     script:
         "../scripts/mesh.py"

@@ -28,5 +28,7 @@ rule report:
     threads: 1
     resources:
         mem_mb=4000,
+    conda:
+        ENV
     script:
         "../scripts/report.py"

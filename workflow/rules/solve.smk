@@ -21,6 +21,8 @@ rule solve:
     threads: 1
     resources:
         mem_mb=3000,
+    conda:
+        ENV
     script:
         "../scripts/solve_case.py"
 

@@ -25,6 +25,8 @@ rule train_study_run:
     threads: 1
     resources:
         mem_mb=4000,
+    conda:
+        ENV
     script:
         "../scripts/train_run.py"
 
@@ -46,6 +48,8 @@ rule architecture_study:
     threads: 2
     resources:
         mem_mb=2000,
+    conda:
+        ENV
     script:
         "../scripts/study_table.py"
 
@@ -64,6 +68,8 @@ rule select_model:
     threads: 1
     resources:
         mem_mb=500,
+    conda:
+        ENV
     script:
         "../scripts/select_model.py"
 
@@ -87,6 +93,8 @@ rule train_variant_run:
     threads: 1
     resources:
         mem_mb=4000,
+    conda:
+        ENV
     script:
         "../scripts/train_run.py"
 
@@ -103,6 +111,8 @@ rule variants:
     threads: 1
     resources:
         mem_mb=500,
+    conda:
+        ENV
     script:
         "../scripts/variants.py"
 
@@ -127,6 +137,8 @@ rule train_by_case:
     threads: 1
     resources:
         mem_mb=4000,
+    conda:
+        ENV
     script:
         "../scripts/train_run.py"
 
@@ -148,6 +160,8 @@ rule clinical:
     threads: 1
     resources:
         mem_mb=2000,
+    conda:
+        ENV
     script:
         "../scripts/clinical.py"
 
@@ -168,6 +182,8 @@ rule extrapolation:
     threads: 1
     resources:
         mem_mb=2000,
+    conda:
+        ENV
     script:
         "../scripts/extrapolation.py"
 
@@ -194,5 +210,7 @@ rule surrogate_benchmark:
     threads: 2
     resources:
         mem_mb=4000,
+    conda:
+        ENV
     script:
         "../scripts/benchmark.py"
