@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import copy
 import math
+import sys
 from collections.abc import Callable
 from typing import Any
 
@@ -413,3 +414,33 @@ def test_the_schema_bounds_are_finite_numbers() -> None:
 def test_sweep_cases_of_the_typed_config_are_the_sweeps() -> None:
     raw = read("tests/config.yaml")
     assert WorkflowConfig.from_mapping(raw).cases == tuple(sweep_cases(raw["sweep"]))
+
+
+def test_the_conda_route_pins_the_versions_of_make_setup() -> None:
+    """The --use-conda environment names the versions that `make setup` installs.
+
+    workflow/envs/fenicsx-jax.yaml against requirements.lock, constraints.txt and the Debian
+    FEniCSx stack this suite runs on.
+    """
+    import dolfinx
+    import mpi4py
+    import petsc4py
+
+    env = yaml.safe_load((REPO / "workflow/envs/fenicsx-jax.yaml").read_text())
+    conda = dict(d.split("=")[:2] for d in env["dependencies"] if isinstance(d, str) and "=" in d)
+    pip = dict(p.split("==") for p in next(d["pip"] for d in env["dependencies"]
+                                           if isinstance(d, dict)))
+    pins = {}
+    for name in ("requirements.lock", "constraints.txt"):
+        for line in (REPO / name).read_text().splitlines():
+            if "==" in line and not line.startswith("#"):
+                package, version = line.split("==")
+                pins[package.lower()] = version.strip()
+    for package, version in pip.items():
+        assert pins[package.lower()] == version, package
+    for package in ("numpy", "scipy", "h5py"):
+        assert conda[package] == pins[package], package
+    assert conda["fenics-dolfinx"] == dolfinx.__version__
+    assert conda["mpi4py"] == mpi4py.__version__
+    assert petsc4py.__version__.startswith(conda["petsc4py"] + ".")
+    assert conda["python"] == "{}.{}".format(*sys.version_info[:2])
