@@ -110,8 +110,8 @@ def validated(config: Mapping[str, Any], schema_path: str | Path = SCHEMA_PATH) 
     if problems:
         raise ConfigError(*problems)
     filled = copy.deepcopy(dict(config))
-    # the defaults are the schema's own objects: a fresh schema for every fill
-    _with_defaults(jsonschema.Draft202012Validator)(copy.deepcopy(schema)).validate(filled)
+    # the defaults filled in are the schema's own objects: this call's schema, used once
+    _with_defaults(jsonschema.Draft202012Validator)(schema).validate(filled)
     return canonical(filled)
 
 
