@@ -1,5 +1,6 @@
 # Breast biomechanics under gravity: mesh -> FE sweep -> HDF5 dataset -> surrogate -> report.
-# Wiring only: the stages live in workflow/rules, the science in fem/, meshes/, surrogate/.
+# Wiring only: the stages live in workflow/rules, the config is parsed once by studies/config.py,
+# the science is in meshes/, fem/, surrogate/ and studies/.
 from snakemake.utils import min_version
 
 min_version("9.0")

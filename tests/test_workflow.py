@@ -19,7 +19,7 @@ def test_full_config_plans_688_solves(tmp_path: Path) -> None:
     assert run.returncode == 0, run.stderr
     counts = job_counts(run.stdout + run.stderr)
     assert counts["solve"] == 688
-    assert counts["mesh"] == counts["aggregate"] == counts["train"] == counts["report"] == 1
+    assert counts["mesh"] == counts["aggregate"] == counts["select_model"] == counts["report"] == 1
 
 
 def test_one_case_path_runs_only_that_case(tmp_path: Path) -> None:

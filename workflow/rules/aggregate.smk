@@ -1,3 +1,6 @@
+# The sweep's cases gathered into one HDF5 dataset with its reproducible splits.
+
+
 rule aggregate:
     input:
         summaries=case_files("summary.json"),
@@ -5,12 +8,12 @@ rule aggregate:
     output:
         DATASET,
     params:
-        dataset=config["dataset"],
+        dataset=CONFIG.section("dataset"),
         # the by-case split holds these setups out as test cases
-        clinical=config["clinical"],
+        clinical=CONFIG.section("clinical"),
         # Provenance: only the sections the data depend on, so that e.g. a surrogate
         # setting does not rebuild the dataset.
-        provenance={key: config[key] for key in ("mesh", "material", "fe", "sweep", "dataset")},
+        provenance=CONFIG.sections_of("mesh", "material", "fe", "sweep", "dataset"),
     log:
         "results/logs/aggregate.log",
     benchmark:
@@ -18,5 +21,7 @@ rule aggregate:
     threads: 1
     resources:
         mem_mb=4000,
+    conda:
+        ENV
     script:
         "../scripts/aggregate.py"

@@ -1,25 +1,18 @@
 # Geometry and meshing: the parametric breast, or a user's surface / volume mesh.
-from meshes.config import MeshConfig
-from meshes.exceptions import GeometryError, MeshInputError
-
-try:
-    MESH_CONFIG = MeshConfig.from_mapping(config["mesh"])
-except (GeometryError, MeshInputError, ValueError) as err:
-    raise WorkflowError(f"invalid configuration: {err}") from None
 
 
 rule mesh:
     input:
         # an imported geometry (and any surface a boundary rule measures from) is an input,
         # so that editing the file rebuilds the mesh; the parametric source has none
-        sources=MESH_CONFIG.input_files(),
+        sources=CONFIG.mesh.input_files(),
     output:
         xdmf=MESH,
         h5=MESH.replace(".xdmf", ".h5"),
         quality="results/mesh/quality.json",
         png="results/mesh/mesh.png",
     params:
-        mesh=config["mesh"],
+        mesh=CONFIG.section("mesh"),
     log:
         "results/logs/mesh.log",
     benchmark:
@@ -27,5 +20,7 @@ rule mesh:
     threads: 1
     resources:
         mem_mb=2000,
+    conda:
+        ENV
     script:
         "../scripts/mesh.py"

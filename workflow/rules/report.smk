@@ -22,11 +22,13 @@ rule report:
     output:
         html=REPORT,
     params:
-        clinical=config["clinical"],
+        clinical=CONFIG.section("clinical"),
     log:
         "results/logs/report.log",
     threads: 1
     resources:
         mem_mb=4000,
+    conda:
+        ENV
     script:
         "../scripts/report.py"

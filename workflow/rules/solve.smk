@@ -1,3 +1,6 @@
+# One FE case: the breast under gravity at one (C1, Phi, theta), in its own folder.
+
+
 rule solve:
     input:
         mesh=MESH,
@@ -7,9 +10,10 @@ rule solve:
         fields=f"{CASE_DIR}/fields.xdmf",
         fields_h5=f"{CASE_DIR}/fields.h5",
     params:
-        fe=FE_SOLVE,
-        material=config["material"],
-        fixed=config["mesh"]["fixed"],
+        # `fe` with a `chest` contact obstacle written out: the job needs no mesh section
+        fe=CONFIG.solve_fe,
+        material=CONFIG.section("material"),
+        fixed=CONFIG.section("mesh", "fixed"),
     log:
         "results/logs/solve/c1={c1}_phi={phi}_theta={theta}.log",
     benchmark:
@@ -17,6 +21,8 @@ rule solve:
     threads: 1
     resources:
         mem_mb=3000,
+    conda:
+        ENV
     script:
         "../scripts/solve_case.py"
 

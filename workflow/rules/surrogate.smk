@@ -7,8 +7,8 @@ wildcard_constraints:
     variant=r"[A-Za-z][A-Za-z0-9_]*",
 
 
-# One job per (architecture, repeat): one core each, so `-j2` runs two at once.
-rule study_run:
+# One training per (architecture, repeat): one core each, so `-j2` runs two at once.
+rule train_study_run:
     input:
         dataset=DATASET,
     output:
@@ -16,7 +16,7 @@ rule study_run:
         params=f"{STUDY_DIR}/{{arch}}/r{{repeat}}/params.npz",
         history=f"{STUDY_DIR}/{{arch}}/r{{repeat}}/history.json",
     params:
-        surrogate=surrogate_settings().as_dict(),
+        surrogate=CONFIG.surrogate.as_dict(),
         holdout=[],
     log:
         "results/logs/surrogate/study/{arch}_r{repeat}.log",
@@ -25,6 +25,8 @@ rule study_run:
     threads: 1
     resources:
         mem_mb=4000,
+    conda:
+        ENV
     script:
         "../scripts/train_run.py"
 
@@ -38,20 +40,22 @@ rule architecture_study:
     output:
         table=STUDY_TABLE,
     params:
-        clinical=config["clinical"],
-        repeats=STUDY["timing_repeats"],
-        budget_ms=STUDY["prediction_budget_ms"],
+        clinical=CONFIG.section("clinical"),
+        repeats=CONFIG.surrogate_study.timing_repeats,
+        budget_ms=CONFIG.surrogate_study.prediction_budget_ms,
     log:
         "results/logs/surrogate/architecture_study.log",
     threads: 2
     resources:
         mem_mb=2000,
+    conda:
+        ENV
     script:
         "../scripts/study_table.py"
 
 
 # The model used downstream: the selected architecture's best run, copied (not retrained).
-rule train:
+rule select_model:
     input:
         table=STUDY_TABLE,
         dataset=DATASET,
@@ -60,15 +64,18 @@ rule train:
         params=f"{SURROGATE_DIR}/model/params.npz",
         history=f"{SURROGATE_DIR}/model/history.json",
     log:
-        "results/logs/train.log",
+        "results/logs/surrogate/select_model.log",
     threads: 1
     resources:
         mem_mb=500,
+    conda:
+        ENV
     script:
         "../scripts/select_model.py"
 
 
-rule variant_run:
+# One training per (variant, repeat), at the selected architecture.
+rule train_variant_run:
     input:
         dataset=DATASET,
         table=STUDY_TABLE,
@@ -77,7 +84,7 @@ rule variant_run:
         params=f"{VARIANT_DIR}/{{variant}}/r{{repeat}}/params.npz",
         history=f"{VARIANT_DIR}/{{variant}}/r{{repeat}}/history.json",
     params:
-        surrogate=variant_params,
+        surrogate=variant_settings,
         holdout=[],
     log:
         "results/logs/surrogate/variants/{variant}_r{repeat}.log",
@@ -86,6 +93,8 @@ rule variant_run:
     threads: 1
     resources:
         mem_mb=4000,
+    conda:
+        ENV
     script:
         "../scripts/train_run.py"
 
@@ -102,6 +111,8 @@ rule variants:
     threads: 1
     resources:
         mem_mb=500,
+    conda:
+        ENV
     script:
         "../scripts/variants.py"
 
@@ -117,8 +128,8 @@ rule train_by_case:
         params=f"{SURROGATE_DIR}/model_by_case/params.npz",
         history=f"{SURROGATE_DIR}/model_by_case/history.json",
     params:
-        surrogate=surrogate_settings({"split": "by_case"}).as_dict(),
-        holdout=config["clinical"],
+        surrogate=CONFIG.surrogate_by_case.as_dict(),
+        holdout=CONFIG.section("clinical"),
     log:
         "results/logs/surrogate/train_by_case.log",
     benchmark:
@@ -126,6 +137,8 @@ rule train_by_case:
     threads: 1
     resources:
         mem_mb=4000,
+    conda:
+        ENV
     script:
         "../scripts/train_run.py"
 
@@ -141,12 +154,14 @@ rule clinical:
         table=CLINICAL_JSON,
         fields=clinical_fields(),
     params:
-        clinical=config["clinical"],
+        clinical=CONFIG.section("clinical"),
     log:
         "results/logs/surrogate/clinical.log",
     threads: 1
     resources:
         mem_mb=2000,
+    conda:
+        ENV
     script:
         "../scripts/clinical.py"
 
@@ -158,8 +173,8 @@ rule extrapolation:
         dataset=DATASET,
         model=MODEL,
         model_by_case=MODEL_BY_CASE,
-        summaries=[f"results/outside/{case.id}/summary.json" for case in EXTRA_CASES],
-        points=[f"results/outside/{case.id}/points.h5" for case in EXTRA_CASES],
+        summaries=extrapolation_files("summary.json"),
+        points=extrapolation_files("points.h5"),
     output:
         EXTRAPOLATION_JSON,
     log:
@@ -167,6 +182,8 @@ rule extrapolation:
     threads: 1
     resources:
         mem_mb=2000,
+    conda:
+        ENV
     script:
         "../scripts/extrapolation.py"
 
@@ -183,15 +200,17 @@ rule surrogate_benchmark:
     output:
         BENCHMARK_JSON,
     params:
-        clinical=config["clinical"],
-        repeats=STUDY["timing_repeats"],
-        fe=FE_SOLVE,
-        material=config["material"],
-        fixed=config["mesh"]["fixed"],
+        clinical=CONFIG.section("clinical"),
+        repeats=CONFIG.surrogate_study.timing_repeats,
+        fe=CONFIG.solve_fe,
+        material=CONFIG.section("material"),
+        fixed=CONFIG.section("mesh", "fixed"),
     log:
         "results/logs/surrogate/benchmark.log",
     threads: 2
     resources:
         mem_mb=4000,
+    conda:
+        ENV
     script:
         "../scripts/benchmark.py"

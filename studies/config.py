@@ -1,0 +1,346 @@
+"""The workflow's configuration, validated once against its schema and parsed into typed objects.
+
+:meth:`WorkflowConfig.from_mapping` is the one place that reads ``config.yaml``: it checks the
+mapping against ``workflow/schemas/config.schema.yaml`` (which also fills the defaults), sorts
+every mapping's keys and builds the objects of every layer from it: the mesh
+(:class:`meshes.config.MeshConfig`), the solve jobs' FE settings
+(:class:`fem.parameters.SolverSettings`), the sweep and the clinical cases
+(:mod:`fem.sweep`), the FE study (:mod:`studies.fe_variants`) and the surrogate with its study
+(:class:`surrogate.config.SurrogateConfig`). It lives in ``studies/`` because it spans them all.
+
+The schema states every bound and default; the dataclasses check what they need to stay
+valid on their own, and ``tests/test_config.py`` keeps the bounds they repeat in step with it.
+Snakemake records a rule's ``params`` by their text, so the mappings the rules pass on come from
+:meth:`WorkflowConfig.section`, the validated mapping itself, not rebuilt from the objects.
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import jsonschema
+import yaml
+from jsonschema import validators
+
+from fem.contact import resolve_obstacle
+from fem.exceptions import FEError
+from fem.parameters import SolverSettings
+from fem.sweep import Case, clinical_cases, sweep_cases
+from meshes.config import MeshConfig
+from meshes.parametric import BreastGeometry
+from studies.fe_variants import MeshSpec, Variant, expand_variants
+from surrogate.config import SurrogateConfig, parse_architecture
+
+SCHEMA_PATH = Path(__file__).resolve().parent.parent / "workflow" / "schemas" / "config.schema.yaml"
+
+
+class ConfigError(ValueError):
+    """The configuration is invalid; the message names each offending key (dotted path).
+
+    Attributes:
+        problems: one ``dotted.key: message`` (or ``dotted.key message``) per problem.
+    """
+
+    def __init__(self, *problems: str) -> None:
+        super().__init__(*problems)
+        self.problems = problems
+
+    def __str__(self) -> str:
+        if len(self.problems) == 1:
+            return self.problems[0]
+        return f"{len(self.problems)} problems:" + "".join(f"\n  {p}" for p in self.problems)
+
+
+def load_schema(path: str | Path = SCHEMA_PATH) -> dict[str, Any]:
+    """The JSON schema of the configuration (YAML)."""
+    return yaml.safe_load(Path(path).read_text())
+
+
+def schema_errors(config: Mapping[str, Any], schema: dict[str, Any]) -> list[str]:
+    """Every schema violation of ``config`` as ``'dotted.key: message'``, sorted by key."""
+    validator = jsonschema.Draft202012Validator(schema)
+    errors = sorted(validator.iter_errors(config), key=lambda e: [str(p) for p in e.absolute_path])
+    return [f"{'.'.join(map(str, e.absolute_path)) or '<top level>'}: {e.message}" for e in errors]
+
+
+def _with_defaults(validator_class: type) -> type:
+    """``validator_class`` that also writes each property's ``default`` into the instance.
+
+    The recipe of the jsonschema FAQ, as ``snakemake.utils.validate`` applies it, so that a
+    config filled here equals one filled by Snakemake.
+    """
+    validate_properties = validator_class.VALIDATORS["properties"]
+
+    def set_defaults(validator, properties, instance, schema):
+        for name, subschema in properties.items():
+            if "default" in subschema and isinstance(instance, dict):
+                instance.setdefault(name, subschema["default"])
+        yield from validate_properties(validator, properties, instance, schema)
+
+    return validators.extend(validator_class, {"properties": set_defaults})
+
+
+def canonical(value: Any) -> Any:
+    """``value`` with every mapping's keys sorted, recursively.
+
+    Snakemake compares a rule's params with the last run's by their text, in which a mapping's
+    key order shows; sorting makes two configs that differ only in key order (a file rewritten
+    by a tool, keys moved by hand) the same experiment.
+    """
+    if isinstance(value, dict):
+        return {key: canonical(value[key]) for key in sorted(value)}
+    if isinstance(value, list):
+        return [canonical(item) for item in value]
+    return value
+
+
+def validated(config: Mapping[str, Any], schema_path: str | Path = SCHEMA_PATH) -> dict[str, Any]:
+    """``config`` checked against the schema, with its defaults filled and its keys sorted.
+
+    Raises:
+        ConfigError: listing every violation, each as ``dotted.key: message``.
+    """
+    schema = load_schema(schema_path)
+    problems = schema_errors(config, schema)
+    if problems:
+        raise ConfigError(*problems)
+    filled = copy.deepcopy(dict(config))
+    # the defaults filled in are the schema's own objects: this call's schema, used once
+    _with_defaults(jsonschema.Draft202012Validator)(schema).validate(filled)
+    return canonical(filled)
+
+
+def _named(key: str, text: str, subkeys: tuple[str, ...] = ()) -> str:
+    """``text``, an error of config key ``key``, beginning with its full dotted key.
+
+    The libraries' messages mostly name their key already, from the section down
+    ("surrogate.width must ...") or from a sub-section ("geometry.axilla_angle must ..." of
+    ``mesh.geometry``, "loading.min_step must ..." of ``fe`` with sub-key ``loading``): those
+    are completed, the others prefixed with ``key``.
+    """
+    if text.startswith(key):
+        return text
+    parent, _, last = key.rpartition(".")
+    if parent and text.startswith(f"{last}."):
+        return f"{parent}.{text}"
+    if any(text.startswith(f"{sub}.") for sub in subkeys):
+        return f"{key}.{text}"
+    return f"{key}: {text}"
+
+
+@contextmanager
+def _section(key: str, subkeys: tuple[str, ...] = ()) -> Iterator[None]:
+    """Turn a parsing error of config key ``key`` into a :class:`ConfigError` that names it."""
+    try:
+        yield
+    except ConfigError:
+        raise
+    except (FEError, ValueError, KeyError, TypeError) as err:
+        text = f"missing key {err}" if isinstance(err, KeyError) else str(err)
+        raise ConfigError(_named(key, text, subkeys)) from None
+
+
+def default_variant(mesh: Mapping[str, Any], fe: Mapping[str, Any]) -> Variant:
+    """The FE-study variant that the workflow's own ``mesh`` and ``fe`` sections amount to."""
+    disc = fe["discretisation"]
+    degree = disc["degree"]
+    element = "p1-penalty" if disc["element"] == "p1-penalty" else f"p{degree}p{degree - 1}"
+    return Variant(MeshSpec.from_mapping(mesh["size"]), element, fe["solver"],
+                   disc["quadrature_degree"])
+
+
+@dataclass(frozen=True, slots=True)
+class FEStudyConfig:
+    """The FE study (``fe_study``): what is compared with what.
+
+    Attributes:
+        reference: the refined discretisation every other one is compared with.
+        variants: the speed-accuracy variants, sorted, each once.
+        target: the accuracy target of the speed-accuracy study (relative error).
+        max_dofs: variants with more unknowns are skipped, not solved.
+        stability_mesh: the mesh sizes of the stability maps.
+        default_variant: the variant the workflow's own mesh and ``fe`` settings amount to.
+        base_config: the ``fe``, ``material`` and ``mesh`` sections that the reference and the
+            variants depend on, without the default's discretisation and solver preset, which
+            each variant sets (so changing those re-solves no study case).
+    """
+
+    reference: Variant
+    variants: tuple[Variant, ...]
+    target: float
+    max_dofs: int
+    stability_mesh: MeshSpec
+    default_variant: Variant
+    base_config: dict[str, Any]
+
+    @classmethod
+    def from_sections(cls, sections: Mapping[str, Any]) -> FEStudyConfig:
+        """Build from the validated config (``fe_study``, ``fe``, ``material``, ``mesh``)."""
+        study = sections["fe_study"]
+        ref = study["reference"]
+        with _section("fe_study.reference"):
+            reference = Variant(MeshSpec.from_mapping(ref["mesh"]), ref["element"], ref["solver"],
+                                ref["quadrature_degree"])
+        with _section("fe_study.speed_accuracy.variants"):
+            variants = tuple(expand_variants(study["speed_accuracy"]["variants"]))
+        with _section("fe_study.stability.mesh"):
+            stability_mesh = MeshSpec.from_mapping(study["stability"]["mesh"])
+        with _section("mesh.size"):
+            default = default_variant(sections["mesh"], sections["fe"])
+        speed_accuracy = study["speed_accuracy"]
+        return cls(reference, variants, speed_accuracy["target"], speed_accuracy["max_dofs"],
+                   stability_mesh, default, Variant.base_config(sections))
+
+
+@dataclass(frozen=True, slots=True)
+class SurrogateVariant:
+    """A named variant of the surrogate settings (``surrogate_study.variants``).
+
+    Attributes:
+        name: its name, a wildcard of the workflow.
+        overrides: the keys it changes, as written.
+        settings: the ``surrogate`` settings with those keys changed.
+    """
+
+    name: str
+    overrides: dict[str, Any]
+    settings: SurrogateConfig
+
+
+@dataclass(frozen=True, slots=True)
+class SurrogateStudyConfig:
+    """The surrogate's study (``surrogate_study``).
+
+    Attributes:
+        architectures: the architectures trained, ``<layers>x<width>``, each once.
+        repeats: trainings per architecture and per variant.
+        variants: the named variants, in the config's (sorted) order.
+        extrapolation: the FE cases of its extrapolation blocks that the sweep lacks, sorted.
+        timing_repeats: timed predictions per model.
+        prediction_budget_ms: the selection's time budget (None: by accuracy alone).
+    """
+
+    architectures: tuple[str, ...]
+    repeats: int
+    variants: tuple[SurrogateVariant, ...]
+    extrapolation: tuple[Case, ...]
+    timing_repeats: int
+    prediction_budget_ms: float | None
+
+    @classmethod
+    def from_sections(
+        cls, study: Mapping[str, Any], surrogate: SurrogateConfig, sweep: tuple[Case, ...]
+    ) -> SurrogateStudyConfig:
+        """Build from the ``surrogate_study`` section, the surrogate settings and the sweep."""
+        with _section("surrogate_study.architectures"):
+            parsed = [parse_architecture(a) for a in study["architectures"]]
+            if len(set(parsed)) != len(parsed):
+                raise ConfigError("surrogate_study.architectures lists one twice")
+        variants = []
+        for name, overrides in study["variants"].items():
+            with _section(f"surrogate_study.variants.{name}"):
+                settings = SurrogateConfig.from_mapping({**surrogate.as_dict(), **overrides})
+            variants.append(SurrogateVariant(name, dict(overrides), settings))
+        extra: set[Case] = set()
+        for i, block in enumerate(study["extrapolation"]):
+            with _section(f"surrogate_study.extrapolation.{i}"):
+                extra.update(sweep_cases(block))
+        return cls(
+            architectures=tuple(f"{layers}x{width}" for layers, width in parsed),
+            repeats=study["repeats"],
+            variants=tuple(variants),
+            extrapolation=tuple(sorted(extra - set(sweep))),
+            timing_repeats=study["timing_repeats"],
+            prediction_budget_ms=study["prediction_budget_ms"],
+        )
+
+    def variant(self, name: str) -> SurrogateVariant:
+        """The variant called ``name``."""
+        for variant in self.variants:
+            if variant.name == name:
+                return variant
+        raise KeyError(f"surrogate_study.variants has no {name!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class WorkflowConfig:
+    """The whole configuration of the workflow, validated and parsed.
+
+    Attributes:
+        mesh: the geometry and its meshing.
+        solver: the FE settings of the solve jobs.
+        solve_fe: the ``fe`` section as the solve jobs receive it: a ``chest`` contact
+            obstacle written out from ``mesh.geometry`` (the jobs need no mesh section);
+            without contact, ``fe`` itself.
+        cases: the sweep, sorted.
+        clinical: the clinical cases, in the config's order.
+        fe_study: the FE study.
+        surrogate: the surrogate settings.
+        surrogate_study: the surrogate's study.
+        sections: the validated mapping (defaults filled, keys sorted), the source of the
+            rules' params; read it through :meth:`section`.
+    """
+
+    mesh: MeshConfig
+    solver: SolverSettings
+    solve_fe: dict[str, Any]
+    cases: tuple[Case, ...]
+    clinical: tuple[Case, ...]
+    fe_study: FEStudyConfig
+    surrogate: SurrogateConfig
+    surrogate_study: SurrogateStudyConfig
+    sections: dict[str, Any]
+
+    @classmethod
+    def from_mapping(
+        cls, config: Mapping[str, Any], schema_path: str | Path = SCHEMA_PATH
+    ) -> WorkflowConfig:
+        """Validate ``config`` against the schema and parse every section.
+
+        Args:
+            config: the configuration as read from ``config.yaml`` (not modified).
+            schema_path: the JSON schema (YAML) that states the bounds and defaults.
+
+        Raises:
+            ConfigError: naming the offending key(s), before any object is used.
+        """
+        sections = validated(config, schema_path)
+        with _section("mesh.geometry"):
+            BreastGeometry.from_mapping(sections["mesh"]["geometry"])  # its errors named apart
+        with _section("mesh", tuple(sections["mesh"])):
+            mesh = MeshConfig.from_mapping(sections["mesh"])
+        with _section("fe", tuple(sections["fe"])):
+            solver = SolverSettings.from_config(sections)
+            solve_fe = resolve_obstacle(sections["fe"], sections["mesh"])
+        with _section("sweep"):
+            cases = tuple(sweep_cases(sections["sweep"]))
+        with _section("clinical"):
+            clinical = tuple(clinical_cases(sections["clinical"]))
+        fe_study = FEStudyConfig.from_sections(sections)
+        with _section("surrogate"):
+            surrogate = SurrogateConfig.from_mapping(sections["surrogate"])
+        surrogate_study = SurrogateStudyConfig.from_sections(
+            sections["surrogate_study"], surrogate, cases)
+        return cls(mesh, solver, solve_fe, cases, clinical, fe_study, surrogate, surrogate_study,
+                   sections)
+
+    def section(self, *keys: str) -> Any:
+        """A copy of the validated value at ``keys``, e.g. ``section("mesh", "fixed")``."""
+        value: Any = self.sections
+        for key in keys:
+            value = value[key]
+        return copy.deepcopy(value)
+
+    def sections_of(self, *names: str) -> dict[str, Any]:
+        """Copies of the top-level sections ``names``, in that order."""
+        return {name: self.section(name) for name in names}
+
+    @property
+    def surrogate_by_case(self) -> SurrogateConfig:
+        """The surrogate settings of the by-case model (whole cases held out)."""
+        return self.surrogate.replace(split="by_case")

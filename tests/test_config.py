@@ -1,0 +1,446 @@
+"""The configuration parsed once (studies.config); the schema's bounds and the dataclasses' agree.
+
+No FE solve and no workflow run: these are unit checks.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import sys
+from collections.abc import Callable
+from typing import Any
+
+import pytest
+import yaml
+
+from fem.contact import Contact, Plane
+from fem.exceptions import InvalidParameterError
+from fem.parameters import Discretisation, Gravity, Loading, Material, SolverSettings
+from fem.sweep import Case, sample_phi, sweep_cases
+from meshes.config import SOURCES, MeshConfig
+from meshes.exceptions import GeometryError
+from meshes.parametric import BreastGeometry
+from meshes.sizing import MeshSize
+from studies.config import (
+    SCHEMA_PATH,
+    ConfigError,
+    SurrogateStudyConfig,
+    WorkflowConfig,
+    canonical,
+    load_schema,
+    validated,
+)
+from studies.fe_variants import ELEMENTS as STUDY_ELEMENTS
+from studies.fe_variants import MeshSpec, Variant
+from surrogate.config import SurrogateConfig, SurrogateConfigError
+from tests.conftest import REPO
+
+SCHEMA = load_schema()
+
+
+def read(name: str) -> dict[str, Any]:
+    return yaml.safe_load((REPO / name).read_text())
+
+
+# -- the typed object -----------------------------------------------------------------------
+
+
+def test_the_default_config_parses_into_every_layer() -> None:
+    config = WorkflowConfig.from_mapping(read("config.yaml"))
+    assert len(config.cases) == 688 and config.cases == tuple(sorted(config.cases))
+    assert [case.id for case in config.clinical] == [
+        "c1=1.00_phi=180.0_theta=0.0", "c1=5.00_phi=180.0_theta=0.0",
+        "c1=1.00_phi=0.0_theta=0.0", "c1=5.00_phi=0.0_theta=0.0"]
+    assert isinstance(config.mesh, MeshConfig) and config.mesh.size.order == 2
+    assert config.solver.discretisation.element == "taylor-hood" and config.solver.contact
+    assert config.surrogate.activation == "silu"  # the file's, not the dataclass default
+    study = config.surrogate_study
+    assert study.architectures[0] == "2x32" and len(study.architectures) == 8
+    assert {v.name for v in study.variants} == {"exact_bc", "paper_protocol"}
+    # three extrapolation blocks: 6 x 2 + 2 x 6 + 2 x 1 cases, none of them in the sweep
+    assert len(study.extrapolation) == 26 and not set(study.extrapolation) & set(config.cases)
+    assert config.fe_study.reference.element == "p2p1"
+    assert config.fe_study.reference.mesh == MeshSpec(0.008, 0.0053, 2, 0.0025)
+    assert len(config.fe_study.variants) == len({v.id for v in config.fe_study.variants})
+
+
+def test_the_default_variant_is_the_workflows_own_discretisation() -> None:
+    config = WorkflowConfig.from_mapping(read("tests/config.yaml"))
+    default = config.fe_study.default_variant
+    assert default == Variant(MeshSpec(0.03, 0.02, 1, None), "p2p1", "direct", 0)
+    raw = read("tests/config.yaml")
+    raw["fe"]["discretisation"] = {"element": "p1-penalty", "quadrature_degree": 3}
+    raw["fe"]["solver"] = "iterative"
+    other = WorkflowConfig.from_mapping(raw).fe_study.default_variant
+    assert (other.element, other.solver, other.quadrature_degree) == ("p1-penalty", "iterative", 3)
+
+
+def test_extrapolation_skips_the_cases_of_the_sweep() -> None:
+    raw = read("tests/config.yaml")
+    # C1 = 1 and 5 at Phi = 180 are sweep cases; 0.8 and 6 are not
+    raw["surrogate_study"]["extrapolation"] = [{"C1_kPa": [0.8, 1.0, 5.0, 6.0], "phi_deg": [180.0]}]
+    extra = WorkflowConfig.from_mapping(raw).surrogate_study.extrapolation
+    assert extra == (Case(0.8, 180.0), Case(6.0, 180.0))
+
+
+def test_variants_override_the_surrogate_settings() -> None:
+    raw = read("config.yaml")
+    config = WorkflowConfig.from_mapping(raw)
+    protocol = config.surrogate_study.variant("paper_protocol")
+    assert protocol.overrides["activation"] == "tanh" and protocol.settings.activation == "tanh"
+    assert protocol.settings.max_epochs == 200 and protocol.settings.width == config.surrogate.width
+    assert protocol.settings.replace(activation="silu", c1_encoding="inverse",
+                                     output_scaling="compliance", lr_schedule="cosine",
+                                     max_epochs=100) == config.surrogate
+    assert config.surrogate_by_case.split == "by_case"
+    assert config.surrogate_by_case.replace(split="by_sample") == config.surrogate
+    with pytest.raises(KeyError, match="no 'nope'"):
+        config.surrogate_study.variant("nope")
+
+
+def test_the_solve_jobs_get_the_chest_obstacle_written_out() -> None:
+    raw = read("tests/config.yaml")
+    config = WorkflowConfig.from_mapping(raw)
+    obstacle = config.solve_fe["contact"]["obstacle"]
+    assert set(obstacle) == {"elliptic_cylinder"}
+    assert config.solver.contact is not None
+    assert config.solver.contact.obstacle.as_mapping() == obstacle
+    # without contact the solve jobs get `fe` itself
+    del raw["fe"]["contact"]
+    config = WorkflowConfig.from_mapping(raw)
+    assert config.solve_fe == config.section("fe") and config.solver.contact is None
+
+
+def test_defaults_are_filled_as_snakemake_fills_them() -> None:
+    """The rules' params come from this mapping.
+
+    It must equal what Snakemake's own `validate` made of the config before, or every job of an
+    existing run would rerun.
+    """
+    from snakemake.utils import validate as snakemake_validate
+
+    for name in ("config.yaml", "tests/config.yaml"):
+        raw = read(name)
+        theirs = copy.deepcopy(raw)
+        snakemake_validate(theirs, schema=str(SCHEMA_PATH))
+        ours = validated(raw)
+        assert repr(ours) == repr(canonical(theirs))
+        assert ours["surrogate"]["boundary"] == "network"  # a default, absent from both files
+
+
+def test_key_order_does_not_change_the_params() -> None:
+    raw = read("config.yaml")
+    reordered = {key: raw[key] for key in reversed(list(raw))}
+    reordered["mesh"] = {key: raw["mesh"][key] for key in reversed(list(raw["mesh"]))}
+    a, b = WorkflowConfig.from_mapping(raw), WorkflowConfig.from_mapping(reordered)
+    assert repr(a.sections) == repr(b.sections)
+    assert repr(a.solve_fe) == repr(b.solve_fe)
+    assert list(a.sections) == sorted(a.sections)
+
+
+def test_the_input_is_not_modified_and_sections_are_copies() -> None:
+    raw = read("tests/config.yaml")
+    before = copy.deepcopy(raw)
+    config = WorkflowConfig.from_mapping(raw)
+    assert raw == before and "material" not in raw and config.sections["material"]["density"] == 900
+    fixed = config.section("mesh", "fixed")
+    fixed["rib"] = "none"
+    assert config.section("mesh", "fixed") == {"rib": "all"}
+    assert list(config.sections_of("mesh", "fe")) == ["mesh", "fe"]
+
+
+# -- errors name their key --------------------------------------------------------------------
+
+
+def test_every_schema_violation_is_listed_by_key() -> None:
+    raw = read("tests/config.yaml")
+    raw["material"] = {"density": -1.0}
+    raw["surrogate"]["width"] = 0
+    raw["sweep"]["C1_kPa"] = [1.0, -2.0]
+    with pytest.raises(ConfigError) as caught:
+        WorkflowConfig.from_mapping(raw)
+    assert [p.split(":")[0] for p in caught.value.problems] == [
+        "material.density", "surrogate.width", "sweep.C1_kPa"]
+    assert str(caught.value).startswith("3 problems:\n  material.density: -1.0 is less")
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        ({"mesh": {"geometry": {"mound_radius_cranial": 0.11}}},
+         "mesh.geometry: the mound reaches the cranial or caudal cut"),
+        ({"mesh": {"geometry": {"axilla_angle": 40.0}}},
+         "mesh.geometry.mound_angle must lie strictly between 0"),
+        ({"mesh": {"size": {"mound_size": 0.05}}}, "mesh.size.mound_size (0.05) must not exceed"),
+        ({"fe": {"loading": {"initial_step": 0.1, "min_step": 0.5}}},
+         "fe.loading.min_step must lie in (0, initial_step]"),
+        ({"fe_study": {"reference": {"mesh": {"global_size": 0.01, "mound_size": 0.02}}}},
+         "fe_study.reference: need 0 < mound_size <= global_size"),
+        ({"fe_study": {"stability": {"mesh": {"global_size": 0.01, "mound_size": 0.02}}}},
+         "fe_study.stability.mesh: need 0 < mound_size <= global_size"),
+    ],
+)
+def test_an_inconsistent_section_is_named(change: dict, message: str) -> None:
+    raw = read("tests/config.yaml")
+    for section, values in change.items():
+        for key, value in values.items():
+            raw.setdefault(section, {})[key] = value
+    with pytest.raises(ConfigError) as caught:
+        WorkflowConfig.from_mapping(raw)
+    assert str(caught.value).startswith(message), str(caught.value)
+
+
+def test_an_imported_mesh_needs_an_explicit_obstacle() -> None:
+    raw = read("tests/config.yaml")
+    raw["mesh"]["source"] = "file"
+    raw["mesh"]["file"] = {"path": "box.stl", "surfaces": {"rib": {"group": "rib"}}}
+    with pytest.raises(ConfigError, match=r"^fe\.contact\.obstacle 'chest' is the parametric"):
+        WorkflowConfig.from_mapping(raw)
+
+
+def test_an_architecture_listed_twice_is_refused() -> None:
+    settings = SurrogateConfig()
+    study = {"architectures": ["2x32", "2X32"], "repeats": 1, "variants": {}, "extrapolation": [],
+             "timing_repeats": 10, "prediction_budget_ms": None}
+    with pytest.raises(ConfigError, match="surrogate_study.architectures lists one twice"):
+        SurrogateStudyConfig.from_sections(study, settings, ())
+    study["architectures"] = ["2x32", "3x16"]
+    assert SurrogateStudyConfig.from_sections(study, settings, ()).architectures == ("2x32", "3x16")
+
+
+def test_a_variant_with_a_bad_override_is_named() -> None:
+    study = {"architectures": ["2x32"], "repeats": 1, "variants": {"wide": {"alpha": -1.0}},
+             "extrapolation": [], "timing_repeats": 10, "prediction_budget_ms": None}
+    with pytest.raises(ConfigError, match=r"^surrogate_study\.variants\.wide: surrogate\.alpha"):
+        SurrogateStudyConfig.from_sections(study, SurrogateConfig(), ())
+
+
+# -- the schema and the dataclasses agree on the bounds they both state -------------------------
+
+
+def schema_node(pointer: str) -> dict[str, Any]:
+    """The schema at ``pointer`` (e.g. ``properties/surrogate/properties/width``).
+
+    A ``$ref`` is resolved; the node's own keys win over the target's.
+    """
+    node: Any = SCHEMA
+    for part in pointer.split("/"):
+        node = node[int(part)] if isinstance(node, list) else node[part]
+    if "$ref" in node:
+        target = schema_node(node["$ref"].removeprefix("#/"))
+        node = {**target, **{k: v for k, v in node.items() if k != "$ref"}}
+    return node
+
+
+def outside_and_inside(node: dict[str, Any], keyword: str) -> tuple[Any, Any]:
+    """A value just outside the schema's ``keyword`` bound and one just inside it."""
+    bound = node[keyword]
+    integer = node.get("type") == "integer"
+    step = 1 if integer else 1e-9 * max(1.0, abs(bound))
+    return {
+        "minimum": (bound - step, bound),
+        "exclusiveMinimum": (bound, bound + step),
+        "maximum": (bound + step, bound),
+        "exclusiveMaximum": (bound, bound - step),
+    }[keyword]
+
+
+def surrogate(name: str) -> Callable[[Any], Any]:
+    return lambda value: SurrogateConfig(**{name: value})
+
+
+def loading(name: str) -> Callable[[Any], Any]:
+    if name == "initial_step":  # min_step must not exceed it
+        return lambda value: Loading(initial_step=value, min_step=min(value, Loading().min_step))
+    return lambda value: Loading(**{name: value})
+
+
+# A tiny mound fits on the narrowest and widest chest patch the schema allows.
+SMALL_MOUND = {"mound_radius_lateral": 0.004, "mound_radius_cranial": 0.004, "mound_length": 0.01,
+               "mound_offset": 0.0, "fold_radius": 0.0}
+
+
+def geometry(name: str) -> Callable[[Any], Any]:
+    if name == "axilla_angle":
+        return lambda value: BreastGeometry(
+            axilla_angle=value, mound_angle=value / 2, **SMALL_MOUND)
+    return lambda value: BreastGeometry(**{name: value})
+
+
+SURROGATE = "properties/surrogate/properties"
+LOADING = "properties/fe/properties/loading/properties"
+DISC = "properties/fe/properties/discretisation/properties"
+GEOMETRY = "properties/mesh/properties/geometry/properties"
+CONTACT = "properties/fe/properties/contact/properties"
+PLANE = Plane((0.0, 0.0, 0.0), (1.0, 0.0, 0.0))
+
+# (schema node, bound keywords the dataclass repeats, build from a value, its error).
+# Bounds the schema states and the dataclass does not (e.g. surrogate.width <= 4096, the mesh
+# sizes' minima) are the schema's alone: only it refuses them, before any object is built.
+REPEATED: list[tuple[str, tuple[str, ...], Callable[[Any], Any], type[Exception]]] = [
+    *[(f"{SURROGATE}/{name}", ("minimum",), surrogate(name), SurrogateConfigError)
+      for name in ("hidden_layers", "width", "batch_size", "max_epochs", "patience", "seed",
+                   "alpha")],
+    (f"{SURROGATE}/learning_rate", ("exclusiveMinimum",), surrogate("learning_rate"),
+     SurrogateConfigError),
+    *[(f"{SURROGATE}/{name}", ("exclusiveMinimum", "maximum"), surrogate(name),
+       SurrogateConfigError) for name in ("bc_length", "lr_final")],
+    *[(f"{SURROGATE}/{name}", ("minimum", "exclusiveMaximum"), surrogate(name),
+       SurrogateConfigError) for name in ("beta1", "beta2")],
+    ("properties/material/properties/density", ("exclusiveMinimum",),
+     lambda value: Material(C1=1000.0, density=value), InvalidParameterError),
+    ("properties/material/properties/gravity", ("minimum",),
+     lambda value: Gravity(0.0, magnitude=value), InvalidParameterError),
+    ("properties/sweep/properties/C1_kPa/oneOf/0/items", ("exclusiveMinimum",),
+     lambda value: Case(value, 0.0), InvalidParameterError),
+    ("properties/clinical/items/properties/C1", ("exclusiveMinimum",),
+     lambda value: Case(value, 0.0), InvalidParameterError),
+    (f"{LOADING}/initial_step", ("exclusiveMinimum", "maximum"), loading("initial_step"),
+     InvalidParameterError),
+    (f"{LOADING}/min_step", ("exclusiveMinimum", "maximum"), loading("min_step"),
+     InvalidParameterError),
+    (f"{LOADING}/max_steps", ("minimum",), loading("max_steps"), InvalidParameterError),
+    (f"{LOADING}/growth", ("minimum",), loading("growth"), InvalidParameterError),
+    (f"{LOADING}/cutback", ("exclusiveMinimum", "exclusiveMaximum"), loading("cutback"),
+     InvalidParameterError),
+    (f"{LOADING}/fixed_steps", ("minimum",), loading("fixed_steps"), InvalidParameterError),
+    (f"{DISC}/quadrature_degree", ("minimum",),
+     lambda value: Discretisation(quadrature_degree=value), InvalidParameterError),
+    (f"{DISC}/bulk_ratio", ("exclusiveMinimum",), lambda value: Discretisation(bulk_ratio=value),
+     InvalidParameterError),
+    (f"{CONTACT}/stiffness", ("exclusiveMinimum",),
+     lambda value: Contact(PLANE, stiffness=value), InvalidParameterError),
+    (f"{CONTACT}/clearance", ("minimum",), lambda value: Contact(PLANE, clearance=value),
+     InvalidParameterError),
+    ("properties/mesh/properties/size/properties/grading", ("exclusiveMinimum",),
+     lambda value: MeshSize(grading=value), GeometryError),
+    (f"{GEOMETRY}/axilla_angle", ("minimum", "maximum"), geometry("axilla_angle"), GeometryError),
+    *[(f"{GEOMETRY}/{name}", ("minimum",), geometry(name), GeometryError)
+      for name in ("mound_offset", "fold_radius")],
+    (f"{GEOMETRY}/layer_thickness", ("exclusiveMinimum",), geometry("layer_thickness"),
+     GeometryError),
+]
+
+# Positive lengths whose smallest positive values the geometry refuses for other reasons (the
+# mound or the layer no longer fits): here only the refusal at the bound is the dataclass's own.
+REFUSED_AT_BOUND = [
+    (f"{GEOMETRY}/{name}", "exclusiveMinimum", geometry(name), GeometryError)
+    for name in ("rib_depth", "rib_half_width", "mound_length", "mound_radius_lateral",
+                 "mound_radius_cranial", "mound_angle")
+]
+
+
+@pytest.mark.parametrize(
+    "pointer, keyword, build, error",
+    [(p, k, b, e) for p, keywords, b, e in REPEATED for k in keywords],
+    ids=[f"{p.split('/')[-1]}-{k}" for p, keywords, _, _ in REPEATED for k in keywords],
+)
+def test_a_dataclass_refuses_just_outside_and_accepts_just_inside_the_schemas_bound(
+    pointer: str, keyword: str, build: Callable[[Any], Any], error: type[Exception]
+) -> None:
+    node = schema_node(pointer)
+    assert keyword in node, f"the schema no longer bounds {pointer} by {keyword}"
+    outside, inside = outside_and_inside(node, keyword)
+    name = {"items": "C1"}.get(pointer.split("/")[-1], pointer.split("/")[-1])
+    with pytest.raises(error, match=name):
+        build(outside)
+    build(inside)
+
+
+@pytest.mark.parametrize("pointer, keyword, build, error", REFUSED_AT_BOUND,
+                         ids=[p.split("/")[-1] for p, *_ in REFUSED_AT_BOUND])
+def test_a_geometry_length_is_refused_at_the_schemas_bound(
+    pointer: str, keyword: str, build: Callable[[Any], Any], error: type[Exception]
+) -> None:
+    node = schema_node(pointer)
+    outside, _ = outside_and_inside(node, keyword)
+    name = pointer.split("/")[-1]
+    with pytest.raises(error, match=name):
+        build(outside)
+
+
+ENUMS: list[tuple[str, Callable[[Any], Any], type[Exception]]] = [
+    *[(f"{SURROGATE}/{name}", surrogate(name), SurrogateConfigError)
+      for name in ("activation", "boundary", "c1_encoding", "output_scaling", "lr_schedule",
+                   "split")],
+    ("properties/fe/properties/solver", lambda value: SolverSettings(solver=value),
+     InvalidParameterError),
+    ("properties/fe/properties/petsc_options/properties/snes_linesearch_type",
+     lambda value: SolverSettings(petsc_options={"snes_linesearch_type": value}),
+     InvalidParameterError),
+    (f"{DISC}/element", lambda value: Discretisation(element=value), InvalidParameterError),
+    (f"{DISC}/degree", lambda value: Discretisation(degree=value), InvalidParameterError),
+    ("properties/mesh/properties/size/properties/order", lambda value: MeshSize(order=value),
+     GeometryError),
+    ("definitions/study_mesh/properties/order", lambda value: MeshSpec(0.02, 0.01, value),
+     InvalidParameterError),
+    ("definitions/study_element",
+     lambda value: Variant(MeshSpec(0.02, 0.01), element=value), InvalidParameterError),
+    ("definitions/study_solver",
+     lambda value: Variant(MeshSpec(0.02, 0.01), solver=value).settings(SolverSettings()),
+     InvalidParameterError),
+    ("properties/sweep/properties/phi_deg/oneOf/1/properties/sampling",
+     lambda value: sample_phi({"sampling": value}), InvalidParameterError),
+]
+
+
+@pytest.mark.parametrize("pointer, build, error", ENUMS,
+                         ids=[p.split("/")[-1] for p, *_ in ENUMS])
+def test_a_dataclass_accepts_exactly_the_schemas_choices(
+    pointer: str, build: Callable[[Any], Any], error: type[Exception]
+) -> None:
+    choices = schema_node(pointer)["enum"]
+    for choice in choices:
+        build(choice)
+    outside = max(choices) + 1 if all(isinstance(c, int) for c in choices) else "not-a-choice"
+    with pytest.raises(error):
+        build(outside)
+
+
+def test_the_choices_named_in_code_are_the_schemas() -> None:
+    assert tuple(schema_node("properties/mesh/properties/source")["enum"]) == SOURCES
+    assert set(schema_node("definitions/study_element")["enum"]) == set(STUDY_ELEMENTS)
+
+
+def test_the_schema_bounds_are_finite_numbers() -> None:
+    """A bound of the table above must be a number the probes can step past."""
+    for pointer, keywords, _, _ in REPEATED:
+        node = schema_node(pointer)
+        for keyword in keywords:
+            assert isinstance(node[keyword], (int, float)) and math.isfinite(node[keyword])
+
+
+def test_sweep_cases_of_the_typed_config_are_the_sweeps() -> None:
+    raw = read("tests/config.yaml")
+    assert WorkflowConfig.from_mapping(raw).cases == tuple(sweep_cases(raw["sweep"]))
+
+
+def test_the_conda_route_pins_the_versions_of_make_setup() -> None:
+    """The --use-conda environment names the versions that `make setup` installs.
+
+    workflow/envs/fenicsx-jax.yaml against requirements.lock, constraints.txt and the Debian
+    FEniCSx stack this suite runs on.
+    """
+    import dolfinx
+    import mpi4py
+    import petsc4py
+
+    env = yaml.safe_load((REPO / "workflow/envs/fenicsx-jax.yaml").read_text())
+    conda = dict(d.split("=")[:2] for d in env["dependencies"] if isinstance(d, str) and "=" in d)
+    pip = dict(p.split("==") for p in next(d["pip"] for d in env["dependencies"]
+                                           if isinstance(d, dict)))
+    pins = {}
+    for name in ("requirements.lock", "constraints.txt"):
+        for line in (REPO / name).read_text().splitlines():
+            if "==" in line and not line.startswith("#"):
+                package, version = line.split("==")
+                pins[package.lower()] = version.strip()
+    for package, version in pip.items():
+        assert pins[package.lower()] == version, package
+    for package in ("numpy", "scipy", "h5py"):
+        assert conda[package] == pins[package], package
+    assert conda["fenics-dolfinx"] == dolfinx.__version__
+    assert conda["mpi4py"] == mpi4py.__version__
+    assert petsc4py.__version__.startswith(conda["petsc4py"] + ".")
+    assert conda["python"] == "{}.{}".format(*sys.version_info[:2])
