@@ -8,7 +8,10 @@ from typing import Any
 
 from fem.sweep import Case
 from report.html import finite
+from studies.architecture import RunSummary
+from studies.fe_timing import TimedSolve
 from studies.figures import fe as fem_plots
+from studies.surrogate_benchmark import SurrogateBenchmark
 
 #: Accuracy needs (mm) of the "model no more than a scene needs" section; the paper's
 #: clinically accepted error is 5 mm.
@@ -71,9 +74,9 @@ def case_id(item: Mapping[str, Any]) -> str:
     return Case(float(item["C1"]), float(item["phi"]), float(item.get("theta", 0.0))).id
 
 
-def worst_case(cases: Sequence[Mapping[str, Any]], key: str) -> float | None:
-    """The largest ``accuracy[key]`` over the cases, or None unless every case has one."""
-    values = [(c.get("accuracy") or {}).get(key) for c in cases]
+def worst_case(cases: Sequence[TimedSolve], key: str) -> float | None:
+    """The largest ``accuracy.<key>`` over the cases, or None unless every case has one."""
+    values = [getattr(c.accuracy, key) if c.accuracy is not None else None for c in cases]
     if not values or not all(finite(v) for v in values):
         return None
     return float(max(values))
@@ -84,7 +87,8 @@ def meets(error: Any, target: Any) -> bool:
     return finite(error) and finite(target) and error <= target
 
 
-def predict_s(row: Mapping[str, Any]) -> float | None:
+def predict_s(timed: RunSummary | SurrogateBenchmark | None) -> float | None:
     """Seconds of one whole-field prediction on one core (the API's median), or None."""
-    ms = ((row.get("predict_one_core") or {}).get("api") or {}).get("median_ms")
+    timing = timed.predict_one_core if timed is not None else None
+    ms = ((timing or {}).get("api") or {}).get("median_ms")
     return 1e-3 * ms if finite(ms) else None

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import logging
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -14,6 +13,14 @@ import numpy as np
 from fem.dataset import read_case_columns, read_dataset
 from report.common import case_id
 from report.html import figure
+from studies.architecture import ArchitectureTable, VariantComparison
+from studies.fe_benchmark import ClinicalBenchmark
+from studies.fe_speed_accuracy import SpeedAccuracy
+from studies.mesh_quality import MeshQuality
+from studies.stability import StabilityMap
+from studies.surrogate_benchmark import SurrogateBenchmark
+from studies.surrogate_evaluation import ClinicalEvaluation, Extrapolation
+from surrogate.checkpoint import read_history, read_model_card
 
 log = logging.getLogger(__name__)
 
@@ -25,18 +32,35 @@ INPUT_NAMES = (
 )
 
 
-JSON_INPUTS = ("quality", "model", "history", "table2", "variants", "clinical", "extrapolation",
-               "benchmark", "fe_clinical", "fe_speed_accuracy", "fe_stability")
+#: The type of each result file among the inputs (:mod:`studies.results`); the model card and
+#: the training history are read by their owner, :mod:`surrogate.checkpoint`.
+RESULT_TYPES: dict[str, Callable[[Path], Any]] = {
+    "quality": MeshQuality.read,
+    "model": lambda path: read_model_card(path.parent),
+    "history": lambda path: read_history(path.parent),
+    "table2": ArchitectureTable.read,
+    "variants": VariantComparison.read,
+    "clinical": ClinicalEvaluation.read,
+    "extrapolation": Extrapolation.read,
+    "benchmark": SurrogateBenchmark.read,
+    "fe_clinical": ClinicalBenchmark.read,
+    "fe_speed_accuracy": SpeedAccuracy.read,
+    "fe_stability": StabilityMap.read,
+}
 
 
-def read_json(path: Path | None) -> dict[str, Any] | None:
-    """The parsed JSON of ``path``, or None (with a warning) if it does not exist."""
+def _read_result(name: str, path: Path | None) -> Any:
+    """The typed result at ``path``, or None (with a warning) if it was not given or is absent.
+
+    Raises:
+        studies.results.ResultFormatError: if the file does not match its type.
+    """
     if path is None:
         return None
     if not path.is_file():
         log.warning("report input %s does not exist", path)
         return None
-    return json.loads(path.read_text())
+    return RESULT_TYPES[name](path)
 
 
 def as_path(value: Any) -> Path | None:
@@ -56,7 +80,7 @@ class Context:
     clinical: list[dict[str, Any]]
     paths: dict[str, Path | None]
     clinical_fields: list[Path]
-    json: dict[str, dict[str, Any] | None] = field(default_factory=dict)
+    results: dict[str, Any] = field(default_factory=dict)
     _dataset: Any = None
     _cases: dict[str, np.ndarray] | None = None
 
@@ -107,5 +131,5 @@ class Context:
                    if name != "clinical_fields"},
             clinical_fields=[Path(str(p)) for p in fields],
         )
-        ctx.json = {name: read_json(ctx.paths.get(name)) for name in JSON_INPUTS}
+        ctx.results = {name: _read_result(name, ctx.paths.get(name)) for name in RESULT_TYPES}
         return ctx

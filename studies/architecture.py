@@ -14,15 +14,76 @@ from __future__ import annotations
 import json
 import shutil
 from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from studies import paper
-from surrogate.config import parse_architecture
 from fem.dataset import Dataset
+from studies import paper
+from studies.results import Record, Result
 from surrogate.checkpoint import HISTORY_JSON, MODEL_JSON, PARAMS_NPZ, unconverged_cases, write_json
+from surrogate.config import parse_architecture
+
+
+@dataclass(frozen=True, slots=True)
+class MeanSD(Record):
+    """Mean and sample SD over training runs (and their range, where runs were ours)."""
+
+    mean: float
+    sd: float
+    min: float | None = None
+    max: float | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class RunSummary(Record):
+    """A group of training runs (one architecture, or one variant of the settings).
+
+    The architecture study adds the paper's row, the one-core prediction timing and whether
+    it is within the budget; the variant comparison adds the ratios to the baseline and what
+    the variant changes.
+    """
+
+    runs: int
+    validation_error_mm: MeanSD
+    validation_error_domain_mm: MeanSD
+    train_s: MeanSD
+    epochs: MeanSD
+    best_run: str
+    best_validation_error_mm: float
+    parameters: int
+    paper: dict[str, MeanSD] | None = None
+    predict_one_core: dict[str, Any] | None = None
+    within_prediction_budget: bool | None = None
+    error_ratio_to_baseline: float | None = None
+    time_ratio_to_baseline: float | None = None
+    boundary: str | None = None
+    changed: dict[str, Any] | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class ArchitectureTable(Result):
+    """``results/surrogate/study/table2.json``: the paper's Table 2 and the selection."""
+
+    rows: dict[str, RunSummary]
+    paper_selected_architecture: str
+    selected_architecture: str
+    selected_run: str
+    most_accurate_architecture: str
+    rule: str
+    prediction_budget_ms: float | None = None
+    timing: dict[str, Any] | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class VariantComparison(Result):
+    """``results/surrogate/variants.json``: variants of the settings against the baseline."""
+
+    baseline: RunSummary
+    variants: dict[str, RunSummary]
+    architecture: str | None = None
 
 
 class StudyError(ValueError):

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import logging
 import statistics
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -30,8 +30,9 @@ import numpy as np
 from fem.overlap import self_overlap
 from fem.parameters import SolverSettings
 from fem.sweep import Case
-from studies.fe_timing import timed_solve, vertex_displacement
+from studies.fe_timing import TimedSolve, timed_solve, vertex_displacement
 from studies.machine import machine_state, timed_on_one_core
+from studies.results import Record, Result
 
 log = logging.getLogger(__name__)
 
@@ -41,6 +42,46 @@ TARGETS = {
     "factorization_equivalents": 6.0,  # each case
     "relative_max_error": 0.01,  # max |u - u_ref| / max |u_ref|, each case
 }
+
+
+@dataclass(frozen=True, slots=True)
+class Target(Record):
+    """A measure against its target."""
+
+    target: float
+    value: float | None
+    met: bool
+
+
+@dataclass(frozen=True, slots=True)
+class ClinicalSummary(Record):
+    """The clinical benchmark over its cases, and its targets."""
+
+    median_wall_s: float
+    median_cpu_s: float
+    max_factorization_equivalents: float
+    median_baseline_over_adaptive_wall: float
+    max_relative_error: float | None
+    all_converged: bool
+    targets: dict[str, Target]
+
+
+@dataclass(frozen=True, slots=True)
+class ClinicalBenchmark(Result):
+    """``results/fe_study/clinical.json``: the default discretisation on the clinical cases."""
+
+    mesh: str
+    dofs: int
+    material_points: int
+    setup_s: float
+    settings: dict[str, Any]
+    baseline_steps: int
+    repeats: int
+    cases: list[TimedSolve]
+    summary: ClinicalSummary
+    machine: dict[str, Any]
+    reference: dict[str, dict[str, Any]]
+    labels: dict[str, str] = field(default_factory=dict)
 
 
 # -- the clinical benchmark ------------------------------------------------------------------------
@@ -73,25 +114,28 @@ def clinical_benchmark(
     references: dict[str, tuple[Any, dict[str, Any]]],
     baseline_steps: int = 10,
     repeats: int = 1,
-) -> dict[str, Any]:
+    labels: dict[str, str] | None = None,
+) -> ClinicalBenchmark:
     """Time and check the clinical cases at the default discretisation.
 
     Args:
         mesh_path: the default mesh (its vertices are the material points).
         settings: the default solver settings.
         cases: the clinical cases.
-        references: case id -> ``(field, meta)`` of :func:`load_displacement`.
+        references: case id -> ``(field, meta)`` of
+            :func:`studies.fe_reference.load_displacement`.
         baseline_steps: equal load steps of the fixed-step Newton baseline.
         repeats: solves per case; the median wall time is reported.
+        labels: case id -> the config's label of the case.
 
     Returns:
         Per-case records (timings, baseline, accuracy, :func:`fem.overlap.self_overlap`) and
-        a summary against :data:`TARGETS`,
-        all measured on one pinned core (:func:`one_core`).
+        a summary against :data:`TARGETS`, all measured on one pinned core
+        (:func:`studies.machine.one_core`).
     """
     from fem.case import CaseRunner
 
-    state_before = machine_state()
+    state_before = machine_state().to_json()
     runner = CaseRunner(mesh_path, settings)
     baseline_loading = replace(settings.loading, fixed_steps=baseline_steps)
     rows = []
@@ -148,8 +192,9 @@ def clinical_benchmark(
         "repeats": repeats,
         "cases": rows,
         "summary": summary,
-        "machine": {"before": state_before, "after": machine_state()},
+        "machine": {"before": state_before, "after": machine_state().to_json()},
         "reference": {cid: meta for cid, (_, meta) in references.items()},
+        "labels": dict(labels or {}),
     }
     runner.solver.destroy()
-    return out
+    return ClinicalBenchmark.from_json(out)

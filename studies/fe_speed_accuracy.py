@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import statistics
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -17,11 +18,58 @@ from fem.overlap import self_overlap
 from fem.parameters import SolverSettings
 from fem.sweep import Case
 from studies.fe_benchmark import TARGETS, accuracy_at_vertices
-from studies.fe_timing import timed_solve
+from studies.fe_timing import TimedSolve, timed_solve
 from studies.fe_variants import Variant
 from studies.machine import machine_state, timed_on_one_core
+from studies.results import Result
 
 log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, slots=True)
+class VariantRecord(Result):
+    """``results/fe_study/speed_accuracy/<variant>.json``: one variant on the clinical cases.
+
+    A variant above the study's DOF limit is recorded with ``skipped`` and no cases.
+    """
+
+    variant: str
+    mesh: dict[str, Any]
+    element: str
+    solver: str
+    quadrature_degree: int
+    dofs: int
+    cells: int
+    material_points: int
+    setup_s: float
+    machine: dict[str, Any]
+    skipped: str | None = None
+    cases: list[TimedSolve] = field(default_factory=list)
+    median_wall_s: float | None = None
+    median_cpu_s: float | None = None
+    max_factorization_equivalents: float | None = None
+    max_relative_error: float | None = None
+    max_error_mm: float | None = None
+    max_overlapping_vertices: int | None = None
+    pareto: bool | None = None
+
+    def cost(self, name: str) -> float | None:
+        """The cost measure ``name`` (``median_cpu_s`` or ``median_wall_s``)."""
+        if name not in ("median_cpu_s", "median_wall_s"):
+            raise ValueError(f"unknown cost measure {name!r}")
+        return getattr(self, name)
+
+
+@dataclass(frozen=True, slots=True)
+class SpeedAccuracy(Result):
+    """``results/fe_study/speed_accuracy.json``: every variant, the Pareto front, the verdict."""
+
+    target_relative_max_error: float
+    cost: str
+    variants: list[VariantRecord]
+    pareto_front: list[str]
+    cheapest_meeting_target: str | None
+    default_variant: str | None = None
 
 
 @timed_on_one_core
@@ -32,7 +80,7 @@ def run_variant(
     cases: list[Case],
     references: dict[str, tuple[Any, dict[str, Any]]],
     max_dofs: int | None = None,
-) -> dict[str, Any]:
+) -> VariantRecord:
     """Time one study variant on the clinical cases and measure its error at its material points.
 
     The material points of a variant are its own mesh's vertices (as the dataset's are
@@ -54,12 +102,12 @@ def run_variant(
         "cells": runner.mesh.topology.index_map(3).size_global,
         "material_points": runner.mesh.topology.index_map(0).size_global,
         "setup_s": runner.setup_s,
-        "machine": machine_state(),
+        "machine": machine_state().to_json(),
     }
     if max_dofs is not None and dofs > max_dofs:
         record["skipped"] = f"{dofs} dofs exceed fe_study.speed_accuracy.max_dofs = {max_dofs}"
         runner.solver.destroy()
-        return record
+        return VariantRecord.from_json(record)
     rows = []
     for case in cases:
         row = timed_solve(runner, case)
@@ -82,7 +130,7 @@ def run_variant(
         (r["self_overlap"]["overlapping_vertices"] for r in rows if "self_overlap" in r), default=None
     )
     runner.solver.destroy()
-    return record
+    return VariantRecord.from_json(record)
 
 
 def pareto_front(costs: list[float], errors: list[float]) -> list[bool]:
@@ -98,8 +146,11 @@ def pareto_front(costs: list[float], errors: list[float]) -> list[bool]:
 
 
 def summarise_variants(
-    records: list[dict[str, Any]], target: float = TARGETS["relative_max_error"], cost: str = "median_cpu_s"
-) -> dict[str, Any]:
+    records: list[VariantRecord],
+    target: float = TARGETS["relative_max_error"],
+    cost: str = "median_cpu_s",
+    default_variant: str | None = None,
+) -> SpeedAccuracy:
     """Mark the Pareto front (cost against worst-case relative error) and the cheapest
     variant that meets ``target``.
 
@@ -108,16 +159,20 @@ def summarise_variants(
         target: accuracy target on the max relative error over the clinical cases.
         cost: the cost measure (CPU seconds are robust to a shared machine; wall
             seconds are what a user waits).
+        default_variant: the id of the variant the workflow's own settings amount to.
     """
-    solved = [r for r in records if not r.get("skipped") and r.get("max_relative_error") is not None]
-    flags = pareto_front([r[cost] for r in solved], [r["max_relative_error"] for r in solved])
-    for r, flag in zip(solved, flags):
-        r["pareto"] = flag
-    meeting = sorted((r for r in solved if r["max_relative_error"] <= target), key=lambda r: r[cost])
-    return {
-        "target_relative_max_error": target,
-        "cost": cost,
-        "variants": records,
-        "pareto_front": [r["variant"] for r in solved if r["pareto"]],
-        "cheapest_meeting_target": meeting[0]["variant"] if meeting else None,
-    }
+    solved = [r for r in records if not r.skipped and r.max_relative_error is not None]
+    flags = pareto_front([r.cost(cost) for r in solved], [r.max_relative_error for r in solved])
+    pareto = {r.variant: flag for r, flag in zip(solved, flags, strict=True)}
+    records = [replace(r, pareto=pareto[r.variant]) if r.variant in pareto else r
+               for r in records]
+    meeting = sorted((r for r in records if r.variant in pareto and r.max_relative_error <= target),
+                     key=lambda r: r.cost(cost))
+    return SpeedAccuracy(
+        target_relative_max_error=target,
+        cost=cost,
+        variants=records,
+        pareto_front=[r.variant for r in records if r.pareto],
+        cheapest_meeting_target=meeting[0].variant if meeting else None,
+        default_variant=default_variant,
+    )

@@ -7,13 +7,75 @@ The cost unit is one Jacobian assembly + factorisation + solve
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
 from fem.parameters import Loading
 from fem.sweep import Case
+from studies.results import Record
+
+
+@dataclass(frozen=True, slots=True)
+class Accuracy(Record):
+    """Errors at the material points against the refined reference (mm; relative to max |u_ref|)."""
+
+    max_error_mm: float
+    rms_error_mm: float
+    mean_error_mm: float
+    max_disp_mm: float
+    relative_max_error: float
+    max_outside_m: float
+
+
+@dataclass(frozen=True, slots=True)
+class SelfOverlap(Record):
+    """Boundary vertices of the deformed body that lie inside another of its cells."""
+
+    boundary_vertices: int
+    overlapping_vertices: int
+    examples_m: list[Any] = field(default_factory=list)
+
+
+@dataclass(frozen=True, slots=True)
+class TimedSolve(Record):
+    """One solve from rest, timed (:func:`studies.fe_timing.timed_solve`)."""
+
+    case: str
+    converged: bool
+    reason: str
+    load_fraction: float
+    wall_s: float
+    cpu_s: float
+    assembly_s: float
+    linear_solve_s: float
+    linear_system_s: float
+    factorization_equivalents: float
+    load_steps: int
+    rejected_steps: int
+    newton_iterations: list[int]
+    total_newton_iterations: int
+    linear_iterations: int
+    jacobian_evaluations: int
+    preconditioner_builds: int
+    residual_evaluations: int
+    first_failure: str
+    # what a caller adds to the timing record
+    wall_s_repeats: list[float] | None = None
+    max_disp_mm: float | None = None
+    mean_disp_mm: float | None = None
+    accuracy: Accuracy | None = None
+    self_overlap: SelfOverlap | None = None
+    max_difference_from_adaptive_mm: float | None = None
+    baseline: TimedSolve | None = None
+    baseline_over_adaptive_wall: float | None = None
+    baseline_over_adaptive_cpu: float | None = None
+    # a reference solve's record
+    dofs: int | None = None
+    setup_s: float | None = None
+    settings: dict[str, Any] | None = None
+    mesh: str | None = None
 
 
 def timed_solve(runner: Any, case: Case, loading: Loading | None = None) -> dict[str, Any]:

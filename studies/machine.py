@@ -9,13 +9,18 @@ so that a reader can tell a busy machine from a slow solver, and runs under
 from __future__ import annotations
 
 import ctypes
+import dataclasses
 import functools
 import os
 import platform
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
+
+from studies.results import Record
+
+R = TypeVar("R")
 
 
 def limit_blas_threads(n: int = 1) -> list[str]:
@@ -77,22 +82,43 @@ def one_core(core: int | None = None) -> Iterator[int]:
         pin(allowed)
 
 
-def timed_on_one_core(func: Callable[..., dict[str, Any]]) -> Callable[..., dict[str, Any]]:
-    """Run a benchmark returning a record with a ``machine`` mapping under :func:`one_core`,
-    and record the core there as ``pinned_core``."""
+def timed_on_one_core(func: Callable[..., R]) -> Callable[..., R]:
+    """Run a benchmark under :func:`one_core`; record the core in its result's ``machine``.
+
+    The benchmark returns a typed result (:mod:`studies.results`) with a ``machine``
+    mapping; the core pinned to is added there as ``pinned_core``.
+    """
 
     @functools.wraps(func)
-    def wrapper(*args: Any, **kwargs: Any) -> dict[str, Any]:
+    def wrapper(*args: Any, **kwargs: Any) -> R:
         with one_core() as core:
             record = func(*args, **kwargs)
-        record["machine"]["pinned_core"] = core
-        return record
+        return dataclasses.replace(record, machine={**record.machine, "pinned_core": core})
 
     return wrapper
 
 
-def machine_state() -> dict[str, Any]:
-    """What the timings were taken on: CPU, cores, load average now."""
+@dataclasses.dataclass(frozen=True, slots=True)
+class MachineState(Record):
+    """The machine a timing was taken on, and how busy it was (the one description of it).
+
+    Attributes:
+        cpu: the processor's model name.
+        cores: CPUs of the machine.
+        load_average_1_5_15min: the load averages at the time.
+        openblas_num_threads: ``OPENBLAS_NUM_THREADS`` of the process, if set.
+        pinned_core: the core a one-core timing was pinned to, if any.
+    """
+
+    cpu: str
+    cores: int | None
+    load_average_1_5_15min: list[float]
+    openblas_num_threads: str | None
+    pinned_core: int | None = None
+
+
+def machine_state(pinned_core: int | None = None) -> MachineState:
+    """What the timings are taken on: CPU, cores, load average now."""
     try:
         load = os.getloadavg()
     except OSError:
@@ -105,9 +131,10 @@ def machine_state() -> dict[str, Any]:
                 break
     except OSError:
         pass
-    return {
-        "cpu": cpu,
-        "cores": os.cpu_count(),
-        "load_average_1_5_15min": [round(v, 2) for v in load],
-        "openblas_num_threads": os.environ.get("OPENBLAS_NUM_THREADS"),
-    }
+    return MachineState(
+        cpu=cpu,
+        cores=os.cpu_count(),
+        load_average_1_5_15min=[round(v, 2) for v in load],
+        openblas_num_threads=os.environ.get("OPENBLAS_NUM_THREADS"),
+        pinned_core=pinned_core,
+    )

@@ -10,8 +10,9 @@ writes atomically (a temporary file renamed into place), :meth:`Result.read` rea
 
 A field with a default may be absent from a file (a record that only some runs produce, such
 as a skipped variant's reason); every other field must be present, and a key that no field
-declares is refused. A field typed ``dict[str, Any]`` or ``Any`` is carried as it is (the
-solver settings, a machine description): the report shows it without reading into it.
+declares is refused, unless the record is open (a field named ``extras`` keeps such keys).
+A field typed ``dict[str, Any]`` or ``Any`` is carried as it is (the solver settings, a
+machine description): the report shows it without reading into it.
 """
 
 from __future__ import annotations
@@ -19,13 +20,19 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import numbers
 import os
 import types
 import typing
 from pathlib import Path
 from typing import Any, TypeVar, Union
 
-R = TypeVar("R", bound="Result")
+R = TypeVar("R", bound="Record")
+
+#: A record with a field of this name is open: keys it does not declare are kept there (a
+#: file written by a lower layer with keys that depend on the input, such as the mesh's
+#: quality report); the declared keys are still required and checked.
+EXTRAS = "extras"
 
 
 class ResultFormatError(ValueError):
@@ -90,17 +97,23 @@ def _convert(tp: Any, value: Any, where: str) -> Any:
         args = typing.get_args(tp)
         item = args[1] if args else Any
         return {k: _convert(item, v, f"{where}.{k}") for k, v in value.items()}
+    # numbers as numpy gives them (np.float64, np.int64, np.bool_) become Python's
+    is_bool = isinstance(value, bool) or type(value).__name__ == "bool_"
     if tp is float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
+        if is_bool or not isinstance(value, numbers.Real):
             raise ResultFormatError(f"{where}: expected a number, got {value!r}")
         return float(value)
     if tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
+        if is_bool or not isinstance(value, numbers.Integral):
             raise ResultFormatError(f"{where}: expected an integer, got {value!r}")
-        return value
-    if tp in (str, bool):
-        if not isinstance(value, tp):
-            raise ResultFormatError(f"{where}: expected {tp.__name__}, got {value!r}")
+        return int(value)
+    if tp is bool:
+        if not is_bool:
+            raise ResultFormatError(f"{where}: expected true or false, got {value!r}")
+        return bool(value)
+    if tp is str:
+        if not isinstance(value, str):
+            raise ResultFormatError(f"{where}: expected a string, got {value!r}")
         return value
     raise TypeError(f"{where}: unsupported field type {tp!r}")
 
@@ -109,25 +122,38 @@ def _from_mapping(cls: type, value: Any, where: str) -> Any:
     if not isinstance(value, dict):
         raise ResultFormatError(f"{where}: expected a mapping, got {type(value).__name__}")
     hints = typing.get_type_hints(cls)
-    fields = {f.name: f for f in dataclasses.fields(cls)}
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.name != EXTRAS}
     unknown = sorted(set(value) - set(fields))
-    if unknown:
-        raise ResultFormatError(
-            f"{where}: unknown key(s) {', '.join(unknown)} (a {cls.__name__} has "
-            f"{', '.join(fields)})"
-        )
     kwargs = {}
-    for name, f in fields.items():
+    if EXTRAS in hints:  # an open record: keys it does not declare are kept as they are
+        kwargs[EXTRAS] = {k: value[k] for k in unknown}
+        unknown = []
+    missing = [name for name, f in fields.items() if name not in value and not _optional(f)]
+    if missing or unknown:  # a renamed key is both: say both
+        problems = [f"missing key {name!r}" for name in missing]
+        if unknown:
+            problems.append(f"unknown key(s) {', '.join(unknown)}")
+        raise ResultFormatError(
+            f"{where}: {'; '.join(problems)} (a {cls.__name__} has {', '.join(fields)})"
+        )
+    for name in fields:
         if name in value:
             kwargs[name] = _convert(hints[name], value[name], f"{where}.{name}")
-        elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
-            raise ResultFormatError(f"{where}: missing key {name!r} (a {cls.__name__} field)")
     return cls(**kwargs)
+
+
+def _optional(f: dataclasses.Field) -> bool:
+    return f.default is not dataclasses.MISSING or f.default_factory is not dataclasses.MISSING
 
 
 def _to_jsonable(value: Any) -> Any:
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return {f.name: _to_jsonable(getattr(value, f.name)) for f in dataclasses.fields(value)}
+        # an optional field (one with a default) that is None is left out, as the writers
+        # of these files leave out keys that only some runs have
+        out = {f.name: _to_jsonable(getattr(value, f.name)) for f in dataclasses.fields(value)
+               if f.name != EXTRAS and not (getattr(value, f.name) is None and _optional(f))}
+        out.update(_to_jsonable(getattr(value, EXTRAS, None) or {}))
+        return out
     if isinstance(value, dict):
         return {k: _to_jsonable(v) for k, v in value.items()}
     if isinstance(value, list | tuple):

@@ -16,7 +16,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -24,8 +24,51 @@ import numpy as np
 
 from fem.parameters import Loading, SolverSettings
 from fem.sweep import Case
+from studies.results import Record, Result
 
 log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, slots=True)
+class StabilityRecord(Record):
+    """One solve of the stability grid (or one case of the sweep, ``scheme`` "sweep")."""
+
+    scheme: str
+    C1: float
+    phi: float
+    converged: bool
+    load_fraction: float
+    reason: str
+    first_failure: str
+    failure_kinds: dict[str, int]
+    load_steps: int | None = None
+    rejected_steps: int | None = None
+    newton_iterations: int | None = None
+    newton_iterations_accepted: int | None = None
+    wall_s: float | None = None
+    cpu_s: float | None = None
+    max_disp_mm: float | None = None
+    min_detF: float | None = None
+    theta: float | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class StabilityMap(Result):
+    """``results/fe_study/stability.json``: every (scheme, C1, Φ) solved once from rest.
+
+    ``lowest_converging`` is :func:`studies.stability.lowest_converging` of the records:
+    per scheme, per Φ (keys "%.1f") the lowest converging C1 and the first failure below
+    it, and ``all_phi``.
+    """
+
+    mesh: str
+    dofs: int
+    settings: dict[str, Any]
+    schemes: dict[str, dict[str, Any]]
+    C1_kPa: list[float]
+    phi_deg: list[float]
+    records: list[StabilityRecord]
+    lowest_converging: dict[str, dict[str, Any]]
 
 
 def loading_schemes(adaptive: Loading, fixed_steps: list[int]) -> dict[str, Loading]:
@@ -42,12 +85,8 @@ def stability_map(
     C1_kPa: list[float],
     phi_deg: list[float],
     schemes: dict[str, Loading],
-) -> dict[str, Any]:
-    """Solve every (scheme, C1, Φ) once from rest and record how it went.
-
-    Returns:
-        ``{"mesh", "dofs", "schemes", "records": [...], "lowest_converging": ...}``.
-    """
+) -> StabilityMap:
+    """Solve every (scheme, C1, Φ) once from rest and record how it went."""
     from fem.case import CaseRunner
 
     runner = CaseRunner(mesh_path, settings)
@@ -98,7 +137,7 @@ def stability_map(
         "lowest_converging": lowest_converging(records),
     }
     runner.solver.destroy()
-    return out
+    return StabilityMap.from_json(out)
 
 
 def sweep_records(cases: Mapping[str, Sequence[Any]]) -> list[dict[str, Any]]:

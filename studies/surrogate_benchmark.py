@@ -14,15 +14,17 @@ from __future__ import annotations
 
 import logging
 import os
-import platform
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from studies import paper
+from studies.machine import MachineState, machine_state
+from studies.results import Record, Result
 from studies.timing import time_on_one_core
 
 log = logging.getLogger(__name__)
@@ -34,6 +36,45 @@ GOALS = {
     "predict_one_core_ms": 0.5,
     "train_3x32_s": 300.0,
 }
+
+
+@dataclass(frozen=True, slots=True)
+class Goal(Record):
+    """A benchmark figure against its goal."""
+
+    value: float | None
+    goal: float
+    met: bool
+
+
+@dataclass(frozen=True, slots=True)
+class SpeedRow(Record):
+    """One clinical case: FE solve and surrogate prediction on the same core (Table 4)."""
+
+    case: str
+    fe_solve_s: float
+    surrogate_ms: float
+    speedup: float
+    paper: dict[str, float] | None
+
+
+@dataclass(frozen=True, slots=True)
+class SurrogateBenchmark(Result):
+    """``results/surrogate/benchmark.json``: the surrogate's goals measured in one job."""
+
+    machine: MachineState
+    selected_architecture: str
+    validation_error_mm: dict[str, Any]
+    clinical_worst: dict[str, Any]
+    predict_one_core: dict[str, Any]
+    predict_one_core_eigen_single_thread: dict[str, Any]
+    timing_process: dict[str, Any]
+    fe: dict[str, dict[str, Any]]
+    speed: list[SpeedRow]
+    train_3x32_s: dict[str, Any] | None
+    goals: dict[str, Goal]
+    paper: dict[str, Any]
+    variants: dict[str, Any] | None = None
 
 
 def fe_timings(mesh: str | Path, cases: Sequence[Any], settings: Any) -> dict[str, dict[str, Any]]:
@@ -114,8 +155,7 @@ def run_benchmark(
                 "speedup": published["fe_s"][0] / published["surrogate_s"][0]},
         })
     return {
-        "machine": {"processor": platform.processor() or platform.machine(), "cpus": os.cpu_count(),
-                    "pinned_core": core, "loadavg": os.getloadavg()},
+        "machine": machine_state(pinned_core=core).to_json(),
         "selected_architecture": table["selected_architecture"],
         "validation_error_mm": {"selected_mean": selected["validation_error_mm"]["mean"],
                                 "selected_sd": selected["validation_error_mm"]["sd"],
@@ -146,8 +186,9 @@ def format_benchmark(bench: dict[str, Any]) -> str:
     g = bench["goals"]
     t = bench["predict_one_core"]
     lines = [
-        f"surrogate benchmark ({bench['selected_architecture']}, core {bench['machine']['pinned_core']}, "
-        f"load {bench['machine']['loadavg'][0]:.2f})",
+        f"surrogate benchmark ({bench['selected_architecture']}, "
+        f"core {bench['machine']['pinned_core']}, "
+        f"load {bench['machine']['load_average_1_5_15min'][0]:.2f})",
     ]
     for name, item in g.items():
         value = item["value"]

@@ -12,16 +12,100 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from studies import paper
 from fem.dataset import Dataset
+from studies import paper
+from studies.results import Record, Result
 from surrogate.exceptions import ExtrapolationWarning
 from surrogate.fields import write_point_fields_xdmf
 from surrogate.predict import Surrogate
+
+
+@dataclass(frozen=True, slots=True)
+class NearestCase(Record):
+    """The sweep case nearest an extrapolation case, and the model's error there."""
+
+    case: str
+    C1: float
+    phi: float
+    theta: float
+    rmse_mm: float
+    relative_rmse: float
+    fe_range_mm: list[float]
+
+
+@dataclass(frozen=True, slots=True)
+class CaseComparison(Record):
+    """Surrogate against FE on one case (the paper's Eq. 3 and Table 3 metrics, mm).
+
+    Clinical rows carry the config's ``label``, the paper's row and the FE time; rows
+    outside the sweep carry how they lie outside (``kind``) and the nearest sweep case.
+    """
+
+    case: str
+    C1: float
+    phi: float
+    theta: float
+    fe_mean_mm: float
+    fe_range_mm: list[float]
+    surrogate_mean_mm: float
+    surrogate_range_mm: list[float]
+    rmse_mm: float
+    sd_mm: float
+    true_rmse_mm: float
+    max_error_mm: float
+    relative_rmse: float
+    relative_max_error: float
+    extrapolation_warnings: list[str]
+    label: str | None = None
+    paper: dict[str, Any] | None = None
+    fe_wall_s: float | None = None
+    error_field: str | None = None
+    kind: str | None = None
+    nearest_sweep_case: NearestCase | None = None
+    error_ratio_to_nearest: float | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class ClinicalBlock(Record):
+    """One model on the clinical cases."""
+
+    architecture: str
+    boundary: str
+    split: str
+    held_out_of_training: list[str]
+    rows: list[CaseComparison]
+    worst: dict[str, Any] | None
+
+
+@dataclass(frozen=True, slots=True)
+class ClinicalEvaluation(Result):
+    """``results/surrogate/clinical.json``: the paper's Table 3 for both models."""
+
+    by_sample: ClinicalBlock | None = None
+    by_case: ClinicalBlock | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class ExtrapolationBlock(Record):
+    """One model on the FE cases outside the sweep."""
+
+    rows: list[CaseComparison]
+    failed_fe: list[dict[str, Any]]
+    by_kind: dict[str, dict[str, Any]]
+
+
+@dataclass(frozen=True, slots=True)
+class Extrapolation(Result):
+    """``results/surrogate/extrapolation.json``: both models outside their training data."""
+
+    by_sample: ExtrapolationBlock | None = None
+    by_case: ExtrapolationBlock | None = None
 
 
 def error_metrics(pred: np.ndarray, fe: np.ndarray) -> dict[str, Any]:

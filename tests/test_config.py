@@ -36,6 +36,8 @@ from studies.fe_variants import MeshSpec, Variant
 from surrogate.config import SurrogateConfig, SurrogateConfigError
 from tests.conftest import REPO
 
+pytestmark = pytest.mark.unit
+
 SCHEMA = load_schema()
 
 

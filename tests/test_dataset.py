@@ -11,6 +11,8 @@ import pytest
 
 from fem.dataset import BOUNDARY, DatasetError, SplitFractions, build_dataset, write_points
 
+pytestmark = pytest.mark.unit
+
 N = 50
 
 

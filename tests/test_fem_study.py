@@ -1,24 +1,30 @@
-"""The FE study: its pieces (variant names, Pareto front, lowest converging C1, reference
-storage, convergence rate) and its workflow rules end to end on tests/config.yaml.
+"""The FE study's pieces: variant names, Pareto front, lowest converging C1, references.
+
+Also the reference storage and the convergence rate; its workflow rules run end to end in
+``tests/test_workflow.py``.
 """
 
 from __future__ import annotations
 
-import json
 import re
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 
 from fem.exceptions import InvalidParameterError
 from report.common import variant_label
-from studies.fe_speed_accuracy import pareto_front, summarise_variants
+from studies.fe_speed_accuracy import (
+    SpeedAccuracy,
+    VariantRecord,
+    pareto_front,
+    summarise_variants,
+)
 from studies.fe_variants import VARIANT_ID_PATTERN, MeshSpec, Variant, expand_variants
 from studies.stability import lowest_converging, sweep_records
-from tests.conftest import REPO, job_counts, snakemake
+
+pytestmark = pytest.mark.solve
 
 
 def test_variant_ids_round_trip_and_expand() -> None:
@@ -49,11 +55,22 @@ def test_pareto_front_and_cheapest_meeting_target() -> None:
     costs = [1.0, 2.0, 3.0, 2.5, 4.0]
     errors = [0.10, 0.02, 0.005, 0.03, 0.005]
     assert pareto_front(costs, errors) == [True, True, True, False, False]
-    records = [{"variant": f"v{i}", "median_cpu_s": c, "max_relative_error": e}
-               for i, (c, e) in enumerate(zip(costs, errors))]
-    summary = summarise_variants(records, target=0.01)
-    assert summary["cheapest_meeting_target"] == "v2"
-    assert summary["pareto_front"] == ["v0", "v1", "v2"]
+    records = [
+        VariantRecord(variant=f"v{i}", mesh={}, element="p2p1", solver="direct",
+                      quadrature_degree=0, dofs=1, cells=1, material_points=1, setup_s=0.0,
+                      machine={}, median_cpu_s=c, max_relative_error=e)
+        for i, (c, e) in enumerate(zip(costs, errors, strict=True))
+    ]
+    skipped = replace(records[0], variant="big", skipped="too many dofs", median_cpu_s=None,
+                      max_relative_error=None)
+    summary = summarise_variants([*records, skipped], target=0.01, default_variant="v1")
+    assert summary.cheapest_meeting_target == "v2"
+    assert summary.pareto_front == ["v0", "v1", "v2"]
+    assert [v.pareto for v in summary.variants] == [True, True, True, False, False, None]
+    # the summary is a result file: it round-trips, the skipped variant without a Pareto flag
+    written = summary.to_json()
+    assert "pareto" not in written["variants"][-1] and written["default_variant"] == "v1"
+    assert SpeedAccuracy.from_json(written) == summary
 
 
 def test_lowest_converging_reads_down_each_column() -> None:
@@ -203,53 +220,3 @@ def test_error_falls_with_mesh_size_against_a_finer_reference(mesh_ladder: dict[
     assert errors[0] > errors[1] > errors[2]
     assert observed_rates(sizes, errors)[0] > 0.5
     fine.solver.destroy()
-
-
-def test_fe_study_rules_run_end_to_end(small_run: Path) -> None:
-    """The FE study's rules ran as part of the small workflow (the report needs them)."""
-    config = yaml.safe_load((REPO / "tests" / "config.yaml").read_text())
-    study = small_run / "results" / "fe_study"
-
-    clinical = json.loads((study / "clinical.json").read_text())
-    assert len(clinical["cases"]) == len(config["clinical"])
-    for row in clinical["cases"]:
-        assert row["converged"] and row["wall_s"] > 0 and row["factorization_equivalents"] > 1
-        assert row["baseline"]["load_steps"] == config["fe_study"]["clinical"]["baseline_fixed_steps"]
-        # the baseline reaches the same state, and the reference is a different discretisation
-        assert row["baseline"]["max_difference_from_adaptive_mm"] < 1e-3
-        assert 0 < row["accuracy"]["relative_max_error"] < 0.2
-    assert set(clinical["summary"]["targets"]) == {"median_wall_s", "factorization_equivalents",
-                                                  "relative_max_error"}
-
-    sa = json.loads((study / "speed_accuracy.json").read_text())
-    assert len(sa["variants"]) == 3 and sa["pareto_front"]
-    by_solver = {v["solver"]: v for v in sa["variants"] if v["element"] == "p2p1"}
-    assert by_solver["direct"]["max_relative_error"] == pytest.approx(
-        by_solver["iterative"]["max_relative_error"], rel=1e-5)
-
-    stability = json.loads((study / "stability.json").read_text())
-    schemes = {r["scheme"] for r in stability["records"]}
-    assert schemes == {"adaptive", "fixed-4"}
-    assert len(stability["records"]) == 2 * 2 * 2
-    assert stability["lowest_converging"]["adaptive"]["all_phi"] is not None
-
-
-@pytest.mark.parametrize("change", [{"solver": "direct-refactor"}, {"discretisation": {"quadrature_degree": 3}}])
-def test_the_default_discretisation_does_not_rerun_the_study_variants(
-    small_run: Path, tmp_path: Path, change: dict
-) -> None:
-    """The reference and the speed-accuracy variants set their own element, quadrature and
-    solver: changing the default's re-solves the sweep and the clinical benchmark only.
-    """
-    config = yaml.safe_load((REPO / "tests" / "config.yaml").read_text())
-    fe = config.setdefault("fe", {})
-    for key, value in change.items():
-        fe[key] = {**fe.get(key, {}), **value} if isinstance(value, dict) else value
-    path = tmp_path / "config.yaml"
-    path.write_text(yaml.safe_dump(config))
-    run = snakemake(small_run, "-n", "-j2", config=path)
-    assert run.returncode == 0, run.stderr[-3000:]
-    counts = job_counts(run.stdout + run.stderr)
-    n_cases = len(config["sweep"]["C1_kPa"]) * len(config["sweep"]["phi_deg"])
-    assert counts["solve"] == n_cases and counts["fe_clinical"] == counts["fe_stability"] == 1
-    assert "fe_variant" not in counts and "fe_reference" not in counts

@@ -12,6 +12,8 @@ import pytest
 from fem.dataset import build_dataset, write_points
 from surrogate.config import SurrogateConfig, SurrogateConfigError
 
+pytestmark = pytest.mark.unit
+
 N = 200
 
 

@@ -11,9 +11,12 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+import pytest
 import yaml
 
 from tests.conftest import REPO, job_counts, snakemake
+
+pytestmark = pytest.mark.workflow
 
 # Twelve quick cases on the coarse test mesh.
 KILL_CONFIG = {

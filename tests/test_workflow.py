@@ -13,6 +13,8 @@ import yaml
 
 from tests.conftest import REPO, job_counts, snakemake
 
+pytestmark = pytest.mark.workflow
+
 
 def test_full_config_plans_688_solves(tmp_path: Path) -> None:
     run = snakemake(tmp_path, "-n", "-j2", config=REPO / "config.yaml")
@@ -184,3 +186,53 @@ def test_small_sweep_report(small_run: Path) -> None:
         assert f"{scheme}: lowest converging C1" in lowest
         if per_phi["all_phi"] is not None:
             assert f"<td>{per_phi['all_phi']:g}</td>" in lowest
+
+
+def test_fe_study_rules_run_end_to_end(small_run: Path) -> None:
+    """The FE study's rules ran as part of the small workflow (the report needs them)."""
+    config = yaml.safe_load((REPO / "tests" / "config.yaml").read_text())
+    study = small_run / "results" / "fe_study"
+
+    clinical = json.loads((study / "clinical.json").read_text())
+    assert len(clinical["cases"]) == len(config["clinical"])
+    for row in clinical["cases"]:
+        assert row["converged"] and row["wall_s"] > 0 and row["factorization_equivalents"] > 1
+        assert row["baseline"]["load_steps"] == config["fe_study"]["clinical"]["baseline_fixed_steps"]
+        # the baseline reaches the same state, and the reference is a different discretisation
+        assert row["baseline"]["max_difference_from_adaptive_mm"] < 1e-3
+        assert 0 < row["accuracy"]["relative_max_error"] < 0.2
+    assert set(clinical["summary"]["targets"]) == {"median_wall_s", "factorization_equivalents",
+                                                  "relative_max_error"}
+
+    sa = json.loads((study / "speed_accuracy.json").read_text())
+    assert len(sa["variants"]) == 3 and sa["pareto_front"]
+    by_solver = {v["solver"]: v for v in sa["variants"] if v["element"] == "p2p1"}
+    assert by_solver["direct"]["max_relative_error"] == pytest.approx(
+        by_solver["iterative"]["max_relative_error"], rel=1e-5)
+
+    stability = json.loads((study / "stability.json").read_text())
+    schemes = {r["scheme"] for r in stability["records"]}
+    assert schemes == {"adaptive", "fixed-4"}
+    assert len(stability["records"]) == 2 * 2 * 2
+    assert stability["lowest_converging"]["adaptive"]["all_phi"] is not None
+
+
+@pytest.mark.parametrize("change", [{"solver": "direct-refactor"}, {"discretisation": {"quadrature_degree": 3}}])
+def test_the_default_discretisation_does_not_rerun_the_study_variants(
+    small_run: Path, tmp_path: Path, change: dict
+) -> None:
+    """The reference and the speed-accuracy variants set their own element, quadrature and
+    solver: changing the default's re-solves the sweep and the clinical benchmark only.
+    """
+    config = yaml.safe_load((REPO / "tests" / "config.yaml").read_text())
+    fe = config.setdefault("fe", {})
+    for key, value in change.items():
+        fe[key] = {**fe.get(key, {}), **value} if isinstance(value, dict) else value
+    path = tmp_path / "config.yaml"
+    path.write_text(yaml.safe_dump(config))
+    run = snakemake(small_run, "-n", "-j2", config=path)
+    assert run.returncode == 0, run.stderr[-3000:]
+    counts = job_counts(run.stdout + run.stderr)
+    n_cases = len(config["sweep"]["C1_kPa"]) * len(config["sweep"]["phi_deg"])
+    assert counts["solve"] == n_cases and counts["fe_clinical"] == counts["fe_stability"] == 1
+    assert "fe_variant" not in counts and "fe_reference" not in counts

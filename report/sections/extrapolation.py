@@ -10,25 +10,32 @@ from studies.figures import surrogate as surrogate_plots
 
 def extrapolation_section(ctx: Context) -> str:
     """The surrogate outside its training data, against FE solutions of those cases."""
-    extra = ctx.json.get("extrapolation")
+    extra = ctx.results.get("extrapolation")
     if extra is None:
         return missing("results/surrogate/extrapolation.json")
-    splits = [s for s in ("by_sample", "by_case") if (extra.get(s) or {}).get("rows")]
+    blocks = {s: getattr(extra, s) for s in ("by_sample", "by_case") if getattr(extra, s)}
+    splits = [s for s, block in blocks.items() if block.rows]
     if not splits:
-        failed = sum(len((extra.get(s) or {}).get("failed_fe") or []) for s in extra)
+        failed = sum(len(block.failed_fe) for block in blocks.values())
         return para(f"No extrapolation case was compared ({failed} FE solves outside the sweep "
-                  "failed).", "note")
-    ids = list(dict.fromkeys(r["case"] for s in splits for r in extra[s]["rows"]))
-    rows_of = {s: {r["case"]: r for r in extra[s]["rows"]} for s in splits}
+                    "failed).", "note")
+    ids = list(dict.fromkeys(r.case for s in splits for r in blocks[s].rows))
+    rows_of = {s: {r.case: r for r in blocks[s].rows} for s in splits}
     first = {cid: next(rows_of[s][cid] for s in splits if cid in rows_of[s]) for cid in ids}
-    labels = [f"C1 {first[c]['C1']:g} kPa, Φ {first[c]['phi']:g}°, θ {first[c]['theta']:g}°\n"
-              f"({first[c].get('kind', 'n/a')})" for c in ids]
+    labels = [f"C1 {first[c].C1:g} kPa, Φ {first[c].phi:g}°, θ {first[c].theta:g}°\n"
+              f"({first[c].kind or 'n/a'})" for c in ids]
+
+    def rmse(split: str, cid: str, nearest: bool = False) -> float | None:
+        row = rows_of[split].get(cid)
+        if row is not None and nearest:
+            row = row.nearest_sweep_case
+        return row.rmse_mm if row is not None else None
+
     series: dict[str, list[float | None]] = {}
     for s in splits:
         name = s.replace("_", "-")
-        series[f"{name} model at the case"] = [rows_of[s].get(c, {}).get("rmse_mm") for c in ids]
-        series[f"{name} model at the nearest sweep case"] = [
-            (rows_of[s].get(c, {}).get("nearest_sweep_case") or {}).get("rmse_mm") for c in ids]
+        series[f"{name} model at the case"] = [rmse(s, c) for c in ids]
+        series[f"{name} model at the nearest sweep case"] = [rmse(s, c, True) for c in ids]
     out = [para(
         "The surrogate asked about cases outside its training data — C1 below "
         f"{PAPER_C1_RANGE[0]:g} or above {PAPER_C1_RANGE[1]:g} kPa (or the sweep's range), "
@@ -46,14 +53,12 @@ def extrapolation_section(ctx: Context) -> str:
         "Mean error per extrapolation case (log), next to the nearest sweep case's error."))
     rows = []
     for cid, label in zip(ids, labels, strict=True):
-        fe_range = first[cid].get("fe_range_mm") or [None, None]
-        row = [label.split("\n")[0], fmt(fe_range[-1], ".3g")]
+        row = [label.split("\n")[0], fmt(first[cid].fe_range_mm[-1], ".3g")]
         for s in splits:
-            r = rows_of[s].get(cid, {})
-            near = r.get("nearest_sweep_case") or {}
-            row += [r.get("kind", "n/a"), fmt(r.get("rmse_mm"), ".3g"),
-                    fmt(r.get("max_error_mm"), ".3g"), fmt(near.get("rmse_mm"), ".3g"),
-                    fmt(r.get("error_ratio_to_nearest"), ".3g")]
+            r = rows_of[s].get(cid)
+            row += [(r.kind if r else None) or "n/a", fmt(r.rmse_mm if r else None, ".3g"),
+                    fmt(r.max_error_mm if r else None, ".3g"), fmt(rmse(s, cid, True), ".3g"),
+                    fmt(r.error_ratio_to_nearest if r else None, ".3g")]
         rows.append(row)
     header = ["case", "FE max |u| (mm)"]
     for s in splits:
@@ -62,7 +67,7 @@ def extrapolation_section(ctx: Context) -> str:
                    f"{name}: max error (mm)", f"{name}: at nearest sweep case (mm)",
                    f"{name}: ratio"]
     out.append(table(header, rows, table_id="extrapolation"))
-    failed = [f for s in splits for f in (extra[s].get("failed_fe") or [])]
+    failed = [f for s in splits for f in blocks[s].failed_fe]
     if failed:
         out.append(para("FE solves outside the sweep that failed (no comparison): " + "; ".join(
             f"{f.get('case')}: {f.get('reason', '')}" for f in failed), "note"))

@@ -10,27 +10,26 @@ from report.html import figure, finite, fmt, missing, para, seconds, table
 
 def mesh_section(ctx: Context) -> str:
     """The mesh section: size and quality table, and the picture of the named surfaces."""
-    quality = ctx.json.get("quality")
+    quality = ctx.results.get("quality")
     if quality is None:
         return missing("results/mesh/quality.json")
-    anatomy = quality.get("anatomy") or {}
-    dofs = quality.get("dofs") or {}
+    anatomy = quality.anatomy
     rows = [
-        ["tetrahedra", fmt(quality.get("cells"), "d")],
-        ["vertices (material points)", fmt(quality.get("vertices"), "d")],
-        ["P2/P1 unknowns", fmt(dofs.get("P2/P1"), "d")],
-        ["volume (ml)", fmt(quality.get("volume_ml"), ".0f")],
+        ["tetrahedra", fmt(quality.cells, "d")],
+        ["vertices (material points)", fmt(quality.vertices, "d")],
+        ["P2/P1 unknowns", fmt(quality.dofs.get("P2/P1"), "d")],
+        ["volume (ml)", fmt(quality.volume_ml, ".0f")],
         ["breast (mound) volume (ml)", fmt(anatomy.get("breast_volume_ml"), ".0f")],
         ["projection from the chest wall (mm)",
          fmt(1e3 * anatomy["projection_from_chest_wall_m"], ".0f")
          if finite(anatomy.get("projection_from_chest_wall_m")) else "n/a"],
-        ["min / mean SICN", f"{fmt(quality.get('min_minSICN'), '.3f')} / "
-                            f"{fmt(quality.get('mean_minSICN'), '.3f')}"],
-        ["min / max dihedral angle (deg)", f"{fmt(quality.get('min_dihedral_deg'), '.1f')} / "
-                                           f"{fmt(quality.get('max_dihedral_deg'), '.1f')}"],
-        ["inverted / degenerate cells", f"{fmt(quality.get('inverted_cells'), 'd')} / "
-                                        f"{fmt(quality.get('degenerate_cells'), 'd')}"],
-        ["meshing time", seconds(quality.get("mesh_wall_s"))],
+        ["min / mean SICN", f"{fmt(quality.min_minSICN, '.3f')} / "
+                            f"{fmt(quality.mean_minSICN, '.3f')}"],
+        ["min / max dihedral angle (deg)", f"{fmt(quality.min_dihedral_deg, '.1f')} / "
+                                           f"{fmt(quality.max_dihedral_deg, '.1f')}"],
+        ["inverted / degenerate cells", f"{fmt(quality.inverted_cells, 'd')} / "
+                                        f"{fmt(quality.degenerate_cells, 'd')}"],
+        ["meshing time", seconds(quality.mesh_wall_s)],
     ]
     out = [para("The tetrahedral mesh of the breast on which the FE sweep was solved; its "
               "vertices are the material points the surrogate learns. SICN is the "

@@ -16,17 +16,16 @@ from surrogate.config import parse_architecture
 
 
 def _table2(ctx: Context) -> str:
-    study = ctx.json.get("table2")
+    study = ctx.results.get("table2")
     if study is None:
         return missing("results/surrogate/study/table2.json")
-    ours = study.get("rows") or {}
-    selected = study.get("selected_architecture")
+    ours = study.rows
+    selected = study.selected_architecture
     names = sorted(set(ours) | set(paper.TABLE2), key=parse_architecture)
     rows, highlight = [], []
     for i, name in enumerate(names):
-        row = ours.get(name) or {}
+        row = ours.get(name)
         published = paper.TABLE2.get(name) or {}
-        err, train = row.get("validation_error_mm") or {}, row.get("train_s") or {}
         p_err, p_train = published.get("validation_error_mm"), published.get("train_s")
         mark = []
         if name == selected:
@@ -34,15 +33,21 @@ def _table2(ctx: Context) -> str:
             highlight.append(i)
         if name == paper.BEST_ARCHITECTURE:
             mark.append("selected by the paper")
-        if name == study.get("most_accurate_architecture") and name != selected:
+        if name == study.most_accurate_architecture and name != selected:
             mark.append("most accurate, over the prediction budget")
-        rows.append([name, fmt(row.get("parameters"), "d"), fmt(row.get("runs"), "d"),
-                     pm(err.get("mean"), err.get("sd"), ".3f"),
+        if row is None:  # the paper's architecture that we did not train
+            rows.append([name, "n/a", "n/a", "n/a", pm(*p_err, ".2f") if p_err else "n/a",
+                         "n/a", pm(*p_train, ".0f") if p_train else "n/a", "n/a", "n/a",
+                         "; ".join(mark)])
+            continue
+        predict = predict_s(row)
+        rows.append([name, fmt(row.parameters, "d"), fmt(row.runs, "d"),
+                     pm(row.validation_error_mm.mean, row.validation_error_mm.sd, ".3f"),
                      pm(*p_err, ".2f") if p_err else "n/a",
-                     pm(train.get("mean"), train.get("sd"), ".3g"),
+                     pm(row.train_s.mean, row.train_s.sd, ".3g"),
                      pm(*p_train, ".0f") if p_train else "n/a",
-                     fmt((row.get("epochs") or {}).get("mean"), ".0f"),
-                     fmt(1e3 * predict_s(row) if predict_s(row) is not None else None, ".3g"),
+                     fmt(row.epochs.mean, ".0f"),
+                     fmt(1e3 * predict if predict is not None else None, ".3g"),
                      "; ".join(mark)])
     return "".join([
         h3("Table 2: architecture study"),
@@ -50,7 +55,7 @@ def _table2(ctx: Context) -> str:
            "repeats) and training time per architecture (hidden layers × width), ours beside "
            "the paper's (trained on an NVIDIA V100). Our prediction time is one whole-field "
            "prediction on one CPU core. The highlighted row is our selection: "
-           f"{study.get('rule', 'n/a')}.", "caption"),
+           f"{study.rule}.", "caption"),
         table(["architecture", "parameters", "runs", "validation error (mm)",
                 "paper: validation error (mm)", "training time (s)", "paper: training time (s)",
                 "epochs", "prediction (ms)", "selected"], rows, highlight, table_id="table2"),
@@ -58,7 +63,7 @@ def _table2(ctx: Context) -> str:
 
 
 def _table3(ctx: Context) -> str:
-    clinical = ctx.json.get("clinical")
+    clinical = ctx.results.get("clinical")
     out = [h3("Table 3: clinical cases")]
     if clinical is None:
         return "".join(out) + missing("results/surrogate/clinical.json")
@@ -69,78 +74,77 @@ def _table3(ctx: Context) -> str:
         "points of every case (the paper's split); the by-case model never saw the clinical "
         "cases.", "caption"))
     for split in ("by_sample", "by_case"):
-        block = clinical.get(split)
-        if not block or not block.get("rows"):
+        block = getattr(clinical, split)
+        if block is None or not block.rows:
             continue
-        cases = block["rows"]
-        published = [paper.table3_row(r["C1"], r["phi"]) or {} for r in cases]
+        cases = block.rows
+        published = [paper.table3_row(r.C1, r.phi) or {} for r in cases]
         metrics = [
-            ("FE mean displacement (mm)", lambda r: fmt(r.get("fe_mean_mm"), ".3g"),
+            ("FE mean displacement (mm)", lambda r: fmt(r.fe_mean_mm, ".3g"),
              lambda p: fmt(p.get("fe_mean_mm"), ".3g")),
-            ("FE displacement range (mm)", lambda r: span(r.get("fe_range_mm")),
+            ("FE displacement range (mm)", lambda r: span(r.fe_range_mm),
              lambda p: span(p.get("fe_range_mm"))),
-            ("surrogate mean displacement (mm)", lambda r: fmt(r.get("surrogate_mean_mm"), ".3g"),
+            ("surrogate mean displacement (mm)", lambda r: fmt(r.surrogate_mean_mm, ".3g"),
              lambda p: fmt(p.get("surrogate_mean_mm"), ".3g")),
-            ("RMSE ± SD (mm, Eq. 3)", lambda r: pm(r.get("rmse_mm"), r.get("sd_mm")),
+            ("RMSE ± SD (mm, Eq. 3)", lambda r: pm(r.rmse_mm, r.sd_mm),
              lambda p: pm(p.get("rmse_mm"), p.get("sd_mm"))),
-            ("surrogate displacement range (mm)", lambda r: span(r.get("surrogate_range_mm")),
+            ("surrogate displacement range (mm)", lambda r: span(r.surrogate_range_mm),
              lambda p: span(p.get("surrogate_range_mm"))),
         ]
         rows = []
         for name, ours, theirs in metrics:
             rows.append([f"{name}: ours"] + [ours(r) for r in cases])
             rows.append([f"{name}: paper"] + [theirs(p) for p in published])
-        rows.append(["max error (mm): ours"] + [fmt(r.get("max_error_mm"), ".3g") for r in cases])
+        rows.append(["max error (mm): ours"] + [fmt(r.max_error_mm, ".3g") for r in cases])
         rows.append(["max error (mm): paper (Fig. 5 caption)"] + [
-            fmt(paper.fig5_max_error_mm(r["C1"], r["phi"]), ".3g") for r in cases])
-        out.append(para(f"{split.replace('_', '-')} model ({block.get('architecture', 'n/a')}, "
-                      f"boundary: {block.get('boundary', 'n/a')}):"))
-        out.append(table(["metric"] + [r.get("label", r["case"]) for r in cases], rows,
+            fmt(paper.fig5_max_error_mm(r.C1, r.phi), ".3g") for r in cases])
+        out.append(para(f"{split.replace('_', '-')} model ({block.architecture}, "
+                        f"boundary: {block.boundary}):"))
+        out.append(table(["metric"] + [r.label or r.case for r in cases], rows,
                           highlight=range(0, len(rows), 2), table_id=f"table3-{split}"))
     return "".join(out)
 
 
 def _table4(ctx: Context) -> str:
-    bench = ctx.json.get("benchmark")
+    bench = ctx.results.get("benchmark")
     out = [h3("Table 4: wall time per case")]
     if bench is None:
         return "".join(out) + missing("results/surrogate/benchmark.json")
-    speed = bench.get("speed") or []
+    speed = bench.speed
     if not speed:
         return "".join(out) + para("The benchmark holds no timed case.", "note")
     items = {case_id(c): c for c in ctx.clinical}
     published = []
     for row in speed:
-        item = items.get(row["case"])
+        item = items.get(row.case)
         published.append(paper.table4_row(item["C1"], item["phi"]) if item else None)
     out.append(para(
         "Wall time of one FE solve (set-up excluded) and one surrogate prediction, both on the "
         "same pinned CPU core in one job, ours beside the paper's (an Intel Core i7 at 2.3 GHz, "
         "mean ± SD), and the speed-up FE / surrogate.", "caption"))
     rows = [
-        ["FE: ours"] + [seconds(r.get("fe_solve_s")) for r in speed],
+        ["FE: ours"] + [seconds(r.fe_solve_s) for r in speed],
         ["FE: paper"] + [pm(*p["fe_s"], ".3g") + " s" if p else "n/a" for p in published],
-        ["surrogate: ours"] + [seconds(1e-3 * r["surrogate_ms"]) if finite(r.get("surrogate_ms"))
+        ["surrogate: ours"] + [seconds(1e-3 * r.surrogate_ms) if finite(r.surrogate_ms)
                                else "n/a" for r in speed],
         ["surrogate: paper"] + [pm(*p["surrogate_s"], ".3g") + " s" if p else "n/a"
                                 for p in published],
-        ["speed-up: ours"] + [times(r.get("speedup")) for r in speed],
+        ["speed-up: ours"] + [times(r.speedup) for r in speed],
         ["speed-up: paper"] + [times(p["fe_s"][0] / p["surrogate_s"][0]) if p else "n/a"
                                for p in published],
     ]
-    out.append(table(["model"] + [ctx.case_label(r["case"]) for r in speed], rows,
+    out.append(table(["model"] + [ctx.case_label(r.case) for r in speed], rows,
                       highlight=(0, 2, 4), table_id="table4"))
-    machine = bench.get("machine") or {}
-    out.append(para(f"Machine: {machine.get('processor', 'n/a')}, "
-                    f"{machine.get('cpus', 'n/a')} CPUs, "
-                  f"pinned core {machine.get('pinned_core', 'n/a')}, load average "
-                  f"{fmt((machine.get('loadavg') or [None])[0], '.2f')}.", "note"))
-    goals = bench.get("goals") or {}
+    machine = bench.machine
+    out.append(para(f"Machine: {machine.cpu}, {fmt(machine.cores, 'd')} CPUs, pinned core "
+                    f"{fmt(machine.pinned_core, 'd')}, load average "
+                    f"{fmt(machine.load_average_1_5_15min[0], '.2f')}.", "note"))
+    goals = bench.goals
     if goals:
         out.append(table(["benchmark goal", "value", "goal", "met"],
-                          [[GOAL_NAMES.get(k, k.replace("_", " ")), fmt(g.get("value"), ".4g"),
-                            fmt(g.get("goal"), "g"),
-                            yes(g.get("met"))] for k, g in goals.items()], table_id="goals"))
+                         [[GOAL_NAMES.get(k, k.replace("_", " ")), fmt(g.value, ".4g"),
+                           fmt(g.goal, "g"), yes(g.met)] for k, g in goals.items()],
+                         table_id="goals"))
     return "".join(out)
 
 
@@ -154,9 +158,11 @@ def _read_point_fields(path: Path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
 def _figure5(ctx: Context) -> str:
     out = [h3("Figure 5: displacement and surrogate error on the material points")]
     by_key = {(p.parent.name, p.stem): p for p in ctx.clinical_fields if p.suffix == ".xdmf"}
-    clinical = ctx.json.get("clinical") or {}
-    rows = {s: {r["case"]: r for r in (clinical.get(s) or {}).get("rows") or []}
-            for s in ("by_sample", "by_case")}
+    clinical = ctx.results.get("clinical")
+    blocks = {s: getattr(clinical, s) if clinical is not None else None
+              for s in ("by_sample", "by_case")}
+    rows = {s: {r.case: r for r in (block.rows if block is not None else [])}
+            for s, block in blocks.items()}
     out.append(para(
         "For each clinical case, the material points seen from the front (projected on the "
         "y–z plane, the front-most point of each line of sight drawn on top): the FE "
@@ -188,7 +194,8 @@ def _figure5(ctx: Context) -> str:
                                   f"{label}: FE |u| and surrogate error, seen from the front."))
         paper_max = paper.fig5_max_error_mm(item["C1"], item["phi"])
         table_rows.append([label] + [
-            fmt(rows[s].get(cid, {}).get("max_error_mm"), ".3g") for s in ("by_sample", "by_case")
+            fmt(rows[s][cid].max_error_mm if cid in rows[s] else None, ".3g")
+            for s in ("by_sample", "by_case")
         ] + [fmt(paper_max, ".3g")])
     out += figures
     if table_rows:

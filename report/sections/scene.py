@@ -34,44 +34,41 @@ class Candidate:
 def candidates(ctx: Context) -> list[Candidate]:
     """Every model with clinical-case errors and a cost on record."""
     out = []
-    clinical = ctx.json.get("clinical") or {}
-    bench = ctx.json.get("benchmark") or {}
-    study = ctx.json.get("table2") or {}
+    clinical = ctx.results.get("clinical")
+    bench = ctx.results.get("benchmark")
+    study = ctx.results.get("table2")
     for split, name in (("by_sample", "surrogate, by-sample split"),
                         ("by_case", "surrogate, by-case split (clinical cases unseen)")):
-        block = clinical.get(split)
-        if not block or not block.get("rows"):
+        block = getattr(clinical, split) if clinical is not None else None
+        if block is None or not block.rows:
             continue
-        rows = block["rows"]
-        max_err = [r.get("max_error_mm") for r in rows]
-        mean_err = [r.get("rmse_mm") for r in rows]
+        rows = block.rows
+        max_err = [r.max_error_mm for r in rows]
+        mean_err = [r.rmse_mm for r in rows]
         cost = None
-        if split == "by_sample" and bench.get("selected_architecture") == block.get("architecture"):
+        if (split == "by_sample" and bench is not None
+                and bench.selected_architecture == block.architecture):
             cost = predict_s(bench)
-        if cost is None:  # the same architecture's timing in the study
-            cost = predict_s((study.get("rows") or {}).get(block.get("architecture"), {}))
+        if cost is None and study is not None:  # the same architecture's timing in the study
+            cost = predict_s(study.rows.get(block.architecture))
         out.append(Candidate(
-            f"{name} ({block.get('architecture', '?')})",
+            f"{name} ({block.architecture})",
             max(max_err) if all(finite(v) for v in max_err) else None,
             max(mean_err) if all(finite(v) for v in mean_err) else None,
             cost, "FE default solution"))
-    fe = ctx.json.get("fe_clinical")
+    fe = ctx.results.get("fe_clinical")
     if fe is not None:
-        cases = fe.get("cases") or []
-        out.append(Candidate("FE default configuration", worst_case(cases, "max_error_mm"),
-                             worst_case(cases, "mean_error_mm"),
-                             (fe.get("summary") or {}).get("median_wall_s"),
+        out.append(Candidate("FE default configuration", worst_case(fe.cases, "max_error_mm"),
+                             worst_case(fe.cases, "mean_error_mm"), fe.summary.median_wall_s,
                              "refined FE reference"))
-    sa = ctx.json.get("fe_speed_accuracy") or {}
-    for v in sa.get("variants") or []:
-        if v.get("skipped"):
+    sa = ctx.results.get("fe_speed_accuracy")
+    for v in sa.variants if sa is not None else []:
+        if v.skipped:
             continue
-        cases = v.get("cases") or []
-        default = (" (the default's discretisation)"
-                   if v["variant"] == sa.get("default_variant") else "")
-        out.append(Candidate(f"FE {variant_label(v['variant'])}{default}",
-                             worst_case(cases, "max_error_mm"),
-                             worst_case(cases, "mean_error_mm"), v.get("median_wall_s"),
+        default = " (the default's discretisation)" if v.variant == sa.default_variant else ""
+        out.append(Candidate(f"FE {variant_label(v.variant)}{default}",
+                             worst_case(v.cases, "max_error_mm"),
+                             worst_case(v.cases, "mean_error_mm"), v.median_wall_s,
                              "refined FE reference"))
     return out
 

@@ -18,18 +18,17 @@ from studies.figures import fe as fem_plots
 def stability_section(ctx: Context) -> str:
     """The stability section: the study's grid, the sweep's own failures, extrapolation."""
     out = []
-    stab = ctx.json.get("fe_stability")
+    stab = ctx.results.get("fe_stability")
     if stab is None:
         out.append(missing("results/fe_study/stability.json"))
     else:
-        records = stab.get("records") or []
-        schemes = stab.get("schemes") or {}
+        records = stab.records
         described = "; ".join(
             f"{name}: " + (f"{s.get('fixed_steps')} equal load steps"
                            if s.get("fixed_steps") else
                            f"adaptive steps from {s.get('initial_step', 'n/a')} of the load, "
                            f"cut back on failure down to {fmt(s.get('min_step'), '.3g')}")
-            for name, s in schemes.items())
+            for name, s in stab.schemes.items())
         out.append(para(
             "Where the nonlinear FE solve struggles or fails: each cell is one solve from rest "
             "at a tissue stiffness C1 (rows) and gravity angle Φ (columns), extended below the "
@@ -38,30 +37,30 @@ def stability_section(ctx: Context) -> str:
             "Newton iterations over all attempts, and rejected load steps (attempts that "
             "failed and were retried with a smaller step). A cross marks a case that did not "
             "reach the full load; its colour names the first failure. "
-            f"Schemes — {described}. Mesh: {Path(str(stab.get('mesh', 'n/a'))).parent.name}, "
-            f"{fmt(stab.get('dofs'), 'd')} DOFs.", "caption"))
+            f"Schemes — {described}. Mesh: {Path(stab.mesh).parent.name}, "
+            f"{fmt(stab.dofs, 'd')} DOFs.", "caption"))
         if records:
             out.append(ctx.figure(
                 "stability_maps.png",
-                lambda p: fem_plots.plot_stability_maps(records, p, PAPER_C1_RANGE[0]),
+                lambda p: fem_plots.plot_stability_maps([r.to_json() for r in records], p,
+                                                        PAPER_C1_RANGE[0]),
                 "stability maps over C1 and gravity angle",
                 "Load steps, Newton iterations and rejected steps over (Φ, C1) per scheme."))
-        lowest = stab.get("lowest_converging") or {}
+        lowest = stab.lowest_converging
         if lowest:
             out.append(para("The lowest C1 from which every stiffer C1 of the grid converged, per "
                           "scheme and angle, and what went wrong at the next C1 below "
                           "(\"—\": nothing failed down to the grid's lowest C1).", "caption"))
             out.append(lowest_converging_table(lowest, "lowest-converging"))
-        failed = [r for r in records if not r.get("converged")]
+        failed = [r for r in records if not r.converged]
         if failed:
             out.append(table(
                 ["scheme", "C1 (kPa)", "Φ (deg)", "load reached (%)", "first failure",
                  "failure kinds (count)", "reason"],
-                [[r["scheme"], f"{r['C1']:g}", f"{r['phi']:g}",
-                  pct(r.get("load_fraction")),
-                  r.get("first_failure") or "n/a",
-                  ", ".join(f"{k} {v}" for k, v in (r.get("failure_kinds") or {}).items()) or "n/a",
-                  r.get("reason", "")] for r in failed], table_id="failed-cases"))
+                [[r.scheme, f"{r.C1:g}", f"{r.phi:g}", pct(r.load_fraction),
+                  r.first_failure or "n/a",
+                  ", ".join(f"{k} {v}" for k, v in r.failure_kinds.items()) or "n/a",
+                  r.reason] for r in failed], table_id="failed-cases"))
         else:
             out.append(para("Every case of the stability grid converged under every scheme."))
     out.append(h3("The sweep on its own mesh"))

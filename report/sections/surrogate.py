@@ -2,49 +2,49 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from typing import Any
 
 from report.common import predict_s, variant_label, worst_case
 from report.context import Context
 from report.html import finite, fmt, h3, missing, para, pm, table
+from studies.architecture import RunSummary
 from studies.figures import surrogate as surrogate_plots
 
 
 def fe_points_for_surrogate(ctx: Context) -> list[dict[str, Any]]:
     """FE configurations as (solve time per case, worst clinical-case mean error)."""
     points = []
-    fe = ctx.json.get("fe_clinical")
+    fe = ctx.results.get("fe_clinical")
     if fe is not None:
-        err = worst_case(fe.get("cases") or [], "mean_error_mm")
-        time_s = (fe.get("summary") or {}).get("median_wall_s")
+        err = worst_case(fe.cases, "mean_error_mm")
+        time_s = fe.summary.median_wall_s
         if err is not None and finite(time_s):
             points.append({"label": "FE default", "time_s": time_s, "error_mm": err,
                            "default": True})
-    sa = ctx.json.get("fe_speed_accuracy")
-    for v in (sa or {}).get("variants") or []:
-        if v.get("skipped"):
+    sa = ctx.results.get("fe_speed_accuracy")
+    for v in sa.variants if sa is not None else []:
+        if v.skipped:
             continue
-        err = worst_case(v.get("cases") or [], "mean_error_mm")
-        if err is not None and finite(v.get("median_wall_s")):
-            points.append({"label": variant_label(v["variant"]), "time_s": v["median_wall_s"],
+        err = worst_case(v.cases, "mean_error_mm")
+        if err is not None and finite(v.median_wall_s):
+            points.append({"label": variant_label(v.variant), "time_s": v.median_wall_s,
                            "error_mm": err, "default": False})
     return points
 
 
 def surrogate_speed_accuracy_section(ctx: Context) -> str:
     """The surrogate speed-accuracy section: architectures beside the FE, and the variants."""
-    study = ctx.json.get("table2")
+    study = ctx.results.get("table2")
     if study is None:
         return missing("results/surrogate/study/table2.json")
-    selected = study.get("selected_architecture")
+    selected = study.selected_architecture
     archs = []
-    for name, row in (study.get("rows") or {}).items():
-        err, train = row.get("validation_error_mm") or {}, row.get("train_s") or {}
-        if not (finite(err.get("mean")) and finite(train.get("mean"))):
+    for name, row in study.rows.items():
+        err, train = row.validation_error_mm, row.train_s
+        if not (finite(err.mean) and finite(train.mean)):
             continue
-        archs.append({"name": name, "error_mm": err["mean"], "error_sd_mm": err.get("sd") or 0.0,
-                      "train_s": train["mean"], "train_sd_s": train.get("sd") or 0.0,
+        archs.append({"name": name, "error_mm": err.mean, "error_sd_mm": err.sd or 0.0,
+                      "train_s": train.mean, "train_sd_s": train.sd or 0.0,
                       "predict_s": predict_s(row), "selected": name == selected})
     fe_points = fe_points_for_surrogate(ctx)
     out = [para(
@@ -66,9 +66,9 @@ def surrogate_speed_accuracy_section(ctx: Context) -> str:
             "Surrogate speed against accuracy, with the FE on the same axes."))
     else:
         out.append(para("The architecture study holds no complete row.", "note"))
-    out.append(para(f"Selected architecture: {selected} (rule: {study.get('rule', 'n/a')}); the "
-                  f"paper selected {study.get('paper_selected_architecture', 'n/a')}."))
-    variants = ctx.json.get("variants")
+    out.append(para(f"Selected architecture: {selected} (rule: {study.rule}); the "
+                    f"paper selected {study.paper_selected_architecture}."))
+    variants = ctx.results.get("variants")
     out.append(h3("Variants of the training settings at the selected architecture"))
     if variants is None:
         out.append(missing("results/surrogate/variants.json"))
@@ -77,21 +77,21 @@ def surrogate_speed_accuracy_section(ctx: Context) -> str:
         "Each variant changes the listed settings of the selected model and is trained with "
         "the same seeds; a ratio below 1 means smaller error (or shorter training) than the "
         "baseline.", "caption"))
-    def stats(v: Mapping[str, Any], key: str) -> str:
-        item = v.get(key) or {}
-        return pm(item.get("mean"), item.get("sd"))
 
-    base = variants.get("baseline") or {}
+    def stats(v: RunSummary, key: str) -> str:
+        item = getattr(v, key)
+        return pm(item.mean, item.sd)
+
+    base = variants.baseline
     rows = [["baseline", "none", stats(base, "validation_error_mm"),
-             stats(base, "train_s"), fmt(base.get("parameters"), "d"), "1", "1"]]
-    for name, v in (variants.get("variants") or {}).items():
-        changed = v.get("changed")
-        changed = (", ".join(f"{k} = {val}" for k, val in changed.items()) if changed is not None
-                   else f"boundary = {v.get('boundary', 'n/a')}")
+             stats(base, "train_s"), fmt(base.parameters, "d"), "1", "1"]]
+    for name, v in variants.variants.items():
+        changed = (", ".join(f"{k} = {val}" for k, val in v.changed.items())
+                   if v.changed is not None else f"boundary = {v.boundary or 'n/a'}")
         rows.append([name, changed or "none", stats(v, "validation_error_mm"),
-                     stats(v, "train_s"), fmt(v.get("parameters"), "d"),
-                     fmt(v.get("error_ratio_to_baseline"), ".3g"),
-                     fmt(v.get("time_ratio_to_baseline"), ".3g")])
+                     stats(v, "train_s"), fmt(v.parameters, "d"),
+                     fmt(v.error_ratio_to_baseline, ".3g"),
+                     fmt(v.time_ratio_to_baseline, ".3g")])
     out.append(table(["variant", "settings changed", "validation error (mm)",
                        "training time (s)", "parameters", "error ratio", "time ratio"], rows))
     return "".join(out)

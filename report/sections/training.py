@@ -12,7 +12,7 @@ from studies.figures import surrogate as surrogate_plots
 
 def training_section(ctx: Context) -> str:
     """The selected model's training history and settings."""
-    history = ctx.json.get("history")
+    history = ctx.results.get("history")
     if history is None:
         return missing("results/surrogate/model/history.json")
     summary = history.get("summary") or {}
@@ -37,7 +37,7 @@ def training_section(ctx: Context) -> str:
         ["validation error (mm)", fmt(summary.get("validation_error_mm"), ".4g")],
         ["training time", seconds(summary.get("train_s"))],
         ["training cases", fmt(summary.get("n_train_cases"), "d")],
-        ["training range", _training_range((ctx.json.get("model") or {}).get("training_range"))],
+        ["training range", _training_range((ctx.results.get("model") or {}).get("training_range"))],
     ], table_id="training"))
     return "".join(out)
 

@@ -1,13 +1,13 @@
 """Snakemake adapter: the surrogate's goals measured in one job, FE and surrogate on one core."""
 
-import json
 import logging
 from pathlib import Path
 
 from fem.parameters import SolverSettings
 from fem.sweep import clinical_cases
-from studies.results import write_json
-from studies.surrogate_benchmark import format_benchmark, run_benchmark
+from studies.architecture import ArchitectureTable, VariantComparison
+from studies.surrogate_benchmark import SurrogateBenchmark, format_benchmark, run_benchmark
+from studies.surrogate_evaluation import ClinicalEvaluation
 
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
 
@@ -24,12 +24,12 @@ bench = run_benchmark(
     snakemake.input.mesh,
     cases,
     settings,
-    json.loads(Path(snakemake.input.table).read_text()),
-    json.loads(Path(snakemake.input.clinical).read_text()),
+    ArchitectureTable.read(snakemake.input.table).to_json(),
+    ClinicalEvaluation.read(snakemake.input.clinical).to_json(),
     repeats=snakemake.params.repeats,
 )
-bench["variants"] = json.loads(Path(snakemake.input.variants).read_text())
-write_json(snakemake.output[0], bench)
+bench["variants"] = VariantComparison.read(snakemake.input.variants).to_json()
+SurrogateBenchmark.from_json(bench).write(snakemake.output[0])
 text = format_benchmark(bench)
 logging.getLogger("benchmark").info("\n%s", text)
 print(text, flush=True)

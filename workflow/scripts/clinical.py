@@ -9,8 +9,7 @@ from surrogate.runtime import configure_cpu
 configure_cpu()
 
 from fem.dataset import read_dataset  # noqa: E402
-from studies.results import write_json  # noqa: E402
-from studies.surrogate_evaluation import evaluate_clinical  # noqa: E402
+from studies.surrogate_evaluation import ClinicalEvaluation, evaluate_clinical  # noqa: E402
 from surrogate.predict import Surrogate  # noqa: E402
 
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
@@ -30,4 +29,4 @@ fields = {
 result = evaluate_clinical(
     models, dataset, snakemake.params.clinical, fe_wall, snakemake.input.mesh, fields
 )
-write_json(snakemake.output.table, result)
+ClinicalEvaluation.from_json(result).write(snakemake.output.table)

@@ -7,8 +7,7 @@ from surrogate.runtime import configure_cpu
 configure_cpu()
 
 from fem.dataset import read_dataset  # noqa: E402
-from studies.results import write_json  # noqa: E402
-from studies.surrogate_evaluation import evaluate_extrapolation  # noqa: E402
+from studies.surrogate_evaluation import Extrapolation, evaluate_extrapolation  # noqa: E402
 from surrogate.predict import Surrogate  # noqa: E402
 
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
@@ -17,4 +16,5 @@ dataset = read_dataset(snakemake.input.dataset)
 models = {"by_sample": Surrogate.load(snakemake.input.model),
           "by_case": Surrogate.load(snakemake.input.model_by_case)}
 cases = list(zip(snakemake.input.summaries, snakemake.input.points, strict=True))
-write_json(snakemake.output[0], evaluate_extrapolation(models, dataset, cases))
+result = evaluate_extrapolation(models, dataset, cases)
+Extrapolation.from_json(result).write(snakemake.output[0])

@@ -3,7 +3,6 @@
 Time, factorisation equivalents, the fixed-step baseline, accuracy against the reference.
 """
 
-import json
 import logging
 
 from fem.parameters import SolverSettings
@@ -24,10 +23,9 @@ result = clinical_benchmark(
     references,
     baseline_steps=snakemake.params.study["baseline_fixed_steps"],
     repeats=snakemake.params.study["repeats"],
+    labels={
+        case.id: c.get("label", case.id)
+        for case, c in zip(cases, snakemake.params.clinical, strict=True)
+    },
 )
-clinical = snakemake.params.clinical
-result["labels"] = {
-    case.id: c.get("label", case.id) for case, c in zip(cases, clinical, strict=True)
-}
-with open(snakemake.output[0], "w") as fh:
-    json.dump(result, fh, indent=2, default=float)
+result.write(snakemake.output[0])

@@ -1,6 +1,5 @@
 """Snakemake adapter: stability maps over (C1, Phi) for adaptive and fixed-step loading."""
 
-import json
 import logging
 
 from fem.parameters import SolverSettings
@@ -17,5 +16,4 @@ result = stability_map(
     study["phi_deg"],
     loading_schemes(settings.loading, study["fixed_steps"]),
 )
-with open(snakemake.output[0], "w") as fh:
-    json.dump(result, fh, indent=2, default=float)
+result.write(snakemake.output[0])

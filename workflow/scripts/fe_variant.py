@@ -1,6 +1,5 @@
 """Snakemake adapter: one point of the speed-accuracy study on the clinical cases."""
 
-import json
 import logging
 
 from fem.parameters import SolverSettings
@@ -23,5 +22,4 @@ record = run_variant(
     references,
     max_dofs=snakemake.params.max_dofs,
 )
-with open(snakemake.output[0], "w") as fh:
-    json.dump(record, fh, indent=2, default=float)
+record.write(snakemake.output[0])

@@ -2,8 +2,12 @@
 
 import logging
 
-from studies.architecture import architecture_table, read_run, select_architecture
-from studies.results import write_json
+from studies.architecture import (
+    ArchitectureTable,
+    architecture_table,
+    read_run,
+    select_architecture,
+)
 from studies.timing import time_on_one_core
 
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
@@ -19,7 +23,7 @@ for arch, folder in best_runs.items():
     table["rows"][arch]["predict_one_core"] = timing["models"][folder]
 table["timing"] = {k: v for k, v in timing.items() if k != "models"}
 select_architecture(table, snakemake.params.budget_ms)
-write_json(snakemake.output.table, table)
+ArchitectureTable.from_json(table).write(snakemake.output.table)
 for arch, row in table["rows"].items():
     log.info(
         "%s: %.4f ± %.4f mm, %.0f ± %.0f s, predict %.3f ms",

@@ -1,16 +1,13 @@
 """Snakemake adapter: each variant of the surrogate settings against the selected runs."""
 
-import json
 import logging
 from pathlib import Path
 
-from studies.architecture import compare_variants, read_run
-from studies.results import write_json
+from studies.architecture import ArchitectureTable, VariantComparison, compare_variants, read_run
 
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
 
-table = json.loads(Path(snakemake.input.table).read_text())
-selected = table["selected_architecture"]
+selected = ArchitectureTable.read(snakemake.input.table).selected_architecture
 baseline = [read_run(p) for p in snakemake.input.study_runs]
 baseline = [r for r in baseline if r["architecture"] == selected]
 variants = {}
@@ -19,4 +16,4 @@ for path in snakemake.input.variant_runs:
     variants.setdefault(name, []).append(read_run(path))
 result = compare_variants(baseline, variants)
 result["architecture"] = selected
-write_json(snakemake.output[0], result)
+VariantComparison.from_json(result).write(snakemake.output[0])

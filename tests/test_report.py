@@ -1,0 +1,163 @@
+"""Typed result files and the report that reads them.
+
+The report reads every result through its type (:mod:`studies.results`): a key that is
+missing, renamed or of the wrong type is an error naming it, not "n/a" on the page.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from studies.fe_benchmark import ClinicalBenchmark
+from studies.fe_speed_accuracy import SpeedAccuracy
+from studies.machine import MachineState, machine_state
+from studies.results import Record, Result, ResultFormatError
+from studies.surrogate_benchmark import Goal
+
+pytestmark = pytest.mark.unit
+
+
+@dataclass(frozen=True, slots=True)
+class _Row(Record):
+    case: str
+    wall_s: float
+    steps: list[int]
+    note: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class _File(Result):
+    rows: list[_Row]
+    by_id: dict[str, _Row]
+    machine: MachineState
+    settings: dict[str, Any]
+    best: _Row | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class _Open(Result):
+    cells: int
+    extras: dict[str, Any] = field(default_factory=dict)
+
+
+def _example() -> _File:
+    row = _Row("c1=1.00_phi=180.0_theta=0.0", 0.5, [4, 3])
+    return _File(rows=[row, _Row("b", 1.5, [], note="slow")], by_id={"a": row},
+                 machine=machine_state(pinned_core=0), settings={"solver": "direct"})
+
+
+def test_a_result_round_trips_through_its_file(tmp_path: Path) -> None:
+    result = _example()
+    result.write(tmp_path / "r.json")
+    assert _File.read(tmp_path / "r.json") == result
+    written = json.loads((tmp_path / "r.json").read_text())
+    # optional fields that are None are left out, as the writers leave out such keys
+    assert "note" not in written["rows"][0] and "best" not in written
+    assert written["rows"][1]["note"] == "slow"
+    assert not list(tmp_path.glob(".*.tmp"))  # written through a temporary file
+
+
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (lambda d: d["rows"][1].pop("wall_s"), "rows[1]: missing key 'wall_s'"),
+        (lambda d: d["rows"][0].update(wall_seconds=d["rows"][0].pop("wall_s")),
+         "rows[0]: missing key 'wall_s'; unknown key(s) wall_seconds"),
+        (lambda d: d["by_id"]["a"].update(steps=["four"]), "by_id.a.steps[0]: expected an integer"),
+        (lambda d: d["machine"].update(cores="two"), "machine.cores"),
+        (lambda d: d.update(rows={}), "rows: expected a list"),
+        (lambda d: d["rows"][0].update(wall_s=True), "rows[0].wall_s: expected a number"),
+    ],
+)
+def test_a_missing_renamed_or_mistyped_key_is_named(
+    tmp_path: Path, edit: Any, message: str
+) -> None:
+    data = _example().to_json()
+    edit(data)
+    (tmp_path / "r.json").write_text(json.dumps(data))
+    with pytest.raises(ResultFormatError, match=re.escape(message)):
+        _File.read(tmp_path / "r.json")
+
+
+def test_an_open_record_keeps_the_keys_it_does_not_declare() -> None:
+    data = {"cells": 10, "cad": {"volume_m3": 1e-3}, "source": "parametric"}
+    quality = _Open.from_json(data)
+    assert quality.cells == 10 and quality.extras == {"cad": {"volume_m3": 1e-3},
+                                                      "source": "parametric"}
+    assert quality.to_json() == data
+    with pytest.raises(ResultFormatError, match="missing key 'cells'"):
+        _Open.from_json({"cad": {}})
+
+
+def test_numbers_from_numpy_become_plain_numbers() -> None:
+    import numpy as np
+
+    goal = Goal.from_json({"value": np.float64(0.25), "goal": np.int64(1), "met": np.bool_(True)})
+    assert goal == Goal(0.25, 1.0, True) and type(goal.met) is bool
+    assert json.dumps(goal.to_json())
+
+
+def _clinical_benchmark() -> dict[str, Any]:
+    row = {
+        "case": "c1=1.00_phi=180.0_theta=0.0", "converged": True, "reason": "converged",
+        "load_fraction": 1.0, "wall_s": 0.5, "cpu_s": 0.5, "assembly_s": 0.3,
+        "linear_solve_s": 0.2, "linear_system_s": 0.1, "factorization_equivalents": 5.0,
+        "load_steps": 1, "rejected_steps": 0, "newton_iterations": [4],
+        "total_newton_iterations": 4, "linear_iterations": 28, "jacobian_evaluations": 4,
+        "preconditioner_builds": 1, "residual_evaluations": 5, "first_failure": "",
+        "accuracy": {"max_error_mm": 0.5, "rms_error_mm": 0.1, "mean_error_mm": 0.08,
+                     "max_disp_mm": 30.0, "relative_max_error": 0.017, "max_outside_m": 0.0},
+    }
+    target = {"target": 8.0, "value": 0.5, "met": True}
+    return {
+        "mesh": "results/mesh/mesh.xdmf", "dofs": 7765, "material_points": 406, "setup_s": 0.1,
+        "settings": {}, "baseline_steps": 3, "repeats": 1, "cases": [row],
+        "summary": {"median_wall_s": 0.5, "median_cpu_s": 0.5, "max_factorization_equivalents": 5.0,
+                    "median_baseline_over_adaptive_wall": 2.0, "max_relative_error": 0.017,
+                    "all_converged": True, "targets": {"median_wall_s": target}},
+        "machine": {"pinned_core": 0}, "reference": {},
+    }
+
+
+def test_the_fe_clinical_benchmark_names_a_renamed_accuracy_key(tmp_path: Path) -> None:
+    data = _clinical_benchmark()
+    bench = ClinicalBenchmark.from_json(data)
+    assert bench.cases[0].accuracy.relative_max_error == 0.017
+    assert ClinicalBenchmark.from_json(bench.to_json()) == bench
+    accuracy = data["cases"][0]["accuracy"]
+    accuracy["relative_error"] = accuracy.pop("relative_max_error")
+    (tmp_path / "clinical.json").write_text(json.dumps(data))
+    with pytest.raises(ResultFormatError, match=r"clinical.json.cases\[0\].accuracy"):
+        ClinicalBenchmark.read(tmp_path / "clinical.json")
+
+
+def test_the_report_refuses_a_result_whose_key_was_renamed(tmp_path: Path) -> None:
+    """A renamed key stops the report with the key's name; it does not print n/a."""
+    from report.build import build_report
+
+    data = {"target_relative_max_error": 0.01, "cost": "median_cpu_s", "variants": [],
+            "pareto_front": [], "cheapest_meeting_target": None}
+    assert SpeedAccuracy.from_json(data).variants == []
+    data["cheapest"] = data.pop("cheapest_meeting_target")
+    path = tmp_path / "speed_accuracy.json"
+    path.write_text(json.dumps(data))
+    renamed = "missing key 'cheapest_meeting_target'; unknown key.s. cheapest"
+    with pytest.raises(ResultFormatError, match=renamed):
+        build_report({"fe_speed_accuracy": path}, tmp_path / "report" / "index.html", [])
+
+
+def test_the_report_page_notes_what_is_missing(tmp_path: Path) -> None:
+    """Without any result the page still has every section, each noting its missing input."""
+    from report.build import SECTIONS, build_report
+
+    page = build_report({}, tmp_path / "index.html", []).read_text()
+    for section_id, title, _ in SECTIONS:
+        assert f'<section id="{section_id}"><h2>{title}</h2>' in page
+    assert "Not available: results/fe_study/speed_accuracy.json" in page
+    assert "could not be built" not in page
