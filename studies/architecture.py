@@ -120,7 +120,7 @@ def read_run(folder: str | Path) -> dict[str, Any]:
 
 def _count_parameters(cfg: dict[str, Any]) -> int:
     sizes = [7] + [cfg["width"]] * cfg["hidden_layers"] + [3]
-    per_net = sum(a * b + b for a, b in zip(sizes[:-1], sizes[1:]))
+    per_net = sum(a * b + b for a, b in zip(sizes[:-1], sizes[1:], strict=True))
     return per_net * (2 if cfg.get("boundary", "network") == "network" else 1)
 
 
@@ -188,15 +188,19 @@ def select_architecture(table: dict[str, Any], budget_ms: float | None = None) -
     if budget_ms is not None:
         missing = [a for a in rows if "predict_one_core" not in rows[a]]
         if missing:
-            raise StudyError(f"no prediction time for {', '.join(missing)}: cannot apply the budget")
+            raise StudyError(
+                f"no prediction time for {', '.join(missing)}: cannot apply the budget"
+            )
         speed = {a: rows[a]["predict_one_core"]["api"]["median_ms"] for a in rows}
         within = [a for a in rows if speed[a] <= budget_ms]
         for a in rows:
             rows[a]["within_prediction_budget"] = a in within
         if within:
             candidates = within
-            rule = (f"lowest mean validation error among the architectures that predict a case "
-                    f"within {budget_ms:g} ms on one core")
+            rule = (
+                f"lowest mean validation error among the architectures that predict a case "
+                f"within {budget_ms:g} ms on one core"
+            )
         else:
             candidates = [min(rows, key=lambda a: speed[a])]
             rule = f"no architecture predicts within {budget_ms:g} ms on one core: the fastest"
@@ -230,12 +234,17 @@ def compare_variants(
     out = {"baseline": base, "variants": {}}
     for name, runs in variants.items():
         s = summarise(runs)
-        s["error_ratio_to_baseline"] = s["validation_error_mm"]["mean"] / base["validation_error_mm"]["mean"]
+        s["error_ratio_to_baseline"] = (
+            s["validation_error_mm"]["mean"] / base["validation_error_mm"]["mean"]
+        )
         s["time_ratio_to_baseline"] = s["train_s"]["mean"] / base["train_s"]["mean"]
         s["boundary"] = runs[0]["boundary"]
         # what the variant changes (the seed differs between repeats, not between variants)
-        s["changed"] = {k: v for k, v in (runs[0].get("config") or {}).items()
-                        if k != "seed" and base_config.get(k) != v}
+        s["changed"] = {
+            k: v
+            for k, v in (runs[0].get("config") or {}).items()
+            if k != "seed" and base_config.get(k) != v
+        }
         out["variants"][name] = s
     return out
 
@@ -255,7 +264,9 @@ def copy_model(source: str | Path, target: str | Path, dataset: Dataset | None =
     meta = json.loads((source / MODEL_JSON).read_text())
     if dataset is not None:
         if meta.get("n_points") != dataset.n_points:
-            raise ValueError(f"{source} has {meta.get('n_points')} material points, the dataset "
-                             f"{dataset.n_points}: it was not trained on this dataset")
+            raise ValueError(
+                f"{source} has {meta.get('n_points')} material points, the dataset "
+                f"{dataset.n_points}: it was not trained on this dataset"
+            )
         meta.setdefault("training_range", {})["unconverged"] = unconverged_cases(dataset)
     write_json(target / MODEL_JSON, meta)  # model.json last: it marks completion

@@ -92,12 +92,15 @@ def load_references(
         ``(cases, {case id: (function, meta)})``.
     """
     cases = clinical_cases(clinical)
-    return cases, {case.id: load_displacement(path, mesh_path) for case, path in zip(cases, paths, strict=True)}
+    return cases, {
+        case.id: load_displacement(path, mesh_path) for case, path in zip(cases, paths, strict=True)
+    }
 
 
-
-def solve_reference(mesh_path: str | Path, settings: SolverSettings, case: Case, path: str | Path) -> dict[str, Any]:
-    """Solve ``case`` on the reference discretisation and store the field (:func:`save_displacement`).
+def solve_reference(
+    mesh_path: str | Path, settings: SolverSettings, case: Case, path: str | Path
+) -> dict[str, Any]:
+    """Solve ``case`` on the reference discretisation and store it (:func:`save_displacement`).
 
     Returns:
         The solve's record (also stored with the field).

@@ -118,28 +118,37 @@ def run_variant(
                 row["accuracy"] = accuracy_at_vertices(runner, reference[0])
         rows.append(row)
         log.info("%s %s: %.2f s, error %s", variant.id, case.id, row["wall_s"],
-                 row.get("accuracy", {}).get("relative_max_error") if row.get("accuracy") else "n/a")
+                 row["accuracy"]["relative_max_error"] if row.get("accuracy") else "n/a")
     record["cases"] = rows
     ok = [r for r in rows if r.get("accuracy")]
     record["median_wall_s"] = statistics.median(r["wall_s"] for r in rows)
     record["median_cpu_s"] = statistics.median(r["cpu_s"] for r in rows)
     record["max_factorization_equivalents"] = max(r["factorization_equivalents"] for r in rows)
-    record["max_relative_error"] = max(r["accuracy"]["relative_max_error"] for r in ok) if len(ok) == len(rows) else None
-    record["max_error_mm"] = max(r["accuracy"]["max_error_mm"] for r in ok) if len(ok) == len(rows) else None
+    record["max_relative_error"] = (
+        max(r["accuracy"]["relative_max_error"] for r in ok) if len(ok) == len(rows) else None
+    )
+    record["max_error_mm"] = (
+        max(r["accuracy"]["max_error_mm"] for r in ok) if len(ok) == len(rows) else None
+    )
     record["max_overlapping_vertices"] = max(
-        (r["self_overlap"]["overlapping_vertices"] for r in rows if "self_overlap" in r), default=None
+        (r["self_overlap"]["overlapping_vertices"] for r in rows if "self_overlap" in r),
+        default=None,
     )
     runner.solver.destroy()
     return VariantRecord.from_json(record)
 
 
 def pareto_front(costs: list[float], errors: list[float]) -> list[bool]:
-    """Points no other point beats in both cost and error (ties count as beaten only if strictly worse in one)."""
+    """Points no other point beats in both cost and error.
+
+    A point is beaten by one at most as costly and at most as wrong, and better in one of the two.
+    """
     flags = []
-    for i, (c, e) in enumerate(zip(costs, errors)):
+    for i, (c, e) in enumerate(zip(costs, errors, strict=True)):
         dominated = any(
             (c2 <= c and e2 <= e) and (c2 < c or e2 < e)
-            for j, (c2, e2) in enumerate(zip(costs, errors)) if j != i
+            for j, (c2, e2) in enumerate(zip(costs, errors, strict=True))
+            if j != i
         )
         flags.append(not dominated)
     return flags
@@ -151,8 +160,9 @@ def summarise_variants(
     cost: str = "median_cpu_s",
     default_variant: str | None = None,
 ) -> SpeedAccuracy:
-    """Mark the Pareto front (cost against worst-case relative error) and the cheapest
-    variant that meets ``target``.
+    """Mark the Pareto front and the cheapest variant that meets ``target``.
+
+    The front is of cost against the worst-case relative error.
 
     Args:
         records: :func:`run_variant` records.
@@ -164,10 +174,11 @@ def summarise_variants(
     solved = [r for r in records if not r.skipped and r.max_relative_error is not None]
     flags = pareto_front([r.cost(cost) for r in solved], [r.max_relative_error for r in solved])
     pareto = {r.variant: flag for r, flag in zip(solved, flags, strict=True)}
-    records = [replace(r, pareto=pareto[r.variant]) if r.variant in pareto else r
-               for r in records]
-    meeting = sorted((r for r in records if r.variant in pareto and r.max_relative_error <= target),
-                     key=lambda r: r.cost(cost))
+    records = [replace(r, pareto=pareto[r.variant]) if r.variant in pareto else r for r in records]
+    meeting = sorted(
+        (r for r in records if r.variant in pareto and r.max_relative_error <= target),
+        key=lambda r: r.cost(cost),
+    )
     return SpeedAccuracy(
         target_relative_max_error=target,
         cost=cost,

@@ -129,8 +129,15 @@ def stability_map(
         "mesh": str(mesh_path),
         "dofs": runner.problem.num_dofs(),
         "settings": settings.describe(runner.solver.options),
-        "schemes": {name: {"fixed_steps": s.fixed_steps, "initial_step": s.initial_step,
-                           "max_steps": s.max_steps, "min_step": s.min_step} for name, s in schemes.items()},
+        "schemes": {
+            name: {
+                "fixed_steps": s.fixed_steps,
+                "initial_step": s.initial_step,
+                "max_steps": s.max_steps,
+                "min_step": s.min_step,
+            }
+            for name, s in schemes.items()
+        },
         "C1_kPa": sorted(C1_kPa),
         "phi_deg": list(phi_deg),
         "records": records,
@@ -188,7 +195,10 @@ def lowest_converging(records: list[dict[str, Any]]) -> dict[str, dict[str, Any]
             lowest, below = None, None
             for r in column:  # from stiff to soft
                 if not r["converged"]:
-                    below = {k: r[k] for k in ("C1", "first_failure", "failure_kinds", "load_fraction", "reason")}
+                    below = {
+                        k: r[k]
+                        for k in ("C1", "first_failure", "failure_kinds", "load_fraction", "reason")
+                    }
                     break
                 lowest = r["C1"]
             per_phi[f"{phi:.1f}"] = {"lowest_C1": lowest, "failed_below": below}

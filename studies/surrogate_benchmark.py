@@ -157,9 +157,11 @@ def run_benchmark(
     return {
         "machine": machine_state(pinned_core=core).to_json(),
         "selected_architecture": table["selected_architecture"],
-        "validation_error_mm": {"selected_mean": selected["validation_error_mm"]["mean"],
-                                "selected_sd": selected["validation_error_mm"]["sd"],
-                                "selected_run": selected["best_validation_error_mm"]},
+        "validation_error_mm": {
+            "selected_mean": selected["validation_error_mm"]["mean"],
+            "selected_sd": selected["validation_error_mm"]["sd"],
+            "selected_run": selected["best_validation_error_mm"],
+        },
         "clinical_worst": {"by_sample": by_sample, "by_case": by_case},
         "predict_one_core": timing,
         "predict_one_core_eigen_single_thread": surrogate_single["models"][str(model_dir)],
@@ -168,16 +170,26 @@ def run_benchmark(
         "speed": rows,
         "train_3x32_s": table["rows"].get("3x32", {}).get("train_s"),
         "goals": {
-            "validation_error_mm": _goal(selected["best_validation_error_mm"], GOALS["validation_error_mm"]),
-            "worst_clinical_rmse_mm": _goal(by_sample.get("rmse_mm"), GOALS["worst_clinical_rmse_mm"]),
-            "worst_clinical_relative_rmse": _goal(by_sample.get("relative_rmse"),
-                                                  GOALS["worst_clinical_relative_rmse"]),
+            "validation_error_mm": _goal(
+                selected["best_validation_error_mm"], GOALS["validation_error_mm"]
+            ),
+            "worst_clinical_rmse_mm": _goal(
+                by_sample.get("rmse_mm"), GOALS["worst_clinical_rmse_mm"]
+            ),
+            "worst_clinical_relative_rmse": _goal(
+                by_sample.get("relative_rmse"), GOALS["worst_clinical_relative_rmse"]
+            ),
             "predict_one_core_ms": _goal(predict_ms, GOALS["predict_one_core_ms"]),
             "train_3x32_s": _goal(train_3x32, GOALS["train_3x32_s"]),
         },
-        "paper": {"validation_error_mm": paper.TABLE2["3x32"]["validation_error_mm"],
-                  "worst_clinical_rmse_mm": 1.04, "worst_clinical_relative_rmse": 1.04 / 38.4,
-                  "predict_s": (2.0, 2.4), "speedup": paper.SPEEDUP_RANGE, "train_3x32_s": 3155.0},
+        "paper": {
+            "validation_error_mm": paper.TABLE2["3x32"]["validation_error_mm"],
+            "worst_clinical_rmse_mm": 1.04,
+            "worst_clinical_relative_rmse": 1.04 / 38.4,
+            "predict_s": (2.0, 2.4),
+            "speedup": paper.SPEEDUP_RANGE,
+            "train_3x32_s": 3155.0,
+        },
     }
 
 
@@ -193,10 +205,18 @@ def format_benchmark(bench: dict[str, Any]) -> str:
     for name, item in g.items():
         value = item["value"]
         shown = "n/a" if value is None else f"{value:.4g}"
-        lines.append(f"  {name:30s} {shown:>10s}  goal <= {item['goal']:g}  {'met' if item['met'] else 'NOT met'}")
-    lines.append(f"  prediction ({t['points']} points): median {t['api']['median_ms']:.3f} ms "
-                 f"(network alone {t['network']['median_ms']:.3f} ms, p95 {t['api']['p95_ms']:.3f} ms)")
+        lines.append(
+            f"  {name:30s} {shown:>10s}  goal <= {item['goal']:g}  "
+            f"{'met' if item['met'] else 'NOT met'}"
+        )
+    lines.append(
+        f"  prediction ({t['points']} points): median {t['api']['median_ms']:.3f} ms "
+        f"(network alone {t['network']['median_ms']:.3f} ms, p95 {t['api']['p95_ms']:.3f} ms)"
+    )
     for row in bench["speed"]:
-        lines.append(f"  {row['case']}: FE {row['fe_solve_s']:.2f} s, surrogate {row['surrogate_ms']:.3f} ms, "
-                     f"FE/surrogate = {row['speedup']:.3g}x")
+        lines.append(
+            f"  {row['case']}: FE {row['fe_solve_s']:.2f} s, "
+            f"surrogate {row['surrogate_ms']:.3f} ms, "
+            f"FE/surrogate = {row['speedup']:.3g}x"
+        )
     return "\n".join(lines)

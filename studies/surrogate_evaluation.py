@@ -143,7 +143,9 @@ def compare_case(model: Surrogate, ds: Dataset, case: int) -> dict[str, Any]:
     }
 
 
-def time_prediction(model: Surrogate, C1: float, phi: float, repeats: int = 200) -> dict[str, float]:
+def time_prediction(
+    model: Surrogate, C1: float, phi: float, repeats: int = 200
+) -> dict[str, float]:
     """Wall time of one whole-field prediction after warm-up (seconds), in this process."""
     model.predict(C1, phi)  # compile
     times = []
@@ -152,12 +154,19 @@ def time_prediction(model: Surrogate, C1: float, phi: float, repeats: int = 200)
         model.predict(C1, phi)
         times.append(time.perf_counter() - start)
     times_arr = np.asarray(times)
-    return {"median_s": float(np.median(times_arr)), "mean_s": float(times_arr.mean()),
-            "std_s": float(times_arr.std()), "repeats": repeats}
+    return {
+        "median_s": float(np.median(times_arr)),
+        "mean_s": float(times_arr.mean()),
+        "std_s": float(times_arr.std()),
+        "repeats": repeats,
+    }
 
 
 def clinical_table(
-    model: Surrogate, ds: Dataset, clinical: Sequence[dict[str, Any]], fe_wall_s: dict[str, float] | None = None
+    model: Surrogate,
+    ds: Dataset,
+    clinical: Sequence[dict[str, Any]],
+    fe_wall_s: dict[str, float] | None = None,
 ) -> list[dict[str, Any]]:
     """The paper's Table 3 for the configured clinical cases, ours beside the paper's.
 
@@ -184,17 +193,27 @@ def clinical_table(
 
 
 def write_error_fields(
-    path: str | Path, mesh_xdmf: str | Path, model: Surrogate, fe_mm: np.ndarray, pred_mm: np.ndarray
+    path: str | Path,
+    mesh_xdmf: str | Path,
+    model: Surrogate,
+    fe_mm: np.ndarray,
+    pred_mm: np.ndarray,
 ) -> None:
     """FE and surrogate displacement, error vector and error norm (mm) on the mesh, as XDMF."""
     err = pred_mm - fe_mm
-    write_point_fields_xdmf(path, mesh_xdmf, model.node_index, model.X, {
-        "fe_displacement_mm": fe_mm,
-        "surrogate_displacement_mm": pred_mm,
-        "error_mm": err,
-        "error_norm_mm": np.linalg.norm(err, axis=1),
-        "fe_displacement_norm_mm": np.linalg.norm(fe_mm, axis=1),
-    })
+    write_point_fields_xdmf(
+        path,
+        mesh_xdmf,
+        model.node_index,
+        model.X,
+        {
+            "fe_displacement_mm": fe_mm,
+            "surrogate_displacement_mm": pred_mm,
+            "error_mm": err,
+            "error_norm_mm": np.linalg.norm(err, axis=1),
+            "fe_displacement_norm_mm": np.linalg.norm(fe_mm, axis=1),
+        },
+    )
 
 
 def extrapolation_kind(C1: float, phi: float, theta: float, training_range: dict[str, Any]) -> str:
@@ -207,7 +226,9 @@ def extrapolation_kind(C1: float, phi: float, theta: float, training_range: dict
         kinds.append("C1 above range")
     if not any(abs(((phi - p) + 180.0) % 360.0 - 180.0) < 1e-6 for p in training_range["phi_deg"]):
         kinds.append("unseen phi")
-    if abs(np.sin(np.radians(phi))) > 1e-9 and not any(abs(theta - t) < 1e-6 for t in training_range["theta_deg"]):
+    if abs(np.sin(np.radians(phi))) > 1e-9 and not any(
+        abs(theta - t) < 1e-6 for t in training_range["theta_deg"]
+    ):
         kinds.append("unseen theta")
     return ", ".join(kinds) or "in range"
 
@@ -226,7 +247,9 @@ def compare_extra_case(
         warnings.simplefilter("always", ExtrapolationWarning)
         pred = model.predict(C1, phi, theta)
     return {
-        "C1": C1, "phi": phi, "theta": theta,
+        "C1": C1,
+        "phi": phi,
+        "theta": theta,
         "kind": extrapolation_kind(C1, phi, theta, model.training_range),
         **error_metrics(pred, fe_mm),
         "extrapolation_warnings": [str(w.message) for w in caught],
@@ -268,9 +291,14 @@ def evaluate_clinical(
             "split": model.config.split,
             "held_out_of_training": sorted(set(row["case"] for row in rows) & set(model.held_out)),
             "rows": rows,
-            "worst": None if worst is None else {
-                "case": worst["case"], "label": worst["label"], "rmse_mm": worst["rmse_mm"],
-                "sd_mm": worst["sd_mm"], "relative_rmse": worst["relative_rmse"],
+            "worst": None
+            if worst is None
+            else {
+                "case": worst["case"],
+                "label": worst["label"],
+                "rmse_mm": worst["rmse_mm"],
+                "sd_mm": worst["sd_mm"],
+                "relative_rmse": worst["relative_rmse"],
             },
         }
     return out
@@ -307,7 +335,9 @@ def evaluate_extrapolation(
         C1, phi, theta = float(summary["C1"]), float(summary["phi"]), float(summary["theta"])
         for name, model in models.items():
             if summary["status"] != "converged":
-                out[name]["failed_fe"].append({"case": summary["case"], "reason": summary.get("reason", "")})
+                out[name]["failed_fe"].append(
+                    {"case": summary["case"], "reason": summary.get("reason", "")}
+                )
                 continue
             points = read_points(points_path)
             row_of = np.full(max(points["node_index"].max(), model.node_index.max()) + 1, -1)
@@ -319,14 +349,20 @@ def evaluate_extrapolation(
             row = {"case": summary["case"], **compare_extra_case(model, C1, phi, theta, fe, X)}
             near = nearest_case(ds, C1, phi, theta)
             ref = compare_case(model, ds, near)
-            row["nearest_sweep_case"] = {k: ref[k] for k in ("case", "C1", "phi", "theta", "rmse_mm",
-                                                              "relative_rmse", "fe_range_mm")}
-            row["error_ratio_to_nearest"] = row["rmse_mm"] / ref["rmse_mm"] if ref["rmse_mm"] > 0 else None
+            row["nearest_sweep_case"] = {
+                k: ref[k]
+                for k in ("case", "C1", "phi", "theta", "rmse_mm", "relative_rmse", "fe_range_mm")
+            }
+            row["error_ratio_to_nearest"] = (
+                row["rmse_mm"] / ref["rmse_mm"] if ref["rmse_mm"] > 0 else None
+            )
             out[name]["rows"].append(row)
     for name in models:
         groups: dict[str, list[float]] = {}
         for row in out[name]["rows"]:
             groups.setdefault(row["kind"], []).append(row["rmse_mm"])
-        out[name]["by_kind"] = {k: {"cases": len(v), "mean_rmse_mm": float(np.mean(v)),
-                                    "max_rmse_mm": float(np.max(v))} for k, v in groups.items()}
+        out[name]["by_kind"] = {
+            k: {"cases": len(v), "mean_rmse_mm": float(np.mean(v)), "max_rmse_mm": float(np.max(v))}
+            for k, v in groups.items()
+        }
     return out

@@ -1,4 +1,4 @@
-"""Prediction wall time on one CPU core, measured in a pinned subprocess.
+r"""Prediction wall time on one CPU core, measured in a pinned subprocess.
 
 The parent process may run JAX with every core (or train on them); a fair "one
 core" figure needs a fresh process whose CPU affinity is a single core before JAX
@@ -10,7 +10,7 @@ allowed to run on and its XLA flags, so the result documents its own pinning.
 
 Example (what the benchmark rule runs)::
 
-    XLA_FLAGS=--xla_cpu_use_thunk_runtime=false \\
+    XLA_FLAGS=--xla_cpu_use_thunk_runtime=false \
         python -m studies.timing results/surrogate/model --core 0 --repeats 2000
 """
 
@@ -156,7 +156,8 @@ def main(argv: list[str] | None = None) -> int:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         for folder in args.models:
-            out["models"][folder] = time_model(Surrogate.load(folder), queries, args.repeats, args.warmup)
+            model = Surrogate.load(folder)
+            out["models"][folder] = time_model(model, queries, args.repeats, args.warmup)
     out["loadavg_after"] = os.getloadavg()
     print(json.dumps(out))
     return 0

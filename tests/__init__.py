@@ -1,0 +1,1 @@
+"""The test suite, in layers (markers in pyproject.toml): unit, solve, workflow, cluster."""

@@ -38,7 +38,9 @@ def test_variant_ids_round_trip_and_expand() -> None:
          {"element": "p2p1", "mesh": [{"global_size": 0.03, "mound_size": 0.02}]}]
     )
     assert len(variants) == 4  # the second entry repeats one of the first's
-    graded = Variant(MeshSpec.from_mapping({"global_size": 0.015, "mound_size": 0.01, "fold_size": 0.004}))
+    graded = Variant(
+        MeshSpec.from_mapping({"global_size": 0.015, "mound_size": 0.01, "fold_size": 0.004})
+    )
     assert graded.id == "g=0.0150_m=0.0100_f=0.0040_o=1_el=p2p1_solver=direct_q=0"
     assert Variant.from_id(graded.id) == graded
     assert re.fullmatch(VARIANT_ID_PATTERN, graded.id) and re.fullmatch(VARIANT_ID_PATTERN, v.id)
@@ -56,13 +58,29 @@ def test_pareto_front_and_cheapest_meeting_target() -> None:
     errors = [0.10, 0.02, 0.005, 0.03, 0.005]
     assert pareto_front(costs, errors) == [True, True, True, False, False]
     records = [
-        VariantRecord(variant=f"v{i}", mesh={}, element="p2p1", solver="direct",
-                      quadrature_degree=0, dofs=1, cells=1, material_points=1, setup_s=0.0,
-                      machine={}, median_cpu_s=c, max_relative_error=e)
+        VariantRecord(
+            variant=f"v{i}",
+            mesh={},
+            element="p2p1",
+            solver="direct",
+            quadrature_degree=0,
+            dofs=1,
+            cells=1,
+            material_points=1,
+            setup_s=0.0,
+            machine={},
+            median_cpu_s=c,
+            max_relative_error=e,
+        )
         for i, (c, e) in enumerate(zip(costs, errors, strict=True))
     ]
-    skipped = replace(records[0], variant="big", skipped="too many dofs", median_cpu_s=None,
-                      max_relative_error=None)
+    skipped = replace(
+        records[0],
+        variant="big",
+        skipped="too many dofs",
+        median_cpu_s=None,
+        max_relative_error=None,
+    )
     summary = summarise_variants([*records, skipped], target=0.01, default_variant="v1")
     assert summary.cheapest_meeting_target == "v2"
     assert summary.pareto_front == ["v0", "v1", "v2"]
@@ -75,13 +93,27 @@ def test_pareto_front_and_cheapest_meeting_target() -> None:
 
 def test_lowest_converging_reads_down_each_column() -> None:
     def rec(c1, phi, ok, failure=""):
-        return {"scheme": "adaptive", "C1": c1, "phi": phi, "converged": ok, "first_failure": failure,
-                "failure_kinds": {"newton": 1} if failure else {}, "load_fraction": 1.0 if ok else 0.4,
-                "reason": failure}
+        return {
+            "scheme": "adaptive",
+            "C1": c1,
+            "phi": phi,
+            "converged": ok,
+            "first_failure": failure,
+            "failure_kinds": {"newton": 1} if failure else {},
+            "load_fraction": 1.0 if ok else 0.4,
+            "reason": failure,
+        }
 
-    records = [rec(2.0, 0.0, True), rec(1.0, 0.0, True), rec(0.5, 0.0, False, "diverged_max_it"),
-               rec(0.3, 0.0, True),  # converging again below a failure does not count
-               rec(2.0, 90.0, True), rec(1.0, 90.0, True), rec(0.5, 90.0, True), rec(0.3, 90.0, True)]
+    records = [
+        rec(2.0, 0.0, True),
+        rec(1.0, 0.0, True),
+        rec(0.5, 0.0, False, "diverged_max_it"),
+        rec(0.3, 0.0, True),  # converging again below a failure does not count
+        rec(2.0, 90.0, True),
+        rec(1.0, 90.0, True),
+        rec(0.5, 90.0, True),
+        rec(0.3, 90.0, True),
+    ]
     out = lowest_converging(records)["adaptive"]
     assert out["0.0"]["lowest_C1"] == 1.0
     assert out["0.0"]["failed_below"]["C1"] == 0.5
@@ -96,16 +128,24 @@ def test_sweep_records_map_the_sweep_at_theta_zero() -> None:
         "theta": np.array([0.0, 0.0, 0.0, 30.0]),
         "converged": np.array([True, True, False, False]),
         "load_fraction": np.array([1.0, 1.0, 0.7, 0.5]),
-        "first_failure": np.array(["", "diverged_max_it", "diverged_line_search", "x"], dtype=object),
-        "reason": np.array(["converged", "converged", "step cut below min_step", "y"], dtype=object),
+        "first_failure": np.array(
+            ["", "diverged_max_it", "diverged_line_search", "x"], dtype=object
+        ),
+        "reason": np.array(
+            ["converged", "converged", "step cut below min_step", "y"], dtype=object
+        ),
     }
     records = sweep_records(cases)
     assert [r["C1"] for r in records] == [2.0, 1.0, 0.8]  # theta = 30 left out
     out = lowest_converging(records)["sweep"]
     assert out["0.0"]["lowest_C1"] == 1.0
     assert out["0.0"]["failed_below"] == {
-        "C1": 0.8, "first_failure": "diverged_line_search", "failure_kinds": {},
-        "load_fraction": 0.7, "reason": "step cut below min_step"}
+        "C1": 0.8,
+        "first_failure": "diverged_line_search",
+        "failure_kinds": {},
+        "load_fraction": 0.7,
+        "reason": "step cut below min_step",
+    }
 
 
 def test_stored_reference_is_rebuilt_exactly(coarse_mesh: Path, tmp_path: Path) -> None:
@@ -189,9 +229,13 @@ def mesh_ladder(tmp_path_factory: pytest.TempPathFactory) -> dict[float, Path]:
     return paths
 
 
-def test_error_falls_with_mesh_size_against_a_finer_reference(mesh_ladder: dict[float, Path]) -> None:
-    """P2/P1, stiff prone case (5 kPa): errors at each mesh's own vertices against P3/P2 on the
-    finest mesh fall monotonically as the mesh is refined, at roughly half to first order.
+def test_error_falls_with_mesh_size_against_a_finer_reference(
+    mesh_ladder: dict[float, Path],
+) -> None:
+    """P2/P1 errors against a finer reference fall monotonically with the mesh size.
+
+    Stiff prone case (5 kPa); errors at each mesh's own vertices against P3/P2 on the finest
+    mesh fall as the mesh is refined, at roughly half to first order.
 
     A small-scale version of the fe_study speed-accuracy rule (which uses a much finer
     reference). The rate is not P2's smooth-solution rate: the displacement is singular

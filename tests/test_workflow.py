@@ -197,18 +197,23 @@ def test_fe_study_rules_run_end_to_end(small_run: Path) -> None:
     assert len(clinical["cases"]) == len(config["clinical"])
     for row in clinical["cases"]:
         assert row["converged"] and row["wall_s"] > 0 and row["factorization_equivalents"] > 1
-        assert row["baseline"]["load_steps"] == config["fe_study"]["clinical"]["baseline_fixed_steps"]
+        steps = config["fe_study"]["clinical"]["baseline_fixed_steps"]
+        assert row["baseline"]["load_steps"] == steps
         # the baseline reaches the same state, and the reference is a different discretisation
         assert row["baseline"]["max_difference_from_adaptive_mm"] < 1e-3
         assert 0 < row["accuracy"]["relative_max_error"] < 0.2
-    assert set(clinical["summary"]["targets"]) == {"median_wall_s", "factorization_equivalents",
-                                                  "relative_max_error"}
+    assert set(clinical["summary"]["targets"]) == {
+        "median_wall_s",
+        "factorization_equivalents",
+        "relative_max_error",
+    }
 
     sa = json.loads((study / "speed_accuracy.json").read_text())
     assert len(sa["variants"]) == 3 and sa["pareto_front"]
     by_solver = {v["solver"]: v for v in sa["variants"] if v["element"] == "p2p1"}
     assert by_solver["direct"]["max_relative_error"] == pytest.approx(
-        by_solver["iterative"]["max_relative_error"], rel=1e-5)
+        by_solver["iterative"]["max_relative_error"], rel=1e-5
+    )
 
     stability = json.loads((study / "stability.json").read_text())
     schemes = {r["scheme"] for r in stability["records"]}
@@ -217,12 +222,15 @@ def test_fe_study_rules_run_end_to_end(small_run: Path) -> None:
     assert stability["lowest_converging"]["adaptive"]["all_phi"] is not None
 
 
-@pytest.mark.parametrize("change", [{"solver": "direct-refactor"}, {"discretisation": {"quadrature_degree": 3}}])
+@pytest.mark.parametrize(
+    "change", [{"solver": "direct-refactor"}, {"discretisation": {"quadrature_degree": 3}}]
+)
 def test_the_default_discretisation_does_not_rerun_the_study_variants(
     small_run: Path, tmp_path: Path, change: dict
 ) -> None:
-    """The reference and the speed-accuracy variants set their own element, quadrature and
-    solver: changing the default's re-solves the sweep and the clinical benchmark only.
+    """Changing the default's discretisation re-solves the sweep and the clinical benchmark only.
+
+    The reference and the speed-accuracy variants set their own element, quadrature and solver.
     """
     config = yaml.safe_load((REPO / "tests" / "config.yaml").read_text())
     fe = config.setdefault("fe", {})
