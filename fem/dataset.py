@@ -37,16 +37,16 @@ from __future__ import annotations
 import json
 import logging
 import os
-import subprocess
 import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from fem.provenance import provenance
 
 log = logging.getLogger(__name__)
 
@@ -129,44 +129,6 @@ class SplitFractions:
             n_val = min(max(n_val, 1), n - n_train - (1 if self.test > 0 else 0))
         parts = np.split(order, [n_train, n_train + n_val])
         return {name: np.sort(p).astype(np.int64) for name, p in zip(SPLITS, parts, strict=True)}
-
-
-def provenance(config: dict[str, Any] | None = None) -> dict[str, Any]:
-    """Package versions, git commit and (optionally) the config that produced the data."""
-    packages = {}
-    for name in (
-        "fenics-dolfinx",
-        "petsc4py",
-        "numpy",
-        "h5py",
-        "gmsh",
-        "snakemake",
-        "jax",
-        "optax",
-    ):
-        try:
-            packages[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            packages[name] = None
-    repo = Path(__file__).resolve().parent.parent
-    try:
-        commit = subprocess.run(
-            ["git", "-C", str(repo), "rev-parse", "HEAD"],
-            capture_output=True,
-            text=True,
-            check=True,
-        ).stdout.strip()
-        dirty = bool(
-            subprocess.run(
-                ["git", "-C", str(repo), "status", "--porcelain", "--untracked-files=no"],
-                capture_output=True,
-                text=True,
-                check=True,
-            ).stdout.strip()
-        )
-    except (OSError, subprocess.CalledProcessError):
-        commit, dirty = None, None
-    return {"packages": packages, "git_commit": commit, "git_dirty": dirty, "config": config}
 
 
 def build_dataset(
