@@ -19,60 +19,42 @@ from __future__ import annotations
 import math
 import warnings
 from pathlib import Path
-from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from surrogate.checkpoint import load_checkpoint
-from surrogate.config import SurrogateConfig
-from surrogate.data import Normalisation
+from surrogate.checkpoint import Checkpoint, load_checkpoint
 from surrogate.exceptions import ExtrapolationWarning, ModelFileError
-from surrogate.model import ACTIVATIONS, Params, boundary_network
+from surrogate.model import ACTIVATIONS, boundary_network
 
 
 class Surrogate:
     """A loaded surrogate that predicts the displacement of every material point.
 
     Args:
-        config: architecture.
-        params: network weights.
-        normalisation: input/output scaling.
-        X: material points (N, 3), m.
-        boundary: boundary flags (N,).
-        training_range: the C1 / Φ / θ values it was trained on.
-        point_factor: per-point output factor φ (exact Dirichlet mode), else None.
-        node_index: index of each point in the mesh file (N,), for XDMF output.
-        metrics: training metrics as saved (optional).
-        held_out: ids of cases kept out of its training and validation.
+        checkpoint: a model folder's content (:func:`surrogate.checkpoint.load_checkpoint`):
+            architecture, weights, normalisation, the material points (N, 3) in m with their
+            boundary flags and mesh node indices, the training range and metrics.
+
+    Raises:
+        ModelFileError: if an exact-Dirichlet model lacks its point factor.
     """
 
-    def __init__(
-        self,
-        config: SurrogateConfig,
-        params: Params,
-        normalisation: Normalisation,
-        X: np.ndarray,
-        boundary: np.ndarray,
-        training_range: dict[str, Any],
-        point_factor: np.ndarray | None = None,
-        node_index: np.ndarray | None = None,
-        metrics: dict[str, Any] | None = None,
-        held_out: list[str] | None = None,
-    ) -> None:
-        if config.boundary == "exact" and point_factor is None:
+    def __init__(self, checkpoint: Checkpoint) -> None:
+        c = checkpoint
+        if c.config.boundary == "exact" and c.point_factor is None:
             raise ModelFileError("an exact-Dirichlet model needs its point factor (points_factor)")
-        self.config = config
-        self.params = params
-        self.normalisation = normalisation
-        self.X = np.asarray(X)
-        self.boundary = np.asarray(boundary, dtype=bool)
-        self.training_range = training_range
-        self.point_factor = point_factor
-        self.node_index = np.arange(len(X)) if node_index is None else np.asarray(node_index)
-        self.metrics = metrics or {}
-        self.held_out = list(held_out or [])
+        self.config = c.config
+        self.params = c.params
+        self.normalisation = c.normalisation
+        self.X = np.asarray(c.X)
+        self.boundary = np.asarray(c.boundary, dtype=bool)
+        self.training_range = c.training_range
+        self.point_factor = c.point_factor
+        self.node_index = np.arange(len(c.X)) if c.node_index is None else np.asarray(c.node_index)
+        self.metrics = c.metrics
+        self.held_out = list(c.held_out)
         self._build_range_checks()
         self._build_predictor()
 
@@ -181,19 +163,7 @@ class Surrogate:
         Raises:
             ModelFileError: if files are missing or the weights do not fit the architecture.
         """
-        c = load_checkpoint(folder)
-        return cls(
-            c.config,
-            c.params,
-            c.normalisation,
-            c.X,
-            c.boundary,
-            c.training_range,
-            point_factor=c.point_factor,
-            node_index=c.node_index,
-            metrics=c.metrics,
-            held_out=c.held_out,
-        )
+        return cls(load_checkpoint(folder))
 
     # -- queries ----------------------------------------------------------------------
     def predict(self, C1: float, phi: float, theta: float = 0.0) -> np.ndarray:
