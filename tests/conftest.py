@@ -32,9 +32,16 @@ def coarse_mesh(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def snakemake(
-    workdir: Path, *args: str, config: Path = REPO / "tests" / "config.yaml"
+    workdir: Path,
+    *args: str,
+    config: Path = REPO / "tests" / "config.yaml",
+    env: dict[str, str] | None = None,
+    timeout: float | None = None,
 ) -> subprocess.CompletedProcess:
-    """Run the project's Snakefile in ``workdir`` with the venv's Snakemake."""
+    """Run the project's Snakefile in ``workdir`` with the venv's Snakemake.
+
+    ``env`` replaces the environment (e.g. a test cluster's), ``timeout`` bounds the run (s).
+    """
     cmd = [
         sys.executable,
         "-m",
@@ -47,7 +54,8 @@ def snakemake(
         str(config),
         *args,
     ]
-    return subprocess.run(cmd, capture_output=True, text=True, cwd=workdir)
+    return subprocess.run(cmd, capture_output=True, text=True, cwd=workdir, env=env,
+                          timeout=timeout)
 
 
 def job_counts(output: str) -> dict[str, int]:

@@ -12,7 +12,6 @@ import os
 import shutil
 import socket
 import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -21,7 +20,7 @@ import h5py
 import numpy as np
 import pytest
 
-from tests.conftest import REPO
+from tests.conftest import REPO, snakemake
 
 pytestmark = pytest.mark.cluster
 
@@ -130,24 +129,17 @@ def slurm_cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str
 
 
 def test_small_sweep_runs_through_slurm(slurm_cluster: dict[str, str], tmp_path: Path) -> None:
-    cmd = [
-        sys.executable,
-        "-m",
-        "snakemake",
-        "-s",
-        str(REPO / "Snakefile"),
-        "-d",
-        str(tmp_path),
-        "--configfile",
-        str(REPO / "tests/config.yaml"),
+    run = snakemake(
+        tmp_path,
         "--workflow-profile",
         str(REPO / "workflow/profiles/slurm"),
         # poll sooner than a real cluster needs, to keep the test short
         "--slurm-init-seconds-before-status-checks",
         "2",
         "results/dataset/dataset.h5",
-    ]
-    run = subprocess.run(cmd, capture_output=True, text=True, env=slurm_cluster, timeout=900)
+        env=slurm_cluster,
+        timeout=900,
+    )
     assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-4000:]
     # every job really went through the scheduler: mesh + 6 solves + aggregate
     states = subprocess.run(
