@@ -42,6 +42,8 @@ Presets (``fe.solver`` in the config):
 
 from __future__ import annotations
 
+import math
+import re
 from typing import Any
 
 from fem.exceptions import InvalidParameterError
@@ -152,6 +154,61 @@ def default_parameters(preset: str = "direct") -> dict[str, Any]:
     return {**_NEWTON, **SOLVER_PRESETS[preset]}
 
 
+#: Every option that a preset, the last resort or the solver itself sets, with its default:
+#: the options the solver reads, and so the only ones a config may override.
+KNOWN_OPTIONS: dict[str, Any] = {
+    key: value
+    for options in (*(default_parameters(p) for p in SOLVER_PRESETS), RESCUE_OPTIONS)
+    for key, value in options.items()
+}
+
+#: Parts of an option name that make PETSc write (viewers, monitors, logs, drawing): a
+#: config may not set them, since their value can name any file to write.
+_WRITES = ("view", "monitor", "log", "draw", "output")
+
+#: A string value: a PETSc type name (no path, no viewer specification).
+_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_-]*")
+
+
+def check_overrides(overrides: dict[str, Any]) -> None:
+    """Check a config's PETSc options against those the solver reads, before any solve.
+
+    Raises:
+        InvalidParameterError: naming the option, for one that writes output (a viewer or
+            monitor), one the solver does not read (a typo would be silently ignored), or a
+            value of the wrong kind (a number where PETSc reads a number, a type name where it
+            reads a string).
+    """
+    for key, value in overrides.items():
+        where = f"petsc_options.{key}"
+        if any(part in key for part in _WRITES):
+            raise InvalidParameterError(
+                f"{where}: options that make PETSc write (viewers, monitors, logs) cannot be "
+                "set from the config"
+            )
+        if key not in KNOWN_OPTIONS:
+            raise InvalidParameterError(
+                f"{where} is not an option the solver reads (a misspelt option would be "
+                f"ignored); expected one of {', '.join(sorted(KNOWN_OPTIONS))}"
+            )
+        default = KNOWN_OPTIONS[key]
+        if key in SOLVER_KEYS:  # the solver's own options: checked by solver_options itself
+            continue
+        if isinstance(default, bool):
+            ok = isinstance(value, bool)
+        elif isinstance(default, int):
+            ok = isinstance(value, int) and not isinstance(value, bool)
+        elif isinstance(default, float):
+            ok = (isinstance(value, int | float) and not isinstance(value, bool)
+                  and math.isfinite(value))
+        else:
+            ok = isinstance(value, str) and _NAME.fullmatch(value) is not None
+        if not ok:
+            kind = {bool: "true or false", int: "an integer", float: "a finite number"}.get(
+                type(default), "a PETSc type name")
+            raise InvalidParameterError(f"{where} must be {kind}, got {value!r}")
+
+
 def solver_options(
     preset: str = "direct", overrides: dict[str, Any] | None = None
 ) -> dict[str, Any]:
@@ -163,6 +220,7 @@ def solver_options(
             no factorisation can be reused (a ``pc_type`` other than lu/cholesky, or
             ``ksp_type preonly``, which would silently make Newton a chord method).
     """
+    check_overrides(overrides or {})
     options = {**default_parameters(preset), **(overrides or {})}
     line_search = options.get("snes_linesearch_type")
     if line_search not in LINE_SEARCHES:
@@ -187,10 +245,12 @@ def solver_options(
 
 
 __all__ = [
+    "KNOWN_OPTIONS",
     "LINE_SEARCHES",
     "RESCUE_OPTIONS",
     "SOLVER_KEYS",
     "SOLVER_PRESETS",
+    "check_overrides",
     "default_parameters",
     "solver_options",
 ]

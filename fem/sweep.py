@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -139,13 +140,29 @@ def sphere_directions(n: int) -> list[tuple[float, float]]:
     return [(float(p), float(t)) for p, t in zip(phi, theta, strict=True)]
 
 
+#: The most values a ``{start, stop, step}`` range may have, and the most cases a sweep may
+#: have: a sweep is planned as one job per case, and a plan of millions of jobs does not end.
+MAX_GRID_VALUES = 10_000
+MAX_CASES = 50_000
+
+
 def grid(spec: Any, name: str) -> list[float]:
-    """Values from a list or from ``{start, stop, step}`` (stop included)."""
+    """Values from a list or from ``{start, stop, step}`` (stop included).
+
+    Raises:
+        InvalidParameterError: for an empty list, a range with step <= 0 or stop < start, or
+            one of more than :data:`MAX_GRID_VALUES` values.
+    """
     if isinstance(spec, dict):
         start, stop, step = (float(spec[k]) for k in ("start", "stop", "step"))
         if step <= 0 or stop < start:
             raise InvalidParameterError(f"{name}: need step > 0 and stop >= start")
         n = int(math.floor((stop - start) / step + 1e-9)) + 1
+        if n > MAX_GRID_VALUES:
+            raise InvalidParameterError(
+                f"{name}: {start:g} to {stop:g} in steps of {step:g} is {n} values, more than "
+                f"{MAX_GRID_VALUES}"
+            )
         return [float(v) for v in np.round(start + step * np.arange(n), 10)]
     values = [float(v) for v in spec]
     if not values:
@@ -160,6 +177,10 @@ def sweep_cases(sweep: dict[str, Any]) -> list[Case]:
         sweep: the ``sweep`` section: ``C1_kPa`` (list or range) and either ``phi_deg``
             (list or sampling rule, see :func:`sample_phi`) × ``theta_deg`` (list, default
             ``[0]``), or ``sphere: {n}`` (directions over the whole sphere).
+
+    Raises:
+        InvalidParameterError: if the sweep has more than :data:`MAX_CASES` cases, or two of
+            its values are closer than its folder names tell apart (they would share a folder).
     """
     c1s = grid(sweep["C1_kPa"], "sweep.C1_kPa")
     if sweep.get("sphere"):
@@ -167,8 +188,27 @@ def sweep_cases(sweep: dict[str, Any]) -> list[Case]:
     else:
         thetas = grid(sweep.get("theta_deg", [0.0]), "sweep.theta_deg")
         directions = [(p, t) for p in sample_phi(sweep["phi_deg"]) for t in thetas]
-    cases = {Case(c, p, t) for c in c1s for p, t in directions}
-    return sorted(cases)
+    if len(c1s) * len(directions) > MAX_CASES:
+        raise InvalidParameterError(
+            f"sweep: {len(c1s)} C1 values x {len(directions)} gravity directions is "
+            f"{len(c1s) * len(directions)} cases, more than {MAX_CASES}"
+        )
+    _distinct_folders("sweep.C1_kPa", c1s, 2, "kPa")
+    _distinct_folders("sweep gravity directions (phi, theta)", directions, 1, "deg")
+    return sorted({Case(c, p, t) for c in c1s for p, t in directions})
+
+
+def _distinct_folders(name: str, values: Sequence[Any], digits: int, unit: str) -> None:
+    """Refuse two different values that a case folder's name, rounded to ``digits``, merges."""
+    seen: dict[Any, Any] = {}
+    for value in values:
+        key = tuple(round(float(v), digits) + 0.0 for v in np.atleast_1d(value))
+        if key in seen and seen[key] != value:
+            raise InvalidParameterError(
+                f"{name}: {seen[key]} and {value} share one case folder (folder names give "
+                f"{digits} decimal(s) of {unit}): drop one or space them further apart"
+            )
+        seen[key] = value
 
 
 def clinical_cases(clinical: list[dict[str, Any]]) -> list[Case]:

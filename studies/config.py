@@ -28,13 +28,14 @@ import yaml
 from jsonschema import validators
 
 from fem.contact import resolve_obstacle
+from fem.dataset import SplitFractions
 from fem.exceptions import FEError
 from fem.parameters import SolverSettings
 from fem.sweep import Case, clinical_cases, sweep_cases
 from meshes.config import MeshConfig
 from meshes.parametric import BreastGeometry
 from studies.fe_variants import MeshSpec, Variant, expand_variants
-from surrogate.config import SurrogateConfig, parse_architecture
+from surrogate.config import SurrogateConfig, SurrogateConfigError, parse_architecture
 
 SCHEMA_PATH = Path(__file__).resolve().parent.parent / "workflow" / "schemas" / "config.schema.yaml"
 
@@ -61,10 +62,28 @@ def load_schema(path: str | Path = SCHEMA_PATH) -> dict[str, Any]:
     return yaml.safe_load(Path(path).read_text())
 
 
+def _specific(error: jsonschema.ValidationError) -> list[jsonschema.ValidationError]:
+    """The errors that say what is wrong, for an error of a ``oneOf``/``anyOf`` alternative.
+
+    A value that fits none of the alternatives fails each of them; the alternatives of the
+    value's own type (a list for a list of C1 values) name the item at fault, e.g.
+    ``sweep.C1_kPa.1``, and the others only say that the type differs.
+    """
+    if not error.context:
+        return [error]
+    fitting = [e for e in error.context if not (e.validator == "type" and not e.relative_path)]
+    return [s for e in fitting for s in _specific(e)] or [error]
+
+
 def schema_errors(config: Mapping[str, Any], schema: dict[str, Any]) -> list[str]:
-    """Every schema violation of ``config`` as ``'dotted.key: message'``, sorted by key."""
+    """Every schema violation of ``config`` as ``'dotted.key: message'``, sorted by key.
+
+    An item of a list is named by its index (``sweep.C1_kPa.1: -2.0 is less than or equal to
+    the minimum of 0``), not the whole list.
+    """
     validator = jsonschema.Draft202012Validator(schema)
-    errors = sorted(validator.iter_errors(config), key=lambda e: [str(p) for p in e.absolute_path])
+    errors = [s for e in validator.iter_errors(config) for s in _specific(e)]
+    errors.sort(key=lambda e: [str(p) for p in e.absolute_path])
     return [f"{'.'.join(map(str, e.absolute_path)) or '<top level>'}: {e.message}" for e in errors]
 
 
@@ -244,7 +263,11 @@ class SurrogateStudyConfig:
         variants = []
         for name, overrides in study["variants"].items():
             with _section(f"surrogate_study.variants.{name}"):
-                settings = SurrogateConfig.from_mapping({**surrogate.as_dict(), **overrides})
+                try:
+                    settings = SurrogateConfig.from_mapping({**surrogate.as_dict(), **overrides})
+                except SurrogateConfigError as err:  # named as the variant's key, not surrogate's
+                    text = str(err).replace("surrogate.", f"surrogate_study.variants.{name}.", 1)
+                    raise ConfigError(text) from None
             variants.append(SurrogateVariant(name, dict(overrides), settings))
         extra: set[Case] = set()
         for i, block in enumerate(study["extrapolation"]):
@@ -321,6 +344,8 @@ class WorkflowConfig:
             cases = tuple(sweep_cases(sections["sweep"]))
         with _section("clinical"):
             clinical = tuple(clinical_cases(sections["clinical"]))
+        with _section("dataset.split"):  # checked here, not after every solve at aggregation
+            SplitFractions(**sections["dataset"].get("split", {}))
         fe_study = FEStudyConfig.from_sections(sections)
         with _section("surrogate"):
             surrogate = SurrogateConfig.from_mapping(sections["surrogate"])

@@ -162,8 +162,11 @@ def test_every_schema_violation_is_listed_by_key() -> None:
     raw["sweep"]["C1_kPa"] = [1.0, -2.0]
     with pytest.raises(ConfigError) as caught:
         WorkflowConfig.from_mapping(raw)
+    # the bad item of a list is named by its index, not the whole list
     assert [p.split(":")[0] for p in caught.value.problems] == [
-        "material.density", "surrogate.width", "sweep.C1_kPa"]
+        "material.density", "surrogate.width", "sweep.C1_kPa.1"]
+    assert caught.value.problems[2] == (
+        "sweep.C1_kPa.1: -2.0 is less than or equal to the minimum of 0")
     assert str(caught.value).startswith("3 problems:\n  material.density: -1.0 is less")
 
 
@@ -181,6 +184,31 @@ def test_every_schema_violation_is_listed_by_key() -> None:
          "fe_study.reference: need 0 < mound_size <= global_size"),
         ({"fe_study": {"stability": {"mesh": {"global_size": 0.01, "mound_size": 0.02}}}},
          "fe_study.stability.mesh: need 0 < mound_size <= global_size"),
+        # found at start, not in aggregation after every solve
+        ({"dataset": {"split": {"train": 0.9, "validation": 0.9, "test": 0.1}}},
+         "dataset.split: split fractions must add up to 1, got 1.9"),
+        # values that one case folder's name would merge are refused, not silently merged
+        ({"sweep": {"C1_kPa": [1.0, 1.001, 5.0]}},
+         "sweep.C1_kPa: 1.0 and 1.001 share one case folder"),
+        ({"sweep": {"phi_deg": [0.0, 0.04, 180.0]}},
+         "sweep gravity directions (phi, theta): (0.0, 0.0) and (0.04, 0.0) share one"),
+        # a sweep too large to plan is refused before it is expanded
+        ({"sweep": {"C1_kPa": {"start": 0.8, "stop": 5.0, "step": 1e-5}}},
+         "sweep.C1_kPa: 0.8 to 5 in steps of 1e-05 is 420001 values, more than 10000"),
+        ({"sweep": {"C1_kPa": {"start": 0.01, "stop": 99.99, "step": 0.01},
+                    "phi_deg": [0.0, 30.0, 60.0, 90.0, 120.0, 150.0]}},
+         "sweep: 9999 C1 values x 6 gravity directions is 59994 cases, more than 50000"),
+        # PETSc options: only those the solver reads, of the right kind, and none that write
+        ({"fe": {"petsc_options": {"snes_max_it": "lots"}}},
+         "fe.petsc_options.snes_max_it must be an integer, got 'lots'"),
+        ({"fe": {"petsc_options": {"snes_maxit_typo": 1}}},
+         "fe.petsc_options.snes_maxit_typo is not an option the solver reads"),
+        ({"fe": {"petsc_options": {"snes_view": "ascii:/tmp/anywhere"}}},
+         "fe.petsc_options.snes_view: options that make PETSc write"),
+        ({"fe": {"petsc_options": {"ksp_monitor": True}}},
+         "fe.petsc_options.ksp_monitor: options that make PETSc write"),
+        ({"fe": {"petsc_options": {"pc_type": "ascii:/tmp/anywhere"}}},
+         "fe.petsc_options.pc_type must be a PETSc type name"),
     ],
 )
 def test_an_inconsistent_section_is_named(change: dict, message: str) -> None:
@@ -214,7 +242,8 @@ def test_an_architecture_listed_twice_is_refused() -> None:
 def test_a_variant_with_a_bad_override_is_named() -> None:
     study = {"architectures": ["2x32"], "repeats": 1, "variants": {"wide": {"alpha": -1.0}},
              "extrapolation": [], "timing_repeats": 10, "prediction_budget_ms": None}
-    with pytest.raises(ConfigError, match=r"^surrogate_study\.variants\.wide: surrogate\.alpha"):
+    # named by the variant's own key, not the surrogate section's
+    with pytest.raises(ConfigError, match=r"^surrogate_study\.variants\.wide\.alpha must be >= 0"):
         SurrogateStudyConfig.from_sections(study, SurrogateConfig(), ())
 
 

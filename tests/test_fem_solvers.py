@@ -138,6 +138,15 @@ def test_higher_order_and_quadrature_change_the_answer_only_slightly(
             {"solver": "iterative", "petsc_options": {"refactor_above_its": 5}},
             "not pc_type 'fieldsplit'",
         ),
+        # a misspelt option would be ignored by PETSc, and the case reported converged
+        ({"petsc_options": {"snes_maxit_typo": 1}}, "snes_maxit_typo is not an option the solver"),
+        # PETSc would fail at every solve with error code 63
+        ({"petsc_options": {"snes_max_it": "lots"}}, "snes_max_it must be an integer, got 'lots'"),
+        ({"petsc_options": {"ksp_rtol": float("nan")}}, "ksp_rtol must be a finite number"),
+        # viewers and monitors write any file their value names
+        ({"petsc_options": {"snes_view": "ascii:/tmp/x"}}, "options that make PETSc write"),
+        ({"petsc_options": {"ksp_monitor_true_residual": True}}, "options that make PETSc write"),
+        ({"petsc_options": {"pc_type": "ascii:/tmp/x"}}, "pc_type must be a PETSc type name"),
     ],
 )
 def test_unknown_solver_options_are_named(settings: dict, message: str) -> None:
