@@ -265,8 +265,15 @@ def _write_atomically(
     import h5py
 
     output.parent.mkdir(parents=True, exist_ok=True)
+    # a build killed before its rename left its temporary file: nothing else writes these
+    for stale in output.parent.glob(f".{output.name}.*.tmp"):
+        stale.unlink(missing_ok=True)
     fd, tmp = tempfile.mkstemp(dir=output.parent, prefix=f".{output.name}.", suffix=".tmp")
     os.close(fd)
+    # mkstemp makes the file private (0600); the dataset gets the mode every other output has
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)
     try:
         with h5py.File(tmp, "w") as h5:
             h5.attrs["title"] = "Breast displacement under rotated gravity (FE sweep)"

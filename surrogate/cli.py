@@ -36,6 +36,10 @@ def predict(args: argparse.Namespace) -> int:
     if output is not None and output.suffix not in (".npy", ".xdmf"):
         print(f"error: --output {output} must end in .npy or .xdmf", file=sys.stderr)
         return 2
+    if output is not None and not output.parent.is_dir():
+        print(f"error: --output {output}: the folder {output.parent} does not exist",
+              file=sys.stderr)
+        return 2
     try:
         model = Surrogate.load(args.model)
         u = model.predict(args.c1, args.phi, args.theta)

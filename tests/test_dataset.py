@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import os
+import stat
 from pathlib import Path
 
 import h5py
@@ -165,3 +167,22 @@ def test_existing_dataset_survives_a_failed_rebuild(tmp_path: Path) -> None:
         build_dataset(summaries, points, tmp_path / "ds.h5")
     assert (tmp_path / "ds.h5").read_bytes() == before
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+def test_a_killed_build_leaves_nothing_behind_and_the_dataset_is_readable_by_all(
+    tmp_path: Path,
+) -> None:
+    """The next build removes a killed build's temporary file; the dataset is mode 0644.
+
+    mkstemp makes its file private (0600); the dataset gets the mode of every other output.
+    """
+    summaries, points = _cases(tmp_path)
+    stale = tmp_path / ".ds.h5.abc123.tmp"
+    stale.write_bytes(b"half a dataset")
+    old = os.umask(0o022)
+    try:
+        build_dataset(summaries, points, tmp_path / "ds.h5")
+    finally:
+        os.umask(old)
+    assert not stale.exists()
+    assert stat.S_IMODE((tmp_path / "ds.h5").stat().st_mode) == 0o644

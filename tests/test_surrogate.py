@@ -269,6 +269,10 @@ def test_train_command_line_trains_saves_and_names_bad_settings(
     assert "C1 must be positive" in capsys.readouterr().err
     assert main(["predict", str(tmp_path / "nowhere"), "--c1", "1", "--phi", "90"]) == 2
     assert "cannot read a surrogate model" in capsys.readouterr().err
+    # an output folder that does not exist is named, not a traceback after the prediction
+    assert main(["predict", str(tmp_path / "m"), "--c1", "2", "--phi", "90",
+                 "-o", str(tmp_path / "no" / "such" / "u.npy")]) == 2
+    assert "does not exist" in capsys.readouterr().err
     assert main([*args, "--set", "activation=sigmoid"]) == 2
     assert "surrogate.activation must be one of" in capsys.readouterr().err
     assert main([*args, "--set", "widthx"]) == 2
