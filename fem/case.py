@@ -155,7 +155,9 @@ class CaseRunner:
         X = gather_vertex_coordinates(self.mesh)
         if self.comm.rank == 0:
             index, values = points
-            write_points(writer.path("points.h5"), index, X[1], values, fixed[1])
+            write_points(
+                writer.path("points.h5"), index, X[1], values, fixed[1], case=summary["case"]
+            )
             summary["mean_disp_mm"] = float(1e3 * np.mean(np.linalg.norm(values, axis=1)))
             summary["num_points"] = int(index.size)
         summary["wall_s"]["output"] = time.perf_counter() - start

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import os
 import tempfile
 from collections.abc import Sequence
@@ -55,6 +56,8 @@ DOMAIN, BOUNDARY = 0, 1
 SPLITS = ("train", "validation", "test")
 REQUIRED_SUMMARY_KEYS = ("status", "case", "C1", "phi", "theta", "gravity_vector", "load_fraction")
 REQUIRED_POINT_FIELDS = ("node_index", "X", "u", "fixed")
+STATUSES = ("converged", "failed")
+"""The statuses a case's summary may have (:func:`fem.case.run_case` writes one of them)."""
 
 
 class DatasetError(ValueError):
@@ -62,9 +65,18 @@ class DatasetError(ValueError):
 
 
 def write_points(
-    path: str | Path, node_index: np.ndarray, X: np.ndarray, u: np.ndarray, fixed: np.ndarray
+    path: str | Path,
+    node_index: np.ndarray,
+    X: np.ndarray,
+    u: np.ndarray,
+    fixed: np.ndarray,
+    case: str | None = None,
 ) -> None:
-    """Write a case's material-point file: ``node_index``, ``X`` (m), ``u`` (m), ``fixed``."""
+    """Write a case's material-point file: ``node_index``, ``X`` (m), ``u`` (m), ``fixed``.
+
+    ``case`` (the case folder's name) is kept as an attribute, so that aggregation can tell a
+    file copied from another case's folder.
+    """
     import h5py
 
     with h5py.File(path, "w") as h5:
@@ -73,10 +85,16 @@ def write_points(
         h5.create_dataset("u", data=u).attrs["units"] = "m"
         h5.create_dataset("fixed", data=fixed.astype(bool))
         h5.attrs["description"] = "displacement at the mesh vertices (material points)"
+        if case is not None:
+            h5.attrs["case"] = case
 
 
-def read_points(path: str | Path) -> dict[str, np.ndarray]:
-    """Read a case's material-point file (``points.h5``, see :mod:`fem.io`)."""
+def read_points(path: str | Path) -> dict[str, Any]:
+    """Read a case's material-point file (``points.h5``, see :mod:`fem.io`).
+
+    Returns the fields of :data:`REQUIRED_POINT_FIELDS` and ``case``: the case the file was
+    written for (None for a file written before the attribute existed).
+    """
     import h5py
 
     try:
@@ -84,22 +102,94 @@ def read_points(path: str | Path) -> dict[str, np.ndarray]:
             missing = [k for k in REQUIRED_POINT_FIELDS if k not in h5]
             if missing:
                 raise DatasetError(f"{path}: missing field(s) {', '.join(missing)}")
-            return {key: h5[key][...] for key in REQUIRED_POINT_FIELDS}
+            points: dict[str, Any] = {key: h5[key][...] for key in REQUIRED_POINT_FIELDS}
+            case = h5.attrs.get("case")
+            points["case"] = case.decode() if isinstance(case, bytes) else case
+            return points
     except OSError as err:
         raise DatasetError(f"{path}: unreadable or truncated HDF5 file ({err})") from None
 
 
+def _finite_number(value: Any) -> bool:
+    return (
+        isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+    )
+
+
 def read_summary(path: str | Path) -> dict[str, Any]:
-    """Read a case's ``summary.json`` and check it has the fields the dataset needs."""
+    """Read a case's ``summary.json`` and check the fields the dataset needs.
+
+    Raises:
+        DatasetError: naming the file, for a file that is not JSON (or not text), is not a
+            JSON object, lacks a field, has an unknown status or a non-numeric parameter.
+    """
     try:
-        with open(path) as fh:
+        with open(path, encoding="utf-8") as fh:
             summary = json.load(fh)
-    except (OSError, json.JSONDecodeError) as err:
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
         raise DatasetError(f"{path}: unreadable or truncated summary ({err})") from None
+    if not isinstance(summary, dict):
+        raise DatasetError(
+            f"{path}: a summary is a JSON object, this file holds {type(summary).__name__}"
+        )
     missing = [k for k in REQUIRED_SUMMARY_KEYS if k not in summary]
     if missing:
         raise DatasetError(f"{path}: summary lacks {', '.join(missing)}")
+    if summary["status"] not in STATUSES:
+        raise DatasetError(
+            f"{path}: unknown status {summary['status']!r}; a case is one of {', '.join(STATUSES)}"
+        )
+    bad = [k for k in ("C1", "phi", "theta", "load_fraction") if not _finite_number(summary[k])]
+    gravity = summary["gravity_vector"]
+    if not (isinstance(gravity, list) and len(gravity) == 3 and all(map(_finite_number, gravity))):
+        bad.append("gravity_vector")
+    if bad:
+        raise DatasetError(
+            f"{path}: summary field(s) {', '.join(bad)} are not finite numbers "
+            f"({', '.join(f'{k}={summary[k]!r}' for k in bad)})"
+        )
     return summary
+
+
+def read_case(summary_path: str | Path, points_path: str | Path) -> tuple[dict, dict]:
+    """Read one case folder's summary and points, and check that they are that folder's case.
+
+    The folder's name is the case (:class:`fem.sweep.Case`); its ``summary.json`` must describe
+    the same C1, Φ and θ, and its ``points.h5`` (where it says) must have been written for it, so
+    that files copied between folders cannot put one case in the dataset twice.
+
+    Raises:
+        DatasetError: naming the folder and the disagreement.
+    """
+    from fem.exceptions import InvalidParameterError
+    from fem.sweep import Case
+
+    summary_path, points_path = Path(summary_path), Path(points_path)
+    folder = summary_path.parent
+    if points_path.parent != folder:
+        raise DatasetError(
+            f"{summary_path} and {points_path} are in different folders: a case's files are in "
+            "its own folder"
+        )
+    try:
+        expected = Case.from_id(folder.name)
+    except InvalidParameterError as err:
+        raise DatasetError(f"{folder}: not a case folder ({err})") from None
+    summary = read_summary(summary_path)
+    described = Case(summary["C1"], summary["phi"], summary["theta"])
+    if described != expected or summary["case"] != expected.id:
+        raise DatasetError(
+            f"{summary_path}: the summary is of case {summary['case']!r} (C1 = {summary['C1']} "
+            f"kPa, phi = {summary['phi']} deg, theta = {summary['theta']} deg), not of its folder "
+            f"{expected.id!r}; solve the case again (snakemake --forcerun solve -- {summary_path})"
+        )
+    points = read_points(points_path)
+    if points["case"] is not None and points["case"] != expected.id:
+        raise DatasetError(
+            f"{points_path}: written for case {points['case']!r}, not for its folder "
+            f"{expected.id!r}; solve the case again"
+        )
+    return summary, points
 
 
 @dataclass(frozen=True, slots=True)
@@ -159,12 +249,14 @@ def build_dataset(
     """
     if len(summary_paths) != len(point_paths) or not summary_paths:
         raise DatasetError("need one points file per summary, and at least one case")
-    summaries = [read_summary(p) for p in summary_paths]
-    reference = read_points(point_paths[0])
-    n_points = len(reference["node_index"])
-    displacement = np.full((len(summaries), n_points, 3), np.nan)
-    for i, (summary, path) in enumerate(zip(summaries, point_paths, strict=True)):
-        points = reference if i == 0 else read_points(path)
+    summaries: list[dict[str, Any]] = []
+    for i, (summary_path, path) in enumerate(zip(summary_paths, point_paths, strict=True)):
+        summary, points = read_case(summary_path, path)
+        summaries.append(summary)
+        if i == 0:
+            reference = points
+            n_points = len(reference["node_index"])
+            displacement = np.full((len(summary_paths), n_points, 3), np.nan)
         case = summary["case"]
         if points["u"].shape != (n_points, 3) or points["X"].shape != (n_points, 3):
             raise DatasetError(

@@ -12,20 +12,23 @@ import numpy as np
 import pytest
 
 from fem.dataset import BOUNDARY, DatasetError, SplitFractions, build_dataset, write_points
+from fem.sweep import Case
 
 pytestmark = pytest.mark.unit
 
 N = 50
 
 
-def _write_case(folder: Path, C1: float, phi: float, status: str = "converged", n: int = N,
+def _write_case(root: Path, C1: float, phi: float, status: str = "converged", n: int = N,
                 rng: np.random.Generator | None = None, **extra: object) -> tuple[Path, Path]:
+    """A case folder under ``root``, named as the workflow names it."""
     rng = rng or np.random.default_rng(0)
+    folder = root / Case(C1, phi).id
     folder.mkdir(parents=True)
     X = np.linspace(0, 1, 3 * N).reshape(N, 3)[:n]
     fixed = np.arange(n) < 5
     u = np.where(fixed[:, None], 0.0, rng.normal(size=(n, 3)) * 1e-3 / C1)
-    write_points(folder / "points.h5", np.arange(n), X, u, fixed)
+    write_points(folder / "points.h5", np.arange(n), X, u, fixed, folder.name)
     summary = {
         "status": status,
         "reason": "converged" if status == "converged" else "diverged",
@@ -53,9 +56,7 @@ def _cases(
     tmp_path: Path, overrides: dict[int, dict] | None = None
 ) -> tuple[list[Path], list[Path]]:
     overrides = overrides or {}
-    paths = [
-        _write_case(tmp_path / f"c{i}", 1.0 + i, 30.0 * i, **overrides.get(i, {})) for i in range(5)
-    ]
+    paths = [_write_case(tmp_path, 1.0 + i, 30.0 * i, **overrides.get(i, {})) for i in range(5)]
     return [p[0] for p in paths], [p[1] for p in paths]
 
 
@@ -83,7 +84,7 @@ def test_dataset_schema_and_contents(tmp_path: Path) -> None:
         seed=1,
         config={"sweep": {"phi_deg": [0]}},
     )
-    assert info["failed"] == ["c3"]
+    assert info["failed"] == ["c1=4.00_phi=90.0_theta=0.0"]
     with h5py.File(tmp_path / "ds.h5") as h5:
         assert h5["displacement"].shape == (5, N, 3)
         assert h5["displacement"].attrs["units"] == "m"
@@ -132,7 +133,8 @@ def test_report_says_whether_the_sweep_had_contact() -> None:
 
 def test_mismatched_point_count_names_the_case(tmp_path: Path) -> None:
     summaries, points = _cases(tmp_path, {2: {"n": N - 1}})
-    with pytest.raises(DatasetError, match="case c2: .* 49 material points, expected 50"):
+    match = "case c1=3.00_phi=60.0_theta=0.0: .* 49 material points, expected 50"
+    with pytest.raises(DatasetError, match=match):
         build_dataset(summaries, points, tmp_path / "ds.h5")
     assert not (tmp_path / "ds.h5").exists()
 
@@ -141,7 +143,8 @@ def test_truncated_case_file_names_the_case(tmp_path: Path) -> None:
     summaries, points = _cases(tmp_path)
     data = points[1].read_bytes()
     points[1].write_bytes(data[: len(data) // 3])
-    with pytest.raises(DatasetError, match="c1/points.h5: unreadable or truncated"):
+    match = "c1=2.00_phi=30.0_theta=0.0/points.h5: unreadable or truncated"
+    with pytest.raises(DatasetError, match=match):
         build_dataset(summaries, points, tmp_path / "ds.h5")
 
 
@@ -149,12 +152,13 @@ def test_missing_field_names_the_case(tmp_path: Path) -> None:
     summaries, points = _cases(tmp_path)
     with h5py.File(points[4], "a") as h5:
         del h5["u"]
-    with pytest.raises(DatasetError, match="c4/points.h5: missing field"):
+    with pytest.raises(DatasetError, match="c1=5.00_phi=120.0_theta=0.0/points.h5: missing field"):
         build_dataset(summaries, points, tmp_path / "ds.h5")
     summary = json.loads(summaries[0].read_text())
     del summary["phi"]
     summaries[0].write_text(json.dumps(summary))
-    with pytest.raises(DatasetError, match="c0/summary.json: summary lacks phi"):
+    match = "c1=1.00_phi=0.0_theta=0.0/summary.json: summary lacks phi"
+    with pytest.raises(DatasetError, match=match):
         build_dataset(summaries, points, tmp_path / "ds.h5")
 
 
@@ -186,3 +190,82 @@ def test_a_killed_build_leaves_nothing_behind_and_the_dataset_is_readable_by_all
         os.umask(old)
     assert not stale.exists()
     assert stat.S_IMODE((tmp_path / "ds.h5").stat().st_mode) == 0o644
+
+
+@pytest.mark.parametrize(
+    "content, message",
+    [
+        (b"\xff\xfe\x00garbage", "unreadable or truncated summary"),
+        (b"null", "a summary is a JSON object, this file holds NoneType"),
+        (b"[1, 2]", "a summary is a JSON object, this file holds list"),
+    ],
+)
+def test_a_summary_that_is_not_a_json_object_names_its_file(
+    tmp_path: Path, content: bytes, message: str
+) -> None:
+    summaries, points = _cases(tmp_path)
+    summaries[2].write_bytes(content)
+    with pytest.raises(DatasetError, match=f"c1=3.00_phi=60.0_theta=0.0/summary.json: {message}"):
+        build_dataset(summaries, points, tmp_path / "ds.h5")
+    assert not (tmp_path / "ds.h5").exists()
+
+
+@pytest.mark.parametrize(
+    "field, value, message",
+    [
+        ("status", "ok", "unknown status 'ok'; a case is one of converged, failed"),
+        ("C1", "1.0", r"summary field\(s\) C1 are not finite numbers \(C1='1.0'\)"),
+        ("phi", None, r"summary field\(s\) phi are not finite numbers"),
+        ("load_fraction", True, r"summary field\(s\) load_fraction are not finite numbers"),
+        ("gravity_vector", [0.0, "x"], r"summary field\(s\) gravity_vector are not finite"),
+    ],
+)
+def test_a_summary_with_a_bad_field_names_the_file_and_the_field(
+    tmp_path: Path, field: str, value: object, message: str
+) -> None:
+    summaries, points = _cases(tmp_path)
+    summary = json.loads(summaries[1].read_text())
+    summary[field] = value
+    summaries[1].write_text(json.dumps(summary))
+    with pytest.raises(DatasetError, match=f"c1=2.00_phi=30.0_theta=0.0/summary.json: {message}"):
+        build_dataset(summaries, points, tmp_path / "ds.h5")
+
+
+def test_a_summary_of_another_case_than_its_folder_is_refused(tmp_path: Path) -> None:
+    """A summary whose C1 or Φ is not its folder's would put one case in the dataset twice."""
+    summaries, points = _cases(tmp_path)
+    summary = json.loads(summaries[1].read_text())
+    summaries[1].write_text(json.dumps({**summary, "C1": 7.0}))
+    with pytest.raises(DatasetError, match="the summary is of case .* not of its folder "
+                       "'c1=2.00_phi=30.0_theta=0.0'"):
+        build_dataset(summaries, points, tmp_path / "ds.h5")
+    summaries[1].write_text(json.dumps({**summary, "phi": 45.0}))
+    with pytest.raises(DatasetError, match="not of its folder 'c1=2.00_phi=30.0_theta=0.0'"):
+        build_dataset(summaries, points, tmp_path / "ds.h5")
+
+
+def test_a_folder_holding_another_cases_files_is_refused(tmp_path: Path) -> None:
+    """Copying case 0's files over case 3's is found, by the summary and by the points file."""
+    summaries, points = _cases(tmp_path)
+    summaries[3].write_bytes(summaries[0].read_bytes())
+    points[3].write_bytes(points[0].read_bytes())
+    with pytest.raises(DatasetError, match="c1=4.00_phi=90.0_theta=0.0/summary.json: the summary "
+                       "is of case 'c1=1.00_phi=0.0_theta=0.0'"):
+        build_dataset(summaries, points, tmp_path / "ds.h5")
+    summaries, points = _cases(tmp_path / "again")
+    points[3].write_bytes(points[0].read_bytes())  # the summary is right, the field is not
+    with pytest.raises(DatasetError, match="c1=4.00_phi=90.0_theta=0.0/points.h5: written for "
+                       "case 'c1=1.00_phi=0.0_theta=0.0'"):
+        build_dataset(summaries, points, tmp_path / "ds.h5")
+
+
+def test_case_files_outside_a_case_folder_are_refused(tmp_path: Path) -> None:
+    summaries, points = _cases(tmp_path)
+    with pytest.raises(DatasetError, match="in different folders"):
+        build_dataset(summaries, [points[1], *points[1:]], tmp_path / "ds.h5")
+    odd = tmp_path / "not_a_case"
+    odd.mkdir()
+    for path in (summaries[0], points[0]):
+        (odd / path.name).write_bytes(path.read_bytes())
+    with pytest.raises(DatasetError, match="not_a_case: not a case folder"):
+        build_dataset([odd / "summary.json"], [odd / "points.h5"], tmp_path / "ds.h5")

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from fem.dataset import build_dataset, write_points
+from fem.sweep import Case
 from surrogate.config import SurrogateConfig, SurrogateConfigError
 
 pytestmark = pytest.mark.unit
@@ -33,9 +34,9 @@ def dataset_path(tmp_path_factory: pytest.TempPathFactory) -> Path:
     summaries, points = [], []
     for C1 in (1.0, 2.0, 3.0, 4.0, 5.0):
         for phi in (0.0, 90.0, 180.0, -90.0):
-            case = folder / f"c{C1}_{phi}"
+            case = folder / Case(C1, phi).id
             case.mkdir()
-            write_points(case / "points.h5", np.arange(N), X, _field(X, C1, phi), fixed)
+            write_points(case / "points.h5", np.arange(N), X, _field(X, C1, phi), fixed, case.name)
             (case / "summary.json").write_text(json.dumps({
                 "status": "converged", "case": case.name, "C1": C1, "phi": phi, "theta": 0.0,
                 "gravity_vector": [0, 0, 0], "load_fraction": 1.0}))
