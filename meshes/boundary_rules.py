@@ -14,6 +14,7 @@ import numpy as np
 
 from meshes.checks import UNITS, point_surface_distance
 from meshes.exceptions import GeometryError, NoRibFacetsError, SurfaceRuleError
+from meshes.quality import triangle_areas
 from meshes.reading import InputMesh, read_surface
 from meshes.tags import Boundary
 
@@ -110,6 +111,39 @@ def _facet_distance(x: np.ndarray, faces: np.ndarray, rule: BoundaryRule, units:
     return d[faces].max(axis=1)
 
 
+RIB_AREA_SHARE = (0.02, 0.70)
+"""The share of the boundary's area the rib rule may select. The clamped chest wall is the
+posterior side of a breast model (a third of a hemisphere's surface, for instance): a rule that
+clamps nearly all of it leaves nothing to hang under gravity, and one that clamps a sliver holds
+the breast by a few facets."""
+
+
+def _check_rib_share(
+    x: np.ndarray, faces: np.ndarray, rib: np.ndarray, rule: BoundaryRule
+) -> None:
+    """Refuse a rib rule that selects too much or too little of the boundary (by area).
+
+    Raises:
+        SurfaceRuleError: with the share, the facet count and what to change.
+    """
+    areas = triangle_areas(x, faces)
+    share = float(areas[rib].sum() / areas.sum())
+    lo, hi = RIB_AREA_SHARE
+    if lo <= share <= hi:
+        return
+    what = (
+        f"the rib rule ({rule.describe()}) selects {100 * share:.3g} % of the boundary's area "
+        f"({int(rib.sum())} of {len(faces)} facets), but the clamped chest wall is "
+        f"{100 * lo:g}-{100 * hi:g} % of a breast model's surface"
+    )
+    remedy = (
+        "narrow the rule (a smaller distance, or a plane through the chest wall)"
+        if share > hi
+        else "widen the rule (a larger distance) or check its position"
+    )
+    raise SurfaceRuleError(f"{what}: {remedy}")
+
+
 def classify_boundary(
     x: np.ndarray,
     faces: np.ndarray,
@@ -188,6 +222,7 @@ def classify_boundary(
                     f"{both} boundary facet(s) match both the {first.label} and the "
                     f"{second.label} rules; make the rules exclusive (e.g. a smaller distance)"
                 )
+    _check_rib_share(x, faces, selected[Boundary.RIB], rules[Boundary.RIB])
     taken = np.zeros(len(faces), dtype=bool)
     for mask in selected.values():
         taken |= mask

@@ -68,6 +68,57 @@ def check_plausible_size(points: np.ndarray, units: str, what: str) -> float:
     )
 
 
+PLAUSIBLE_VOLUME_ML = (5.0, 10_000.0)
+"""Range of the tissue volume of a breast model, millilitres: the smallest breasts hold some
+tens of ml, the largest a few litres each, so that a model of 32 l (a 50 mm model read in cm)
+is in other units."""
+
+
+def enclosed_volume(points: np.ndarray, tris: np.ndarray) -> float:
+    """Volume enclosed by a closed triangulated surface (divergence theorem), m³."""
+    a, b, c = (points[tris[:, i]] for i in range(3))
+    return abs(float(np.einsum("ij,ij->", a, np.cross(b, c)))) / 6.0
+
+
+def check_plausible_volume(volume_m3: float, units: str, what: str) -> float:
+    """Reject a model whose volume is implausible for a breast in the declared units.
+
+    The extent alone lets a factor of ten through (a 5 cm model read in cm is 0.5 m across,
+    within :data:`PLAUSIBLE_EXTENT_M`), the volume does not: it scales with the cube.
+
+    Args:
+        volume_m3: the model's volume, in m³ (converted with ``units``).
+        units: the declared units (for the message).
+        what: the file, for the message.
+
+    Returns:
+        The volume in millilitres.
+
+    Raises:
+        UnitsError: naming the volume found and the units that would make it plausible.
+    """
+    ml = 1e6 * volume_m3
+    lo, hi = PLAUSIBLE_VOLUME_ML
+    if lo <= ml <= hi:
+        return ml
+    native = ml / UNITS[units] ** 3
+    fits = [u for u, f in UNITS.items() if lo <= native * f**3 <= hi]
+    hint = (
+        f"; read in {' or '.join(fits)} it would hold {native * UNITS[fits[0]] ** 3:.3g} ml: "
+        f"set mesh.file.units: {fits[0]}"
+        if fits
+        else ""
+    )
+    raise UnitsError(
+        f"{what} holds {_volume(ml)} of tissue with units {units!r}, but a breast model holds "
+        f"{lo:g} ml to {hi / 1000:g} l: the file is probably in other units{hint}"
+    )
+
+
+def _volume(ml: float) -> str:
+    return f"{ml / 1000:.3g} l" if ml >= 1000 else f"{ml:.3g} ml"
+
+
 def merge_duplicate_points(
     points: np.ndarray, cells: np.ndarray, tol: float
 ) -> tuple[np.ndarray, np.ndarray]:

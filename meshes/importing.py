@@ -36,12 +36,14 @@ from meshes.checks import (
     check_face_manifold,
     check_no_self_intersections,
     check_plausible_size,
+    check_plausible_volume,
     check_tetrahedra,
     check_triangles,
+    enclosed_volume,
     merge_duplicate_points,
 )
 from meshes.exceptions import GeometryError, MeshInputError
-from meshes.quality import exterior_faces
+from meshes.quality import exterior_faces, tet_volumes
 from meshes.reading import SURFACE_SUFFIXES, VOLUME_SUFFIXES, InputMesh, read_input
 from meshes.sizing import MeshSize
 from meshes.tags import Boundary
@@ -178,6 +180,9 @@ def prepare_input(
         mesh = InputMesh(x, tets, tris, mesh.triangle_groups, mesh.group_names)
         info["extent_m"] = check_plausible_size(x, spec.units, what)
         tets = check_tetrahedra(x, tets, what)
+        info["volume_ml"] = check_plausible_volume(
+            float(np.abs(tet_volumes(x, tets)).sum()), spec.units, what
+        )
         check_face_manifold(tets, what)
         faces = exterior_faces(tets)
         check_closed(x, faces, f"the boundary of {spec.path}")
@@ -189,6 +194,7 @@ def prepare_input(
         info["extent_m"] = check_plausible_size(x, spec.units, what)
         check_triangles(x, tris, what)
         check_closed(x, tris, what)
+        info["volume_ml"] = check_plausible_volume(enclosed_volume(x, tris), spec.units, what)
         check_no_self_intersections(x, tris, what)
         info["kind"] = "closed surface"
         info["surface_triangles"] = int(len(tris))

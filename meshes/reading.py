@@ -63,8 +63,10 @@ def read_input(path: str | Path, units: str) -> InputMesh:
             # meshio reads single-grid XDMF only; dolfinx writes mesh and tags as several
             return _read_dolfinx_xdmf(path, units, err)
         raise MeshInputError(f"cannot read {path}: {type(err).__name__}: {err}") from err
-    scale = UNITS[units]
-    points = np.asarray(mesh.points, dtype=float)[:, :3] * scale
+    raw = np.asarray(mesh.points, dtype=float)
+    if raw.size == 0 or sum(len(block.data) for block in mesh.cells) == 0:
+        raise MeshInputError(f"{path} is empty: it holds no points or no cells")
+    points = raw.reshape(len(raw), -1)[:, :3] * UNITS[units]
     tets, tris, groups = [], [], []
     physical = mesh.cell_data.get("gmsh:physical")
     int_data = [
@@ -92,13 +94,32 @@ def read_input(path: str | Path, units: str) -> InputMesh:
             f"{path} holds no tetrahedra or triangles (cell types: {', '.join(types) or 'none'})"
         )
     names = {str(name): int(value[0]) for name, value in (mesh.field_data or {}).items()}
-    return InputMesh(
+    result = InputMesh(
         points=points,
         tets=np.concatenate(tets) if tets else np.empty((0, 4), dtype=np.int64),
         triangles=np.concatenate(tris) if tris else np.empty((0, 3), dtype=np.int64),
         triangle_groups=np.concatenate(groups) if groups else np.empty(0, dtype=np.int64),
         group_names=names,
     )
+    check_finite(result, path)
+    return result
+
+
+def check_finite(mesh: InputMesh, path: str | Path) -> None:
+    """Refuse a file whose elements use a point with a NaN or infinite coordinate.
+
+    Raises:
+        MeshInputError: with the number of such points and the first one's index.
+    """
+    used = np.unique(np.concatenate([mesh.tets.ravel(), mesh.triangles.ravel()]))
+    if used.size and (used.min() < 0 or used.max() >= len(mesh.points)):
+        raise MeshInputError(f"{path}: its cells refer to points it does not have")
+    bad = used[~np.isfinite(mesh.points[used]).all(axis=1)]
+    if len(bad):
+        raise MeshInputError(
+            f"{path}: {len(bad)} point(s) of its cells have a NaN or infinite coordinate, the "
+            f"first is point #{bad[0]}; repair the file (a broken export or conversion)"
+        )
 
 
 def _read_dolfinx_xdmf(path: Path, units: str, meshio_error: Exception) -> InputMesh:

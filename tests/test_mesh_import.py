@@ -435,3 +435,57 @@ def test_a_dolfinx_xdmf_mesh_round_trips_with_its_tags(coarse_mesh: Path, tmp_pa
     assert report["cells"] == original["cells"]
     for name, area in original["area_m2"].items():
         assert report["area_m2"][name] == pytest.approx(area, rel=1e-12), name
+
+
+# -- inputs that used to pass or fail without naming the problem ----------------------------
+
+
+@pytest.mark.parametrize("content", [b"", b"solid empty\nendsolid empty\n"])
+def test_an_empty_file_is_named_as_empty(tmp_path: Path, content: bytes) -> None:
+    stl = tmp_path / "empty.stl"
+    stl.write_bytes(content)
+    with pytest.raises(MeshInputError, match="empty.stl is empty: it holds no points or no cells"):
+        write_imported_mesh(spec(stl, "mm"), SIZE, tmp_path / "m.xdmf")
+    assert not (tmp_path / "m.xdmf").exists()
+
+
+def test_a_nan_vertex_is_named_not_taken_for_wrong_units(tmp_path: Path) -> None:
+    x, tris = box_mesh(2)
+    x[7, 1] = np.nan
+    stl = write_surface(tmp_path / "nan.stl", x, tris)
+    with pytest.raises(MeshInputError, match="point.* have a NaN or infinite coordinate") as err:
+        write_imported_mesh(spec(stl), SIZE, tmp_path / "m.xdmf")
+    assert not isinstance(err.value, UnitsError)
+
+
+def test_a_small_model_declared_in_centimetres_is_refused_by_its_volume(tmp_path: Path) -> None:
+    """A 5 cm model in mm, declared in cm, is 0.5 m across (a plausible extent) but holds 12 l.
+
+    Its volume names the units.
+    """
+    x, tris = box_mesh(2)
+    stl = write_surface(tmp_path / "small_mm.stl", 200.0 * x, tris)  # 1 x 4 x 3 cm, in mm
+    rib = {"plane": {"point": [0, 0, 0], "normal": [1, 0, 0]}, "distance": 0.1}
+    with pytest.raises(
+        UnitsError, match=r"holds 12 l of tissue with units 'cm'.*read in mm it would hold 12 ml"
+    ):
+        write_imported_mesh(spec(stl, "cm", rib=rib), SIZE, tmp_path / "m.xdmf")
+    report = write_imported_mesh(spec(stl, "mm", rib=rib), SIZE, tmp_path / "m.xdmf")
+    assert report["input"]["volume_ml"] == pytest.approx(12.0, rel=1e-9)
+
+
+def test_a_rib_rule_that_clamps_the_whole_boundary_is_refused(tmp_path: Path) -> None:
+    stl = write_surface(tmp_path / "box.stl", *box_mesh(2))
+    everything = {"plane": RIB_PLANE["plane"], "distance": 1.0}
+    with pytest.raises(SurfaceRuleError, match=r"selects 100 % of the boundary's area.*narrow"):
+        write_imported_mesh(spec(stl, rib=everything), SIZE, tmp_path / "m.xdmf")
+    assert not (tmp_path / "m.xdmf").exists()
+
+
+def test_a_rib_rule_that_clamps_a_sliver_is_refused(tmp_path: Path) -> None:
+    """A slab 1 cm deep and 45 cm tall clamped by its 1 x 20 cm base: 1 % of its surface."""
+    x, tris = box_mesh(2)
+    stl = write_surface(tmp_path / "slab.stl", x * [0.2, 1.0, 3.0], tris)
+    base = {"plane": {"point": [0, 0, 0], "normal": [0, 0, 1]}, "distance": 0.001}
+    with pytest.raises(SurfaceRuleError, match=r"selects 1.0\d* % of the boundary's area.*widen"):
+        write_imported_mesh(spec(stl, rib=base), SIZE, tmp_path / "m.xdmf")
