@@ -1,10 +1,9 @@
 """Snakemake adapter: gather all case files into one HDF5 dataset."""
 
-import logging
-
 from fem.dataset import SplitFractions, build_dataset
+from studies.joblog import job_log
 
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
+job_log(snakemake.log[0])
 
 cfg = snakemake.params.dataset
 build_dataset(

@@ -6,10 +6,11 @@ from pathlib import Path
 from fem.parameters import SolverSettings
 from fem.sweep import clinical_cases
 from studies.architecture import ArchitectureTable, VariantComparison
+from studies.joblog import job_log
 from studies.surrogate_benchmark import SurrogateBenchmark, format_benchmark, run_benchmark
 from studies.surrogate_evaluation import ClinicalEvaluation
 
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
+job_log(snakemake.log[0])
 
 settings = SolverSettings.from_config(
     {

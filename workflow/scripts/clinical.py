@@ -1,7 +1,6 @@
 """Snakemake adapter: the paper's Table 3 for the clinical cases, and their error fields as XDMF."""
 
 import json
-import logging
 from pathlib import Path
 
 from surrogate.runtime import configure_cpu
@@ -9,10 +8,11 @@ from surrogate.runtime import configure_cpu
 configure_cpu()
 
 from fem.dataset import read_dataset  # noqa: E402
+from studies.joblog import job_log  # noqa: E402
 from studies.surrogate_evaluation import ClinicalEvaluation, evaluate_clinical  # noqa: E402
 from surrogate.predict import Surrogate  # noqa: E402
 
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
+job_log(snakemake.log[0])
 
 dataset = read_dataset(snakemake.input.dataset)
 models = {

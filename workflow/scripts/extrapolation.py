@@ -1,16 +1,15 @@
 """Snakemake adapter: the surrogate's error on FE cases outside its training range."""
 
-import logging
-
 from surrogate.runtime import configure_cpu
 
 configure_cpu()
 
 from fem.dataset import read_dataset  # noqa: E402
+from studies.joblog import job_log  # noqa: E402
 from studies.surrogate_evaluation import Extrapolation, evaluate_extrapolation  # noqa: E402
 from surrogate.predict import Surrogate  # noqa: E402
 
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
+job_log(snakemake.log[0])
 
 dataset = read_dataset(snakemake.input.dataset)
 models = {"by_sample": Surrogate.load(snakemake.input.model),

@@ -8,9 +8,10 @@ import logging
 from fem.parameters import SolverSettings
 from studies.fe_benchmark import clinical_benchmark
 from studies.fe_reference import load_references
+from studies.joblog import job_log
 from studies.machine import limit_blas_threads
 
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
+job_log(snakemake.log[0])
 logging.info("single-threaded BLAS: %s", limit_blas_threads(1))
 
 cases, references = load_references(

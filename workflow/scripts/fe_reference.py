@@ -6,9 +6,10 @@ from fem.parameters import SolverSettings
 from fem.sweep import Case
 from studies.fe_reference import solve_reference
 from studies.fe_variants import MeshSpec, Variant
+from studies.joblog import job_log
 from studies.machine import limit_blas_threads
 
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
+job_log(snakemake.log[0])
 logging.info("BLAS on %d threads: %s", snakemake.threads, limit_blas_threads(snakemake.threads))
 
 ref = snakemake.params.reference

@@ -3,11 +3,10 @@
 Also the cheapest variant meeting the accuracy target.
 """
 
-import logging
-
 from studies.fe_speed_accuracy import VariantRecord, summarise_variants
+from studies.joblog import job_log
 
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
+job_log(snakemake.log[0])
 
 records = [VariantRecord.read(path) for path in snakemake.input]
 summary = summarise_variants(

@@ -1,11 +1,10 @@
 """Snakemake adapter: stability maps over (C1, Phi) for adaptive and fixed-step loading."""
 
-import logging
-
 from fem.parameters import SolverSettings
+from studies.joblog import job_log
 from studies.stability import loading_schemes, stability_map
 
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
+job_log(snakemake.log[0])
 
 study = snakemake.params.stability
 settings = SolverSettings.from_config(snakemake.params.config)

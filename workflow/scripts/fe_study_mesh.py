@@ -1,11 +1,10 @@
 """Snakemake adapter: build one mesh of the FE study (the workflow's geometry at other sizes)."""
 
-import logging
-
 from meshes.config import MeshConfig, make_mesh
 from studies.fe_variants import MeshSpec
+from studies.joblog import job_log
 
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
+job_log(snakemake.log[0])
 
 spec = MeshSpec.from_id(snakemake.wildcards.fe_mesh)
 mesh = dict(snakemake.params.mesh)

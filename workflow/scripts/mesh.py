@@ -1,10 +1,9 @@
 """Snakemake adapter: build (or import) the tagged breast mesh, its quality report and picture."""
 
-import logging
-
 from meshes.config import MeshConfig, make_mesh
+from studies.joblog import job_log
 
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
+job_log(snakemake.log[0])
 
 make_mesh(
     MeshConfig.from_mapping(snakemake.params.mesh),

@@ -1,8 +1,7 @@
 """Snakemake adapter: write the HTML report and its figures (report.build)."""
 
-import logging
-
 from report.build import build_report
+from studies.joblog import job_log
 
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
+job_log(snakemake.log[0])
 build_report(dict(snakemake.input.items()), snakemake.output.html, snakemake.params.clinical)

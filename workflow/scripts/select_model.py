@@ -10,8 +10,9 @@ from pathlib import Path
 
 from fem.dataset import read_dataset
 from studies.architecture import copy_model
+from studies.joblog import job_log
 
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
+job_log(snakemake.log[0])
 
 table = json.loads(Path(snakemake.input.table).read_text())
 copy_model(table["selected_run"], Path(snakemake.output.model).parent,

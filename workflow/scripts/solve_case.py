@@ -1,13 +1,13 @@
 """Snakemake adapter: solve one (C1, Phi, theta) case."""
 
-import logging
 from pathlib import Path
 
 from fem.case import run_case
 from fem.parameters import SolverSettings
 from fem.sweep import Case
+from studies.joblog import job_log
 
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
+job_log(snakemake.log[0])
 
 w = snakemake.wildcards
 settings = SolverSettings.from_config(

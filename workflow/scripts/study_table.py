@@ -8,9 +8,10 @@ from studies.architecture import (
     read_run,
     select_architecture,
 )
+from studies.joblog import job_log
 from studies.timing import time_on_one_core
 
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
+job_log(snakemake.log[0])
 log = logging.getLogger("study_table")
 
 table = architecture_table(read_run(path) for path in snakemake.input.runs)

@@ -1,7 +1,6 @@
 """Snakemake adapter: one training run (a study repeat, a variant or the by-case model)."""
 
 import json
-import logging
 from pathlib import Path
 
 from surrogate.runtime import configure_cpu
@@ -9,11 +8,12 @@ from surrogate.runtime import configure_cpu
 configure_cpu(single_thread=snakemake.threads == 1)  # before JAX starts: one core per job
 
 from fem.dataset import read_dataset  # noqa: E402
+from studies.joblog import job_log  # noqa: E402
 from surrogate.checkpoint import save_model  # noqa: E402
 from surrogate.config import SurrogateConfig  # noqa: E402
 from surrogate.train import train_and_evaluate  # noqa: E402
 
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
+job_log(snakemake.log[0])
 
 wildcards = snakemake.wildcards
 if hasattr(wildcards, "arch"):

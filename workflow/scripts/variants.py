@@ -1,11 +1,11 @@
 """Snakemake adapter: each variant of the surrogate settings against the selected runs."""
 
-import logging
 from pathlib import Path
 
 from studies.architecture import ArchitectureTable, VariantComparison, compare_variants, read_run
+from studies.joblog import job_log
 
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True)
+job_log(snakemake.log[0])
 
 selected = ArchitectureTable.read(snakemake.input.table).selected_architecture
 baseline = [read_run(p) for p in snakemake.input.study_runs]
