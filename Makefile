@@ -8,7 +8,7 @@ CONFIG ?= config.yaml
 WORKDIR ?= .
 SNAKEMAKE_ARGS ?=
 SNAKEMAKE := $(VENV)/bin/snakemake --snakefile $(CURDIR)/Snakefile --directory $(abspath $(WORKDIR)) \
-	--configfile $(abspath $(CONFIG)) --workflow-profile $(CURDIR)/workflow/profiles/default
+	--configfile $(abspath $(CONFIG)) --workflow-profile $(CURDIR)/profiles/default
 
 # Debian packages: dolfinx 0.5.2 (PETSc 3.18, MPI), h5py on the same HDF5, a fast BLAS for MUMPS,
 # the X/GL libraries the gmsh wheel links against, and SLURM + munge for the
@@ -46,14 +46,13 @@ PYTEST_ARGS ?=
 test: setup lint
 	$(PY) -m pytest -q $(PYTEST_ARGS) tests
 
-# The whole run holds a kernel lock (flock), released even when the run is SIGKILLed; while we
-# hold it no other `make reproduce` can be running on WORKDIR, so a Snakemake lock left by a
-# killed run is stale and safe to clear. Finished cases are kept; interrupted ones are redone.
+# The config is checked first (a YAML syntax error with its line, every bad value named), then
+# the run. Every run of the Snakefile holds the working directory's run lock (studies.workdir):
+# a second run there is refused, and the Snakemake locks a killed run left are cleared, so
+# finished cases are kept and interrupted ones are redone without --unlock.
 reproduce: setup
-	@mkdir -p $(WORKDIR)/results
-	@flock --nonblock --conflict-exit-code 75 $(WORKDIR)/results/.reproduce.lock sh -c \
-		'$(SNAKEMAKE) --unlock --quiet all >/dev/null 2>&1; $(SNAKEMAKE) -j$(JOBS) $(SNAKEMAKE_ARGS)' \
-		|| { rc=$$?; [ $$rc -ne 75 ] || echo "another 'make reproduce' is running on $(WORKDIR)" >&2; exit $$rc; }
+	$(PY) -m studies.config $(abspath $(CONFIG))
+	$(SNAKEMAKE) -j$(JOBS) $(SNAKEMAKE_ARGS)
 
 # ruff (with the docstring rules of pyproject.toml), the import-linter contracts (the layers
 # import downward only) and Snakemake's own lint of the workflow.

@@ -1,12 +1,23 @@
 # Breast biomechanics under gravity: mesh -> FE sweep -> HDF5 dataset -> surrogate -> report.
 # Wiring only: the stages live in workflow/rules, the config is parsed once by studies/config.py,
 # the science is in meshes/, fem/, surrogate/ and studies/.
+from snakemake.exceptions import WorkflowError
 from snakemake.utils import min_version
 
 min_version("9.0")
 
 
-configfile: "config.yaml"
+# config.yaml is the study; a --configfile replaces it rather than being merged into it, so that
+# a config such as tests/config.yaml stands alone. A syntax error is reported with its line.
+if not workflow.overwrite_configfiles:
+    from studies.config import ConfigError, read_config_file
+
+    try:
+        read_config_file("config.yaml")
+    except ConfigError as err:
+        raise WorkflowError(str(err)) from None
+
+    configfile: "config.yaml"
 
 
 include: "workflow/rules/common.smk"

@@ -17,6 +17,7 @@ Snakemake records a rule's ``params`` by their text, so the mappings the rules p
 from __future__ import annotations
 
 import copy
+import sys
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -55,6 +56,34 @@ class ConfigError(ValueError):
         if len(self.problems) == 1:
             return self.problems[0]
         return f"{len(self.problems)} problems:" + "".join(f"\n  {p}" for p in self.problems)
+
+
+def read_config_file(path: str | Path) -> dict[str, Any]:
+    """A config file (YAML) as a mapping; a syntax error names its line and column.
+
+    Raises:
+        ConfigError: for a file that cannot be read, is not YAML (with the line and column
+            where the parser stopped), or does not hold a mapping of sections.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        raise ConfigError(f"{path}: cannot read the config file ({err})") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        words = [getattr(err, "context", None), getattr(err, "problem", None)]
+        what = ", ".join(w for w in words if w) or str(err)
+        raise ConfigError(f"{path}: YAML syntax error{where}: {what}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(
+            f"{path}: a config file is a mapping of sections (mesh:, fe:, sweep:, ...), this "
+            f"one holds {type(data).__name__}"
+        )
+    return data
 
 
 def load_schema(path: str | Path = SCHEMA_PATH) -> dict[str, Any]:
@@ -369,3 +398,31 @@ class WorkflowConfig:
     def surrogate_by_case(self) -> SurrogateConfig:
         """The surrogate settings of the by-case model (whole cases held out)."""
         return self.surrogate.replace(split="by_case")
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m studies.config FILE...``: check config files as a run would, before it starts.
+
+    Prints one line per file (its number of cases, or what is wrong) and exits 2 if any is
+    invalid. ``make reproduce`` runs it first: Snakemake reads a ``--configfile`` itself and
+    reports a YAML syntax error without its line.
+    """
+    import argparse
+
+    parser = argparse.ArgumentParser(prog="python -m studies.config", description=main.__doc__)
+    parser.add_argument("files", nargs="+", type=Path, help="config files (YAML)")
+    args = parser.parse_args(argv)
+    status = 0
+    for path in args.files:
+        try:
+            config = WorkflowConfig.from_mapping(read_config_file(path))
+        except ConfigError as err:
+            print(f"{path}: invalid configuration: {err}", file=sys.stderr)
+            status = 2
+        else:
+            print(f"{path}: valid, {len(config.cases)} cases")
+    return status
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -34,28 +34,26 @@ def coarse_mesh(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def snakemake(
     workdir: Path,
     *args: str,
-    config: Path = REPO / "tests" / "config.yaml",
+    config: Path | None = REPO / "tests" / "config.yaml",
     env: dict[str, str] | None = None,
     timeout: float | None = None,
 ) -> subprocess.CompletedProcess:
     """Run the project's Snakefile in ``workdir`` with the venv's Snakemake.
 
-    ``env`` replaces the environment (e.g. a test cluster's), ``timeout`` bounds the run (s).
+    ``config`` None runs on the working directory's ``config.yaml``, as a plain ``snakemake``
+    does; ``env`` replaces the environment (e.g. a test cluster's), ``timeout`` bounds the run (s).
     """
-    cmd = [
-        sys.executable,
-        "-m",
-        "snakemake",
-        "-s",
-        str(REPO / "Snakefile"),
-        "-d",
-        str(workdir),
-        "--configfile",
-        str(config),
-        *args,
-    ]
-    return subprocess.run(cmd, capture_output=True, text=True, cwd=workdir, env=env,
-                          timeout=timeout)
+    return subprocess.run(snakemake_command(workdir, *args, config=config), capture_output=True,
+                          text=True, cwd=workdir, env=env, timeout=timeout)
+
+
+def snakemake_command(
+    workdir: Path, *args: str, config: Path | None = REPO / "tests" / "config.yaml"
+) -> list[str]:
+    """The command line :func:`snakemake` runs (for a test that starts it in the background)."""
+    configfile = ["--configfile", str(config)] if config is not None else []
+    return [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-d", str(workdir),
+            *configfile, *args]
 
 
 def job_counts(output: str) -> dict[str, int]:

@@ -3,7 +3,7 @@
 munged, slurmctld and slurmd (Debian's slurm-wlm 22.05) run as root on localhost with a
 private key, socket, ports and spool folder, so nothing outside the temporary folder is
 touched. Accounting is off (no slurmdbd), so job status comes from ``squeue``, which is what
-``workflow/profiles/slurm`` selects.
+``profiles/slurm`` selects.
 """
 
 from __future__ import annotations
@@ -132,7 +132,7 @@ def test_small_sweep_runs_through_slurm(slurm_cluster: dict[str, str], tmp_path:
     run = snakemake(
         tmp_path,
         "--workflow-profile",
-        str(REPO / "workflow/profiles/slurm"),
+        str(REPO / "profiles/slurm"),
         # poll sooner than a real cluster needs, to keep the test short
         "--slurm-init-seconds-before-status-checks",
         "2",

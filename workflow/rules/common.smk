@@ -1,9 +1,11 @@
 # The configuration, validated and parsed once (studies.config.WorkflowConfig), the wildcard
 # constraints, and the small helpers that derive targets, so that the rule files hold rules only.
 from snakemake.exceptions import WorkflowError
+from snakemake.logging import logger
 
 from studies.config import ConfigError, WorkflowConfig
 from studies.fe_variants import MESH_ID_PATTERN, VARIANT_ID_PATTERN, Variant
+from studies.workdir import RunLock
 from fem.sweep import ANGLE_PATTERN, C1_PATTERN
 
 # Every job's software under --use-conda (the env file says how it relates to `make setup`).
@@ -17,6 +19,22 @@ except ConfigError as err:
 # that still reads it agrees with CONFIG; the rules take their params from CONFIG.
 config.clear()
 config.update(CONFIG.section())
+
+# One run at a time in a working directory (studies.workdir): every run takes the kernel lock,
+# and the run that gets it clears the Snakemake locks a killed run left (no --unlock needed).
+# A dry run that finds it taken goes on (it writes nothing); a real run stops before any job.
+RUN_LOCK = RunLock()
+if workflow.is_main_process:
+    if RUN_LOCK.acquire():
+        RUN_LOCK.clear_stale_snakemake_locks()
+    else:
+        logger.warning(RUN_LOCK.busy_message())
+
+
+onstart:
+    if workflow.is_main_process and not RUN_LOCK.acquire():
+        raise WorkflowError(RUN_LOCK.busy_message())
+
 
 CASE_DIR = "results/cases/c1={c1}_phi={phi}_theta={theta}"
 OUTSIDE_DIR = "results/outside/c1={c1}_phi={phi}_theta={theta}"

@@ -1,14 +1,19 @@
 # One FE case: the breast under gravity at one (C1, Phi, theta), in its own folder.
+#
+# The case's files are update() outputs: Snakemake keeps a case's previous files while it is
+# solved again (fem.io.CaseWriter replaces them at the end, summary.json last) and restores them
+# if the solve fails. A rerun that is killed thus leaves the folder whole, as the dataset built
+# from it expects, and marked incomplete, so the next run solves it again (rerun-incomplete).
 
 
 rule solve:
     input:
         mesh=MESH,
     output:
-        summary=f"{CASE_DIR}/summary.json",
-        points=f"{CASE_DIR}/points.h5",
-        fields=f"{CASE_DIR}/fields.xdmf",
-        fields_h5=f"{CASE_DIR}/fields.h5",
+        summary=update(f"{CASE_DIR}/summary.json"),
+        points=update(f"{CASE_DIR}/points.h5"),
+        fields=update(f"{CASE_DIR}/fields.xdmf"),
+        fields_h5=update(f"{CASE_DIR}/fields.h5"),
     params:
         # `fe` with a `chest` contact obstacle written out: the job needs no mesh section
         fe=CONFIG.solve_fe,
@@ -31,10 +36,10 @@ rule solve:
 # folders, so that `solve` stays exactly the sweep and they never enter the dataset.
 use rule solve as solve_outside with:
     output:
-        summary=f"{OUTSIDE_DIR}/summary.json",
-        points=f"{OUTSIDE_DIR}/points.h5",
-        fields=f"{OUTSIDE_DIR}/fields.xdmf",
-        fields_h5=f"{OUTSIDE_DIR}/fields.h5",
+        summary=update(f"{OUTSIDE_DIR}/summary.json"),
+        points=update(f"{OUTSIDE_DIR}/points.h5"),
+        fields=update(f"{OUTSIDE_DIR}/fields.xdmf"),
+        fields_h5=update(f"{OUTSIDE_DIR}/fields.h5"),
     log:
         "results/logs/solve_outside/c1={c1}_phi={phi}_theta={theta}.log",
     benchmark:
