@@ -77,7 +77,9 @@ def read_config_file(path: str | Path) -> dict[str, Any]:
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
         words = [getattr(err, "context", None), getattr(err, "problem", None)]
         what = ", ".join(w for w in words if w) or str(err)
-        raise ConfigError(f"{path}: YAML syntax error{where}: {what}") from None
+        syntax = (yaml.scanner.ScannerError, yaml.parser.ParserError)
+        kind = "syntax error" if isinstance(err, syntax) else "error"
+        raise ConfigError(f"{path}: YAML {kind}{where}: {what}") from None
     if not isinstance(data, dict):
         raise ConfigError(
             f"{path}: a config file is a mapping of sections (mesh:, fe:, sweep:, ...), this "

@@ -1,4 +1,8 @@
 # The sweep's cases gathered into one HDF5 dataset with its reproducible splits.
+#
+# The dataset is an update() output: Snakemake keeps the previous one while it is rebuilt (the new
+# one is written to a temporary file and renamed) and restores it if the rebuild fails, e.g. on a
+# case file that aggregation refuses, so a bad case file costs no dataset.
 
 
 rule aggregate:
@@ -6,7 +10,7 @@ rule aggregate:
         summaries=case_files("summary.json"),
         points=case_files("points.h5"),
     output:
-        DATASET,
+        update(DATASET),
     params:
         dataset=CONFIG.section("dataset"),
         # the by-case split holds these setups out as test cases

@@ -1,0 +1,431 @@
+"""Probe the workflow with bad configs and bad files end to end, as a careful or hostile user.
+
+    .venv/bin/python tests/probe_inputs.py [-j JOBS] [-k PATTERN] [--keep DIR]
+
+Every probe runs a real entry point in a working directory of its own: the project's
+Snakefile (``snakemake -n`` for a config, the mesh job for a geometry file, the aggregation
+job for a case folder's files) or ``python -m studies.config``. A probe passes when the run
+stops, names the problem in the words given (on the console or in the job's log), writes
+nothing it should not (no ``results/`` for a bad config, no mesh for a bad file, the previous
+dataset untouched for bad case files) and writes no file outside its working directory.
+
+It prints one line per probe and, last, ``N passed, M failed``; it exits 1 if any failed.
+``tests/test_probe_inputs.py`` runs it in the suite.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+REPO = Path(__file__).resolve().parent.parent
+BASE_CONFIG = yaml.safe_load((REPO / "tests" / "config.yaml").read_text())
+RIB = {"plane": {"point": [0.0, 0.0, 0.0], "normal": [1.0, 0.0, 0.0]}, "distance": 0.001}
+
+
+def snakemake(workdir: Path, config: Path | None, *args: str) -> subprocess.CompletedProcess:
+    """The project's Snakefile in ``workdir`` (on ``config``, or on its own config.yaml)."""
+    configfile = ["--configfile", str(config)] if config is not None else []
+    cmd = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-d", str(workdir),
+           *configfile, *args]
+    return subprocess.run(cmd, cwd=workdir, capture_output=True, text=True, timeout=300)
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What a probe found: passed, and what it saw (for a failed probe, what was wrong)."""
+
+    passed: bool
+    detail: str
+
+
+def expect(run: subprocess.CompletedProcess, text: str, where: str | None = None) -> Outcome:
+    """The run failed and ``text`` (a regular expression) is in its output or in ``where``."""
+    said = run.stdout + run.stderr
+    if where is not None:
+        said = Path(where).read_text() if Path(where).is_file() else ""
+    if run.returncode == 0:
+        return Outcome(False, "the run succeeded")
+    if not re.search(text, said, re.S):
+        tail = " ".join(said.split())[-400:]
+        return Outcome(False, f"{text!r} not in {'the log' if where else 'the output'}: ...{tail}")
+    return Outcome(True, " ".join(re.search(text, said, re.S)[0].split())[:120])
+
+
+# -- bad configs ---------------------------------------------------------------------------
+
+
+def config_with(**changes: Any) -> dict[str, Any]:
+    """tests/config.yaml with ``section__key=value`` changes (``section=value`` replaces)."""
+    config = copy.deepcopy(BASE_CONFIG)
+    for dotted, value in changes.items():
+        *parents, last = dotted.split("__")
+        node = config
+        for key in parents:
+            node = node.setdefault(key, {})
+        node[last] = value
+    return config
+
+
+SENTINEL = "probe-must-not-exist"
+
+
+def config_probe(config: dict[str, Any] | str, text: str) -> Callable[[Path], Outcome]:
+    """Plan the workflow on ``config`` (a mapping, or a file's text): it must stop first.
+
+    The run must name ``text``, create no ``results/`` and no file that a PETSc viewer option
+    would have written.
+    A mapping is given as ``--configfile``; a file's text (a syntax error) is the working
+    directory's ``config.yaml``, which the Snakefile reads itself (Snakemake reads a
+    ``--configfile`` without naming a syntax error's line). ``python -m studies.config``, which
+    ``make reproduce`` runs first, must name ``text`` too.
+    """
+
+    def probe(workdir: Path) -> Outcome:
+        path = workdir / ("bad.yaml" if isinstance(config, dict) else "config.yaml")
+        body = yaml.safe_dump(config) if isinstance(config, dict) else config
+        path.write_text(body.replace("SENTINEL", str(workdir.parent / SENTINEL)))
+        run = snakemake(workdir, path if isinstance(config, dict) else None, "-n", "-j1")
+        outcome = expect(run, text)
+        if outcome.passed and (workdir / "results").exists():
+            return Outcome(False, "results/ was created")
+        checked = subprocess.run(
+            [sys.executable, "-m", "studies.config", str(path)], capture_output=True, text=True
+        )
+        if outcome.passed and (checked.returncode != 2 or not re.search(text, checked.stderr)):
+            return Outcome(False, f"python -m studies.config: {checked.stderr.strip()[-300:]}")
+        return outcome
+
+    return probe
+
+
+CONFIG_PROBES: dict[str, Callable[[Path], Outcome]] = {
+    "C1 list item below its bound": config_probe(
+        config_with(sweep__C1_kPa=[1.0, -2.0]), r"sweep\.C1_kPa\.1: -2\.0 is less than"
+    ),
+    "C1 list item not a number": config_probe(
+        config_with(sweep__C1_kPa=[1.0, "soft"]), r"sweep\.C1_kPa\.1: 'soft'"
+    ),
+    "split fractions that sum to 1.9": config_probe(
+        config_with(dataset__split={"train": 0.9, "validation": 0.5, "test": 0.5}),
+        r"dataset\.split.*?add up to 1",
+    ),
+    "PETSc option of the wrong kind": config_probe(
+        config_with(fe__petsc_options={"snes_max_it": "lots"}), r"fe\.petsc_options.*?snes_max_it"
+    ),
+    "PETSc option with a typo": config_probe(
+        config_with(fe__petsc_options={"snes_maxit_typo": 1}),
+        r"fe\.petsc_options.*?snes_maxit_typo",
+    ),
+    "PETSc viewer that writes a file": config_probe(
+        config_with(fe__petsc_options={"snes_view": "ascii:SENTINEL"}),
+        r"fe\.petsc_options.*?snes_view",
+    ),
+    "PETSc monitor that writes a file": config_probe(
+        config_with(fe__petsc_options={"ksp_monitor": "ascii:SENTINEL"}),
+        r"fe\.petsc_options.*?ksp_monitor",
+    ),
+    "PETSc log to a file": config_probe(
+        config_with(fe__petsc_options={"log_view": "ascii:SENTINEL"}),
+        r"fe\.petsc_options.*?log_view",
+    ),
+    "C1 values one folder would merge": config_probe(
+        config_with(sweep__C1_kPa=[1.0, 1.001, 5.0]), r"1\.0 and 1\.001 share one case folder"
+    ),
+    "a sweep of millions of cases": config_probe(
+        config_with(sweep__C1_kPa={"start": 0.8, "stop": 5.0, "step": 0.0001}),
+        r"sweep\.C1_kPa.*?more than 10000",
+    ),
+    "a sphere of too many directions": config_probe(
+        config_with(sweep__sphere={"n": 100000}, sweep__C1_kPa=[1.0, 2.0, 3.0]),
+        r"more than 50000",
+    ),
+    "a variant's bad value under its own key": config_probe(
+        config_with(surrogate_study__variants={"x": {"activation": "sigmoidish"}}),
+        r"surrogate_study\.variants\.x\.activation",
+    ),
+    "density zero": config_probe(config_with(material__density=0.0), r"material\.density"),
+    "network width zero": config_probe(config_with(surrogate__width=0), r"surrogate\.width"),
+    "contact stiffness zero": config_probe(
+        config_with(fe__contact={"stiffness": 0}), r"fe\.contact\.stiffness"
+    ),
+    "an unknown section": config_probe(config_with(not_a_section={"a": 1}), r"not_a_section"),
+    "a YAML syntax error": config_probe(
+        "sweep:\n  C1_kPa: [1.0, 5.0\n  phi_deg: [0.0]\n", r"YAML syntax error at line 3, column"
+    ),
+    "a config that is a list": config_probe("- mesh\n- fe\n", r"a config file is a mapping"),
+    "a YAML tag that would run a command": config_probe(
+        'sweep: !!python/object/apply:os.system ["touch SENTINEL"]\n',
+        r"could not determine a constructor for the tag",
+    ),
+    "an imported file in inches": config_probe(
+        config_with(mesh__source="file", mesh__file={"path": "b.stl", "units": "inch",
+                                                      "surfaces": {"rib": RIB}}),
+        r"mesh\.file\.units",
+    ),
+    "an import without a rib rule": config_probe(
+        config_with(mesh__source="file", mesh__file={"path": "b.stl", "surfaces": {}}),
+        r"rib",
+    ),
+    "the parametric chest as an import's obstacle": config_probe(
+        config_with(mesh__source="file", mesh__size={"fold_size": None, "order": 1},
+                    mesh__file={"path": "b.stl", "surfaces": {"rib": RIB}}, fe__contact={}),
+        r"fe\.contact\.obstacle 'chest'",
+    ),
+}
+
+
+# -- bad geometry files --------------------------------------------------------------------
+
+
+def box_surface(size: tuple[float, float, float] = (0.05, 0.2, 0.15)) -> tuple[np.ndarray, ...]:
+    """A closed box surface of 12 outward triangles, metres."""
+    x = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], float) * size
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    tris = np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))])
+    return x, tris
+
+
+def write_stl(path: Path, x: np.ndarray, tris: np.ndarray) -> None:
+    import meshio
+
+    meshio.write(str(path), meshio.Mesh(x, [("triangle", tris)]), binary=False)
+
+
+def file_probe(
+    make: Callable[[Path], None],
+    text: str,
+    units: str = "m",
+    rib: dict | None = None,
+    suffix: str = ".stl",
+) -> Callable[[Path], Outcome]:
+    """Build the mesh from the file ``make`` writes: the job fails, its log names ``text``."""
+
+    def probe(workdir: Path) -> Outcome:
+        make(workdir / "breast.stl")
+        config = config_with(
+            mesh__source="file",
+            mesh__size={"fold_size": None, "order": 1, "global_size": 0.03},
+            mesh__file={"path": f"breast{suffix}", "units": units,
+                        "surfaces": {"rib": rib or RIB}},
+        )
+        del config["fe"]["contact"]
+        path = workdir / "import.yaml"
+        path.write_text(yaml.safe_dump(config))
+        run = snakemake(workdir, path, "-j1", "results/mesh/mesh.xdmf")
+        outcome = expect(run, text, workdir / "results/logs/mesh.log")
+        if outcome.passed and (workdir / "results/mesh/mesh.xdmf").exists():
+            return Outcome(False, "a mesh was written")
+        return outcome
+
+    return probe
+
+
+def _nan_vertex(path: Path) -> None:
+    x, tris = box_surface()
+    x[3, 2] = np.nan
+    write_stl(path, x, tris)
+
+
+def _open_surface(path: Path) -> None:
+    x, tris = box_surface()
+    write_stl(path, x, tris[:-1])
+
+
+def _two_boxes_crossing(path: Path) -> None:
+    x, tris = box_surface()
+    write_stl(path, np.vstack([x, x + [0.02, 0.05, 0.05]]), np.vstack([tris, tris + 8]))
+
+
+def _inverted_tetrahedra(path: Path) -> None:
+    """The box as tetrahedra about its centre, three of them inside out (a .vtu volume mesh)."""
+    import meshio
+    from scipy.spatial import Delaunay
+
+    x = np.vstack([box_surface()[0], [[0.025, 0.1, 0.075]]])
+    tets = Delaunay(x).simplices.copy()
+    tets[:3] = tets[:3, [1, 0, 2, 3]]
+    meshio.write(str(path.with_suffix(".vtu")), meshio.Mesh(x, [("tetra", tets)]))
+
+
+FILE_PROBES: dict[str, Callable[[Path], Outcome]] = {
+    "an empty STL": file_probe(lambda p: p.write_text("solid e\nendsolid e\n"), r"is empty"),
+    "a zero-byte STL": file_probe(lambda p: p.write_bytes(b""), r"is empty"),
+    "an STL of random bytes": file_probe(
+        lambda p: p.write_bytes(bytes(range(256)) * 3), r"cannot read|is empty"
+    ),
+    "a NaN vertex": file_probe(_nan_vertex, r"NaN or infinite coordinate"),
+    "millimetres read as metres": file_probe(
+        lambda p: write_stl(p, 1000 * box_surface()[0], box_surface()[1]),
+        r"probably in other units.*?units: mm",
+    ),
+    "a 5 cm model declared in cm (a 32-litre breast)": file_probe(
+        lambda p: write_stl(p, 1000 * box_surface((0.02, 0.05, 0.032))[0], box_surface()[1]),
+        r"holds 32 l of tissue with units 'cm'.*?set mesh\.file\.units: mm",
+        units="cm",
+        rib={"plane": {"point": [0, 0, 0], "normal": [1, 0, 0]}, "distance": 0.1},
+    ),
+    "a rib rule that clamps the whole boundary": file_probe(
+        lambda p: write_stl(p, *box_surface()), r"selects 100 % of the boundary",
+        rib={"plane": RIB["plane"], "distance": 1.0},
+    ),
+    "a rib rule that selects nothing": file_probe(
+        lambda p: write_stl(p, *box_surface()), r"no boundary facets found for the rib",
+        rib={"plane": {"point": [-0.1, 0, 0], "normal": [1, 0, 0]}, "distance": 0.001},
+    ),
+    "a surface with a hole": file_probe(_open_surface, r"not a closed surface"),
+    "two surfaces through each other": file_probe(_two_boxes_crossing, r"intersect"),
+    "a volume mesh with inverted tetrahedra": file_probe(
+        _inverted_tetrahedra, r"\d+ inverted tetrahedra \(oriented opposite", suffix=".vtu"
+    ),
+}
+
+
+# -- bad case files at aggregation ---------------------------------------------------------
+
+THREE_CASES = config_with(sweep={"C1_kPa": [1.0], "phi_deg": [0.0, 90.0, 180.0]})
+CASES = ("c1=1.00_phi=0.0_theta=0.0", "c1=1.00_phi=90.0_theta=0.0", "c1=1.00_phi=180.0_theta=0.0")
+
+
+def solved_sweep(workdir: Path) -> None:
+    """Solve the three-case sweep and build its dataset once; the case-file probes copy it."""
+    path = workdir / "three.yaml"
+    path.write_text(yaml.safe_dump(THREE_CASES))
+    run = snakemake(workdir, path, "-j2", "results/dataset/dataset.h5")
+    if run.returncode != 0:
+        raise RuntimeError(f"the three-case sweep failed: {run.stderr[-2000:]}")
+
+
+def case_probe(spoil: Callable[[Path], None], text: str) -> Callable[[Path, Path], Outcome]:
+    """Spoil a copy of the solved sweep; rebuilding the dataset must fail and keep the old one.
+
+    The aggregation log must name ``text``.
+    """
+
+    def probe(workdir: Path, solved: Path) -> Outcome:
+        shutil.copytree(solved, workdir, symlinks=True, dirs_exist_ok=True)
+        dataset = workdir / "results/dataset/dataset.h5"
+        before = dataset.read_bytes()
+        spoil(workdir / "results" / "cases")
+        time.sleep(0.01)
+        run = snakemake(workdir, workdir / "three.yaml", "-j1", "results/dataset/dataset.h5")
+        outcome = expect(run, text, workdir / "results/logs/aggregate.log")
+        if outcome.passed and dataset.read_bytes() != before:
+            return Outcome(False, "the previous dataset was changed")
+        return outcome
+
+    return probe
+
+
+def _summary(cases: Path, case: str, **changes: Any) -> None:
+    path = cases / case / "summary.json"
+    summary = json.loads(path.read_text())
+    path.write_text(json.dumps({**summary, **changes}))
+
+
+def _copy_case(cases: Path, source: str, target: str) -> None:
+    for name in ("summary.json", "points.h5"):
+        shutil.copy(cases / source / name, cases / target / name)
+
+
+CASE_PROBES: dict[str, Callable[[Path, Path], Outcome]] = {
+    "a summary of garbage bytes": case_probe(
+        lambda c: (c / CASES[1] / "summary.json").write_bytes(b"\xff\xfe\x00\x01"),
+        rf"{re.escape(CASES[1])}/summary\.json: unreadable",
+    ),
+    "a summary that is null": case_probe(
+        lambda c: (c / CASES[1] / "summary.json").write_text("null"),
+        rf"{re.escape(CASES[1])}/summary\.json: a summary is a JSON object",
+    ),
+    "an unknown status": case_probe(
+        lambda c: _summary(c, CASES[0], status="ok"), r"unknown status 'ok'"
+    ),
+    "a non-numeric C1": case_probe(
+        lambda c: _summary(c, CASES[0], C1="one"), r"C1 are not finite numbers"
+    ),
+    "a summary of another C1 than its folder": case_probe(
+        lambda c: _summary(c, CASES[2], C1=2.0), r"not of its folder"
+    ),
+    "another case's files in a folder": case_probe(
+        lambda c: _copy_case(c, CASES[0], CASES[2]),
+        rf"summary is of case '{re.escape(CASES[0])}'",
+    ),
+    "another case's points file in a folder": case_probe(
+        lambda c: shutil.copy(c / CASES[0] / "points.h5", c / CASES[1] / "points.h5"),
+        rf"points\.h5: written for case '{re.escape(CASES[0])}'",
+    ),
+}
+
+
+# -- running -------------------------------------------------------------------------------
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the probes, print a line each and the count; 1 if any failed."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("-j", "--jobs", type=int, default=3, help="probes run at once")
+    parser.add_argument("-k", default="", help="run only probes whose name contains this")
+    parser.add_argument("--keep", type=Path, help="keep the working directories here")
+    args = parser.parse_args(argv)
+    start = time.perf_counter()
+    root = Path(tempfile.mkdtemp(prefix="probe-")) if args.keep is None else args.keep
+    root.mkdir(parents=True, exist_ok=True)
+
+    def run(kind: str, name: str, probe: Callable[..., Outcome], *extra: Path) -> tuple:
+        workdir = root / re.sub(r"\W+", "-", f"{kind}-{name}").strip("-")
+        workdir.mkdir()
+        try:
+            outcome = probe(workdir, *extra)
+        except Exception as err:  # a probe that crashes has failed, with its error
+            outcome = Outcome(False, f"{type(err).__name__}: {err}")
+        return kind, name, outcome
+
+    selected = [
+        (kind, name, probe)
+        for kind, probes in (("config", CONFIG_PROBES), ("file", FILE_PROBES))
+        for name, probe in probes.items()
+        if args.k in name
+    ]
+    cases = [(n, p) for n, p in CASE_PROBES.items() if args.k in n]
+    results = []
+    with ThreadPoolExecutor(max_workers=max(args.jobs, 1)) as pool:
+        solved = root / "solved"
+        pending = [pool.submit(run, *item) for item in selected]
+        if cases:
+            solved.mkdir()
+            solved_sweep(solved)
+            pending += [pool.submit(run, "case", name, probe, solved) for name, probe in cases]
+        for future in pending:
+            kind, name, outcome = future.result()
+            results.append(outcome.passed)
+            print(f"{'PASS' if outcome.passed else 'FAIL'} {kind}: {name}: {outcome.detail}",
+                  flush=True)
+    leaked = list(root.rglob(f"{SENTINEL}*"))  # where the viewer options pointed PETSc
+    if leaked:
+        print(f"FAIL a file was written outside a working directory: {leaked}")
+        results.append(False)
+    if args.keep is None:
+        shutil.rmtree(root, ignore_errors=True)
+    passed = sum(results)
+    print(f"probes took {time.perf_counter() - start:.0f} s")
+    print(f"{passed} passed, {len(results) - passed} failed")
+    return 0 if passed == len(results) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
