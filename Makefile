@@ -11,15 +11,16 @@ SNAKEMAKE := $(VENV)/bin/snakemake --snakefile $(CURDIR)/Snakefile --directory $
 	--configfile $(abspath $(CONFIG)) --workflow-profile $(CURDIR)/profiles/default
 
 # Debian packages: dolfinx 0.5.2 (PETSc 3.18, MPI), h5py on the same HDF5, a fast BLAS for MUMPS,
-# the X/GL libraries the gmsh wheel links against, and SLURM + munge for the
-# cluster-profile test.
+# the X/GL libraries the gmsh wheel links against, SLURM + munge for the cluster-profile test,
+# and Chromium for the viewer's browser test (driven by Playwright, pointed at this browser).
 APT_PACKAGES := python3-dolfinx python3-h5py libopenblas0-pthread python3-venv \
 	libglu1-mesa libxcursor1 libxft2 libxinerama1 \
-	slurm-wlm munge
+	slurm-wlm munge \
+	chromium fonts-dejavu-core
 
 .PHONY: setup system-packages test reproduce lint lock clean-results
 
-setup: system-packages $(VENV)/.installed
+setup: system-packages $(VENV)/.installed node_modules/.package-lock.json
 
 system-packages:
 	@missing=$$(for p in $(APT_PACKAGES); do \
@@ -38,6 +39,16 @@ $(VENV)/.installed: requirements.lock constraints.txt pyproject.toml
 	$(PY) -m pip install --disable-pip-version-check -q --no-deps -c constraints.txt -r requirements.lock
 	$(PY) -m pip install --disable-pip-version-check -q -c constraints.txt --no-deps --no-build-isolation -e .
 	$(PY) -c "import numpy, petsc4py, dolfinx, jax, optax, gmsh, snakemake; assert numpy.__version__ == '1.24.2', numpy.__version__"
+	touch $@
+
+# The viewer's JavaScript tools, pinned in package-lock.json: three.js (rendering, bundled into
+# the page) and esbuild (the bundler). Node.js and npm come from Debian where they are missing.
+node_modules/.package-lock.json: package.json package-lock.json
+	@command -v npm >/dev/null || { \
+		sudo=""; [ "$$(id -u)" -eq 0 ] || sudo="sudo"; \
+		$$sudo apt-get update && DEBIAN_FRONTEND=noninteractive $$sudo apt-get install -y \
+			--no-install-recommends nodejs npm; }
+	npm ci --no-audit --no-fund
 	touch $@
 
 # The checks first (seconds), then the suite; `make test PYTEST_ARGS="-m unit"` runs one layer

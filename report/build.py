@@ -15,6 +15,7 @@ template ``templates/page.html.j2``.
 from __future__ import annotations
 
 import logging
+import os
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -56,14 +57,19 @@ SECTIONS: tuple[tuple[str, str, Callable[[Context], str]], ...] = (
 )
 
 
-def render_page(sections: Sequence[Mapping[str, str]]) -> str:
-    """The page's HTML from the template; each section is ``{id, title, html}``."""
+def render_page(sections: Sequence[Mapping[str, str]], viewer: str | None = None) -> str:
+    """The page's HTML from the template; each section is ``{id, title, html}``.
+
+    ``viewer`` is the interactive view's address relative to the page, linked from the top.
+    """
     env = jinja2.Environment(
         loader=jinja2.PackageLoader("report", "templates"),
         autoescape=jinja2.select_autoescape(["html", "j2"]),
         undefined=jinja2.StrictUndefined,
     )
-    return env.get_template("page.html.j2").render(title=TITLE, intro=INTRO, sections=sections)
+    return env.get_template("page.html.j2").render(
+        title=TITLE, intro=INTRO, sections=sections, viewer=viewer
+    )
 
 
 def build_report(
@@ -103,7 +109,9 @@ def build_report(
             content = para(f"This section could not be built: {type(err).__name__}: {err}",
                            "error")
         sections.append({"id": section_id, "title": title, "html": content})
-    html_path.write_text(render_page(sections))
+    viewer = inputs.get("viewer")
+    link = Path(os.path.relpath(Path(str(viewer)).resolve(), out_dir.resolve())).as_posix()
+    html_path.write_text(render_page(sections, link if viewer else None))
     log.info("wrote %s with %d sections", html_path, len(sections))
     return html_path
 

@@ -28,7 +28,7 @@ log = logging.getLogger(__name__)
 INPUT_NAMES = (
     "dataset", "quality", "mesh_png", "model", "history", "table2", "variants", "clinical",
     "extrapolation", "benchmark", "clinical_fields", "fe_clinical", "fe_speed_accuracy",
-    "fe_stability",
+    "fe_stability", "viewer",
 )
 
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 import warnings
 from pathlib import Path
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -130,6 +131,22 @@ class Surrogate:
         ]
         # the angles a query's neighbours are taken from: built once, not per prediction
         self._sweep_angles = sorted(set(phis) | {p % 360.0 for _, p, _ in self._unconverged})
+
+    def range_checks(self) -> dict[str, Any]:
+        """What decides that a query is an extrapolation (for :mod:`surrogate.export`).
+
+        ``c1_kPa``: the trained C1 range; ``phi_gap``: ``[start, width]`` of the arc of Φ without
+        training angles (degrees), or None; ``theta_deg``: the trained θ; ``unconverged``: the
+        sweep's failed cases (C1, Φ, θ); ``sweep_phi_deg``: the angles (mod 360°) whose failures
+        judge a query between them.
+        """
+        return {
+            "c1_kPa": [v if math.isfinite(v) else None for v in self._c1_range],
+            "phi_gap": None if self._phi_gap is None else list(self._phi_gap),
+            "theta_deg": list(self._thetas),
+            "unconverged": [list(case) for case in self._unconverged],
+            "sweep_phi_deg": list(self._sweep_angles),
+        }
 
     def _unconverged_beside(
         self, C1: float, phi: float, theta: float

@@ -42,6 +42,7 @@ MESH = "results/mesh/mesh.xdmf"
 DATASET = "results/dataset/dataset.h5"
 MODEL = "results/surrogate/model/model.json"
 REPORT = "results/report/index.html"
+VIEWER = "results/viewer/index.html"
 
 
 wildcard_constraints:

@@ -19,6 +19,7 @@ rule report:
         fe_clinical=FE_CLINICAL_JSON,
         fe_speed_accuracy=FE_SPEED_ACCURACY_JSON,
         fe_stability=FE_STABILITY_JSON,
+        viewer=VIEWER,
     output:
         html=REPORT,
     params:
@@ -32,3 +33,26 @@ rule report:
         ENV
     script:
         "../scripts/report.py"
+
+
+# The interactive 3D view (report.viewer): one page that opens from the file system, with the
+# selected surrogate predicting in the browser and the FE solutions of some sweep cases.
+rule viewer:
+    input:
+        model=MODEL,
+        mesh=MESH,
+        dataset=DATASET,
+    output:
+        html=VIEWER,
+        licence="results/viewer/THREE-LICENSE.txt",
+    params:
+        clinical=CONFIG.section("clinical"),
+    log:
+        "results/logs/viewer.log",
+    threads: 1
+    resources:
+        mem_mb=2000,
+    conda:
+        ENV
+    script:
+        "../scripts/viewer.py"

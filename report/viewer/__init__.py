@@ -1,0 +1,189 @@
+"""The interactive 3D view: one HTML file that predicts and draws the breast under any gravity.
+
+:func:`build_viewer` writes ``index.html``, which opens from the file system with no server
+and no network. It holds:
+
+* the surrogate, exported by :func:`surrogate.export.export_web`, whose forward pass runs in
+  the page (``app.js``, the same computation as :meth:`surrogate.predict.Surrogate.predict`);
+* the mesh's surface (its exterior triangles on the material points);
+* the FE displacement of some sweep cases (the clinical ones first), to compare with;
+* ``app.js`` and three.js (the npm package pinned in ``package.json``, installed by
+  ``make setup``) bundled into one script by esbuild; three.js's licence is kept in the
+  bundle and written beside the page.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import shutil
+import subprocess
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import jinja2
+import numpy as np
+
+from fem.dataset import read_dataset
+from meshes.quality import exterior_faces
+from surrogate.export import encode_array, export_web
+from surrogate.fields import read_mesh_vertices
+from surrogate.predict import Surrogate
+
+log = logging.getLogger(__name__)
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent.parent
+NODE_MODULES = REPO / "node_modules"
+ESBUILD = NODE_MODULES / ".bin" / "esbuild"
+THREE_LICENSE = NODE_MODULES / "three" / "LICENSE"
+MAX_FE_CASES = 24
+"""FE cases carried for comparison: the clinical cases and others spread over the sweep (each
+adds its surface field, about 1 % of the page per 1,000 surface vertices)."""
+
+PRESETS = (
+    {"name": "prone", "phi": 180, "theta": 0, "note": "face down (MRI): gravity anterior"},
+    {"name": "supine", "phi": 0, "theta": 0, "note": "face up (surgery): gravity posterior"},
+    {"name": "supine tilted 30° lateral", "phi": 30, "theta": 0,
+     "note": "rolled 30° towards this breast's side"},
+    {"name": "supine tilted 30° medial", "phi": -30, "theta": 0,
+     "note": "rolled 30° away from this breast's side"},
+    {"name": "lying on the side", "phi": 90, "theta": 0, "note": "gravity lateral"},
+    {"name": "standing", "phi": 90, "theta": -90, "note": "upright (mammogram): gravity caudal"},
+    {"name": "sitting reclined 45°", "phi": 45, "theta": -90,
+     "note": "gravity half posterior, half caudal"},
+)
+"""Clinical postures as gravity directions: g = [cos Φ, sin Φ cos θ, sin Φ sin θ] in the body's
+frame (x anterior to posterior, y medial to lateral, z caudal to cranial)."""
+
+
+class ViewerError(RuntimeError):
+    """The viewer cannot be built (e.g. its JavaScript tools are not installed)."""
+
+
+def bundle_script(entry: Path = HERE / "app.js") -> str:
+    """``entry`` and the three.js it imports, as one minified script (esbuild).
+
+    Raises:
+        ViewerError: if esbuild or three.js is missing (``make setup`` runs ``npm ci``).
+    """
+    if not ESBUILD.is_file() or not THREE_LICENSE.is_file():
+        raise ViewerError(
+            f"the viewer needs three.js and esbuild from npm in {NODE_MODULES}: run `make setup` "
+            "(or `npm ci` in the repository)"
+        )
+    run = subprocess.run(
+        [str(ESBUILD), str(entry), "--bundle", "--minify", "--format=iife",
+         "--legal-comments=inline", "--target=es2020", "--log-level=warning"],
+        capture_output=True, text=True, cwd=REPO, check=False,
+    )
+    if run.returncode != 0:
+        raise ViewerError(f"esbuild could not bundle {entry}: {run.stderr.strip()}")
+    return run.stdout
+
+
+def surface(model: Surrogate, mesh_xdmf: str | Path) -> dict[str, Any]:
+    """The mesh's exterior triangles on the material points: vertices and triangles."""
+    _, cells = read_mesh_vertices(mesh_xdmf, model.node_index, model.X)
+    faces = exterior_faces(cells)
+    vertices, triangles = np.unique(faces, return_inverse=True)
+    return {
+        "points": encode_array(vertices, "int32"),
+        "triangles": encode_array(triangles.reshape(-1, 3), "int32"),
+        "_vertices": vertices,
+    }
+
+
+def fe_cases(
+    dataset_path: str | Path,
+    vertices: np.ndarray,
+    clinical: Sequence[dict[str, Any]] = (),
+    limit: int = MAX_FE_CASES,
+) -> list[dict[str, Any]]:
+    """FE surface displacements (mm) of the clinical cases and of others spread over the sweep."""
+    ds = read_dataset(dataset_path)
+    good = np.flatnonzero(ds.converged)
+    chosen: list[int] = []
+    labels: dict[int, str] = {}
+    for case in clinical:
+        try:
+            i = ds.case_index(case["C1"], case["phi"], case.get("theta", 0.0))
+        except KeyError:
+            continue
+        if ds.converged[i] and i not in chosen:
+            chosen.append(i)
+            labels[i] = case.get("label", "")
+    spread = good[np.linspace(0, len(good) - 1, min(limit, len(good))).round().astype(int)]
+    for i in spread:
+        if len(chosen) >= limit:
+            break
+        if int(i) not in chosen:
+            chosen.append(int(i))
+    out = []
+    for i in chosen:
+        name = f"C1 = {ds.C1[i]:g} kPa, Φ = {ds.phi[i]:g}°, θ = {ds.theta[i]:g}°"
+        out.append({
+            "id": str(ds.ids[i]),
+            "label": f"{labels[i]}: {name}" if labels.get(i) else name,
+            "C1": float(ds.C1[i]),
+            "phi": float(ds.phi[i]),
+            "theta": float(ds.theta[i]),
+            "u_mm": encode_array(ds.displacement[i][vertices], "float32"),
+        })
+    return out
+
+
+def build_viewer(
+    model_dir: str | Path,
+    mesh_xdmf: str | Path,
+    dataset_path: str | Path,
+    output: str | Path,
+    clinical: Sequence[dict[str, Any]] = (),
+) -> dict[str, Any]:
+    """Write the viewer page ``output`` (and three.js's licence beside it).
+
+    Args:
+        model_dir: the surrogate's model folder.
+        mesh_xdmf: the mesh the surrogate was trained on.
+        dataset_path: the sweep's dataset (the FE cases to compare with).
+        output: the page to write.
+        clinical: the config's clinical cases (carried first, with their labels).
+
+    Returns:
+        What the page holds: points, surface vertices and triangles, FE cases, bytes.
+    """
+    model = Surrogate.load(model_dir)
+    skin = surface(model, mesh_xdmf)
+    vertices = skin.pop("_vertices")
+    cases = fe_cases(dataset_path, vertices, clinical)
+    data = {"model": export_web(model), "surface": skin, "fe_cases": cases}
+    C1s = [c for c in model.range_checks()["c1_kPa"] if c is not None]
+    first = cases[0] if cases else {"C1": float(np.median(C1s)) if C1s else 1.0, "phi": 180.0,
+                                    "theta": 0.0}
+    env = jinja2.Environment(
+        loader=jinja2.FileSystemLoader(HERE), autoescape=True, keep_trailing_newline=True
+    )
+    page = env.get_template("page.html.j2").render(
+        title="Breast under gravity: the surrogate, live",
+        subtitle=f"{model.config.architecture} {model.config.activation} network, "
+        f"{len(model.X)} material points, predicted in this page",
+        initial={"C1": first["C1"], "phi": first["phi"], "theta": first["theta"]},
+        presets=PRESETS,
+        axes="x anterior→posterior · y medial→lateral · z caudal→cranial",
+        provenance=f"model {Path(model_dir).name}, mesh {Path(mesh_xdmf).name}; three.js "
+        "(MIT licence, THREE-LICENSE.txt beside this page)",
+        data=json.dumps(data, separators=(",", ":")).replace("</", "<\\/"),
+        bundle=bundle_script().replace("</script", "<\\/script"),
+    )
+    output = Path(output)
+    output.parent.mkdir(parents=True, exist_ok=True)
+    tmp = output.with_suffix(".tmp")
+    tmp.write_text(page, encoding="utf-8")
+    tmp.replace(output)
+    shutil.copyfile(THREE_LICENSE, output.parent / "THREE-LICENSE.txt")
+    info = {"points": len(model.X), "surface_vertices": int(len(vertices)),
+            "triangles": skin["triangles"]["shape"][0],
+            "fe_cases": len(cases), "bytes": output.stat().st_size}
+    log.info("viewer: %s", info)
+    return info

@@ -1,0 +1,434 @@
+// The interactive view: the surrogate's forward pass in the page, drawn with three.js.
+//
+// The page carries its data in <script id="viewer-data" type="application/json">: the model as
+// surrogate.export.export_web writes it, the surface triangles of the mesh, and FE solutions
+// of some sweep cases. Nothing is fetched: the page works opened from the file system.
+// window.viewer exposes the predictions and the timing to the browser test and the benchmark.
+import {
+  AmbientLight, ArrowHelper, BufferAttribute, BufferGeometry, Color, DirectionalLight,
+  DoubleSide, Mesh, MeshBasicMaterial, MeshPhongMaterial, PerspectiveCamera, Raycaster, Scene,
+  SphereGeometry, Vector2, Vector3, WebGLRenderer,
+} from 'three';
+import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
+
+const DATA = JSON.parse(document.getElementById('viewer-data').textContent);
+
+// -- arrays ---------------------------------------------------------------------------------
+const TYPES = { float32: Float32Array, int32: Int32Array, uint8: Uint8Array };
+
+function decode(encoded) {
+  const bytes = Uint8Array.from(atob(encoded.data), (ch) => ch.charCodeAt(0));
+  return new TYPES[encoded.dtype](bytes.buffer);
+}
+
+// -- the surrogate (mirrors surrogate.predict.Surrogate) -------------------------------------
+const SQRT_2_OVER_PI = Math.sqrt(2 / Math.PI);
+const ACTIVATIONS = {
+  tanh: Math.tanh,
+  relu: (x) => (x > 0 ? x : 0),
+  gelu: (x) => 0.5 * x * (1 + Math.tanh(SQRT_2_OVER_PI * (x + 0.044715 * x * x * x))),
+  silu: (x) => x / (1 + Math.exp(-x)),
+};
+
+class WebSurrogate {
+  constructor(model) {
+    this.model = model;
+    this.n = model.n_points;
+    this.act = ACTIVATIONS[model.activation];
+    this.X = decode(model.X_m);
+    this.Xs = decode(model.points_standardised);
+    this.parts = Object.values(model.parts).map((part) => ({
+      points: decode(part.points),
+      gain: decode(part.gain),
+      layers: part.layers.map((layer) => ({
+        W: decode(layer.W), b: decode(layer.b), nIn: layer.W.shape[0], nOut: layer.W.shape[1],
+      })),
+    }));
+    this.range = model.training_range;
+  }
+
+  // Encoded C1, gravity direction and output gain, as Surrogate.features computes them.
+  features(C1, phi, theta) {
+    const e = this.model.encoding;
+    const p = (phi * Math.PI) / 180;
+    const t = (theta * Math.PI) / 180;
+    let enc = C1;
+    if (e.c1 === 'log') enc = Math.log(C1);
+    else if (e.c1 === 'inverse') enc = 1 / C1;
+    const c = (2 * (enc - e.c1_min)) / (e.c1_max - e.c1_min) - 1;
+    const gain = e.output_scaling === 'compliance' ? e.c1_ref / C1 : 1;
+    return [c, Math.cos(p), Math.sin(p) * Math.cos(t), Math.sin(p) * Math.sin(t), gain];
+  }
+
+  // An evaluator for the material points `indices`: the query-independent part of the first
+  // layer is computed here, once; evaluate() then costs the rest.
+  evaluator(indices) {
+    const where = new Int32Array(this.n).fill(-1);
+    indices.forEach((point, row) => { where[point] = row; });
+    const parts = [];
+    for (const part of this.parts) {
+      const rows = [];
+      const local = [];
+      part.points.forEach((point, i) => {
+        if (where[point] >= 0) { rows.push(where[point]); local.push(i); }
+      });
+      if (!rows.length) continue;
+      const first = part.layers[0];
+      const w = first.nOut;
+      const pre = new Float32Array(rows.length * w);
+      local.forEach((i, r) => {
+        const point = part.points[i];
+        for (let j = 0; j < w; j += 1) {
+          let s = first.b[j];
+          for (let k = 0; k < 3; k += 1) s += this.Xs[3 * point + k] * first.W[k * w + j];
+          pre[r * w + j] = s;
+        }
+      });
+      const widest = Math.max(...part.layers.map((l) => l.nOut));
+      parts.push({
+        rows: Int32Array.from(rows),
+        gain: Float32Array.from(local, (i) => part.gain[i]),
+        pre,
+        layers: part.layers,
+        h: new Float64Array(rows.length * widest),
+        g: new Float64Array(rows.length * widest),
+      });
+    }
+    return { n: indices.length, parts, out: new Float32Array(3 * indices.length) };
+  }
+
+  // Displacement (mm) of the evaluator's points for one query, into ev.out (3 per point).
+  evaluate(ev, C1, phi, theta) {
+    const c = this.features(C1, phi, theta);
+    const act = this.act;
+    ev.out.fill(0);  // rib points of an exact-Dirichlet model stay zero
+    for (const part of ev.parts) {
+      const n = part.rows.length;
+      const first = part.layers[0];
+      const w = first.nOut;
+      const q = new Float64Array(w);
+      for (let j = 0; j < w; j += 1) {
+        for (let k = 0; k < 4; k += 1) q[j] += c[k] * first.W[(3 + k) * w + j];
+      }
+      let h = part.h;
+      let g = part.g;
+      for (let i = 0; i < n; i += 1) {
+        for (let j = 0; j < w; j += 1) h[i * w + j] = act(part.pre[i * w + j] + q[j]);
+      }
+      const last = part.layers.length - 1;
+      for (let l = 1; l <= last; l += 1) {
+        const { W, b, nIn, nOut } = part.layers[l];
+        for (let i = 0; i < n; i += 1) {
+          const hi = i * nIn;
+          const go = i * nOut;
+          for (let o = 0; o < nOut; o += 1) g[go + o] = b[o];
+          for (let k = 0; k < nIn; k += 1) {
+            const hk = h[hi + k];
+            const wk = k * nOut;
+            for (let o = 0; o < nOut; o += 1) g[go + o] += hk * W[wk + o];
+          }
+          if (l < last) for (let o = 0; o < nOut; o += 1) g[go + o] = act(g[go + o]);
+        }
+        [h, g] = [g, h];
+      }
+      for (let i = 0; i < n; i += 1) {
+        const scale = part.gain[i] * c[4];
+        const r = 3 * part.rows[i];
+        for (let d = 0; d < 3; d += 1) ev.out[r + d] = h[3 * i + d] * scale;
+      }
+    }
+    return ev.out;
+  }
+
+  // The reasons a query is an extrapolation, in the words of Surrogate._warn_if_outside
+  // (numbers as Python prints a float: 7.0, 0.8).
+  warnings(C1, phi, theta) {
+    const r = this.range;
+    const py = (x) => (Number.isInteger(x) ? x.toFixed(1) : String(x));
+    const messages = [];
+    const [lo, hi] = r.c1_kPa;
+    if ((lo !== null && C1 < lo - 1e-9) || (hi !== null && C1 > hi + 1e-9)) {
+      messages.push(`C1 = ${py(C1)} kPa is outside the training range [${py(lo)}, ${py(hi)}] kPa`);
+    }
+    const mod = (a) => ((a % 360) + 360) % 360;
+    if (r.phi_gap) {
+      const [start, width] = r.phi_gap;
+      const offset = mod(phi - start);
+      if (offset > 1e-6 && offset < width - 1e-6) {
+        messages.push(`Φ = ${py(phi)}° lies in a ${width.toFixed(0)}° arc without training angles`);
+      }
+    }
+    if (r.theta_deg.length === 1 && Math.abs(Math.sin((phi * Math.PI) / 180)) > 1e-6
+        && Math.abs(theta - r.theta_deg[0]) > 1e-6) {
+      messages.push(`θ = ${py(theta)}° but the surrogate was trained at θ = ${py(r.theta_deg[0])}° `
+        + 'only');
+    }
+    if (r.unconverged.length) {
+      const q = mod(phi);
+      const angles = r.sweep_phi_deg;
+      const below = angles.reduce((a, p) => (mod(q - p) < mod(q - a) ? p : a));
+      const above = angles.reduce((a, p) => (mod(p - q) < mod(a - q) ? p : a));
+      const near = (p, n) => Math.abs(mod(p - n + 180) - 180) < 1e-6;
+      const beside = r.unconverged.filter(([, p, t]) => Math.abs(t - theta) < 1e-6
+        && (near(p, below) || near(p, above)));
+      if (beside.length) {
+        const [c1, p] = beside.reduce((a, b) => (b[0] > a[0] || (b[0] === a[0] && b[1] > a[1])
+          ? b : a));
+        if (C1 <= c1 + 1e-9) {
+          messages.push(`the sweep's FE solve did not converge at C1 = ${c1} kPa, Φ = ${p}° `
+            + `(beside C1 = ${py(C1)} kPa, Φ = ${py(phi)}°, θ = ${py(theta)}°), so no FE solution backs `
+            + `C1 ≤ ${c1} kPa there`);
+        }
+      }
+    }
+    return messages.map((m) => `${m}; the prediction is an extrapolation`);
+  }
+}
+
+// -- colours --------------------------------------------------------------------------------
+// viridis at nine stops (matplotlib's table), interpolated linearly
+const VIRIDIS = [[68, 1, 84], [71, 44, 122], [59, 81, 139], [44, 113, 142], [33, 144, 141],
+  [39, 173, 129], [92, 200, 99], [170, 220, 50], [253, 231, 37]].map((c) => c.map((v) => v / 255));
+
+function colourmap(t, out, offset) {
+  const x = Math.min(Math.max(t, 0), 1) * (VIRIDIS.length - 1);
+  const i = Math.min(Math.floor(x), VIRIDIS.length - 2);
+  const f = x - i;
+  for (let d = 0; d < 3; d += 1) out[offset + d] = VIRIDIS[i][d] * (1 - f) + VIRIDIS[i + 1][d] * f;
+}
+
+function niceCeiling(value) {
+  if (!(value > 0)) return 1;
+  const step = 10 ** Math.floor(Math.log10(value));
+  return [1, 2, 2.5, 5, 10].map((m) => m * step).find((v) => v >= value);
+}
+
+// -- the scene ------------------------------------------------------------------------------
+const surrogate = new WebSurrogate(DATA.model);
+const surface = decode(DATA.surface.points);        // material-point index of each vertex
+const triangles = decode(DATA.surface.triangles);   // vertex indices, 3 per triangle
+const nv = surface.length;
+const onSurface = surrogate.evaluator(Array.from(surface));
+const everywhere = surrogate.evaluator(Array.from({ length: surrogate.n }, (_, i) => i));
+const feCases = DATA.fe_cases.map((c) => ({ ...c, u: decode(c.u_mm) }));
+
+const reference = new Float32Array(3 * nv);
+for (let v = 0; v < nv; v += 1) {
+  for (let d = 0; d < 3; d += 1) reference[3 * v + d] = 1000 * surrogate.X[3 * surface[v] + d];
+}
+const geometry = new BufferGeometry();
+const positions = new BufferAttribute(new Float32Array(reference), 3);
+const colours = new BufferAttribute(new Float32Array(3 * nv), 3);
+geometry.setAttribute('position', positions);
+geometry.setAttribute('color', colours);
+geometry.setIndex(new BufferAttribute(Uint32Array.from(triangles), 1));
+geometry.computeBoundingSphere();
+const centre = geometry.boundingSphere.center.clone();
+const radius = geometry.boundingSphere.radius;
+
+const canvas = document.getElementById('view');
+const renderer = new WebGLRenderer({ canvas, antialias: true, preserveDrawingBuffer: true });
+renderer.setPixelRatio(window.devicePixelRatio || 1);
+const scene = new Scene();
+scene.background = new Color(0xf4f4f2);
+const camera = new PerspectiveCamera(35, 1, radius / 100, radius * 40);
+camera.up.set(0, 0, 1);  // z is cranial
+camera.position.copy(centre).add(new Vector3(-2.2 * radius, 2.2 * radius, 1.1 * radius));
+scene.add(new AmbientLight(0xffffff, 1.1));
+const light = new DirectionalLight(0xffffff, 1.6);
+light.position.set(-1, 1, 2);
+scene.add(light);
+const breast = new Mesh(geometry, new MeshPhongMaterial({
+  vertexColors: true, side: DoubleSide, shininess: 15,
+}));
+scene.add(breast);
+const arrowAnchor = centre.clone().add(new Vector3(0, -1.25 * radius, 0.75 * radius));
+const gravityArrow = new ArrowHelper(new Vector3(1, 0, 0), arrowAnchor, 0.7 * radius, 0xc0392b,
+  0.2 * radius, 0.1 * radius);
+scene.add(gravityArrow);
+const controls = new OrbitControls(camera, canvas);
+controls.target.copy(centre);
+
+function resize() {
+  const { clientWidth: w, clientHeight: h } = canvas;
+  renderer.setSize(w, h, false);
+  camera.aspect = w / h;
+  camera.updateProjectionMatrix();
+}
+
+// -- state and controls ---------------------------------------------------------------------
+const $ = (id) => document.getElementById(id);
+const inputs = { C1: $('c1'), phi: $('phi'), theta: $('theta') };
+const [c1Lo, c1Hi] = surrogate.range.c1_kPa;
+inputs.C1.min = String(Math.max(0.05, 0.5 * (c1Lo ?? 1)));
+inputs.C1.max = String(1.5 * (c1Hi ?? 5));
+const state = { mode: 'surrogate', fe: null, points: [], lastMs: 0 };
+let current = null;  // surrogate displacement of the surface vertices, mm
+
+function query() {
+  return { C1: Number(inputs.C1.value), phi: Number(inputs.phi.value),
+    theta: Number(inputs.theta.value) };
+}
+
+function matchingFeCase({ C1, phi, theta }) {
+  return feCases.find((c) => Math.abs(c.C1 - C1) < 1e-6 && Math.abs(c.phi - phi) < 1e-6
+    && Math.abs(c.theta - theta) < 1e-6) || null;
+}
+
+function update() {
+  const start = performance.now();
+  const q = query();
+  current = surrogate.evaluate(onSurface, q.C1, q.phi, q.theta);
+  state.fe = matchingFeCase(q);
+  const mode = state.fe ? state.mode : 'surrogate';
+  const shown = mode === 'fe' ? state.fe.u : current;
+  const magnitude = new Float32Array(nv);
+  let largest = 0;
+  for (let v = 0; v < nv; v += 1) {
+    let s = 0;
+    for (let d = 0; d < 3; d += 1) {
+      positions.array[3 * v + d] = reference[3 * v + d] + shown[3 * v + d];
+      const diff = mode === 'difference' ? current[3 * v + d] - state.fe.u[3 * v + d]
+        : shown[3 * v + d];
+      s += diff * diff;
+    }
+    magnitude[v] = Math.sqrt(s);
+    largest = Math.max(largest, magnitude[v]);
+  }
+  const top = niceCeiling(largest);
+  for (let v = 0; v < nv; v += 1) colourmap(magnitude[v] / top, colours.array, 3 * v);
+  positions.needsUpdate = true;
+  colours.needsUpdate = true;
+  const p = (q.phi * Math.PI) / 180;
+  const t = (q.theta * Math.PI) / 180;
+  const g = new Vector3(Math.cos(p), Math.sin(p) * Math.cos(t), Math.sin(p) * Math.sin(t));
+  gravityArrow.setDirection(g);  // drawn beside the body, centred on its anchor
+  gravityArrow.position.copy(arrowAnchor).addScaledVector(g, -0.35 * radius);
+  placePoints(shown);
+  renderer.render(scene, camera);
+  state.lastMs = performance.now() - start;
+  showState(q, mode, top, largest);
+}
+
+function showState(q, mode, top, largest) {
+  $('c1-value').textContent = `${q.C1.toFixed(2)} kPa`;
+  $('phi-value').textContent = `${q.phi.toFixed(0)}°`;
+  $('theta-value').textContent = `${q.theta.toFixed(0)}°`;
+  const title = { surrogate: '|u|, surrogate', fe: '|u|, FE', difference: '|u surrogate − u FE|' };
+  $('scale-title').textContent = `${title[mode]} (mm)`;
+  [0, 0.25, 0.5, 0.75, 1].forEach((f, i) => {
+    $(`tick-${i}`).textContent = (f * top).toPrecision(3).replace(/\.?0+$/, '');
+  });
+  $('max-value').textContent = `largest ${largest.toFixed(2)} mm`;
+  $('timing').textContent = `update ${state.lastMs.toFixed(1)} ms`;
+  const warnings = surrogate.warnings(q.C1, q.phi, q.theta);
+  $('warnings').textContent = warnings.join('\n');
+  $('warnings').hidden = !warnings.length;
+  $('fe-controls').classList.toggle('disabled', !state.fe);
+  for (const radio of document.querySelectorAll('input[name=mode]')) radio.disabled = !state.fe;
+  $('fe-note').textContent = state.fe ? `FE case ${state.fe.id}`
+    : 'choose an FE case to compare (the sliders then sit on a solved case)';
+}
+
+// -- named points ---------------------------------------------------------------------------
+const pointGeometry = new SphereGeometry(radius / 60, 12, 8);
+function placePoints(shown) {
+  const rows = state.points.map((point) => {
+    const v = point.vertex;
+    point.deformed.position.set(...[0, 1, 2].map((d) => reference[3 * v + d] + shown[3 * v + d]));
+    const u = [0, 1, 2].map((d) => shown[3 * v + d]);
+    const size = Math.hypot(...u);
+    return `<tr><td>${point.name}</td><td>${size.toFixed(2)}</td>`
+      + `<td>${u.map((x) => x.toFixed(1)).join(', ')}</td></tr>`;
+  });
+  $('points').innerHTML = rows.join('');
+}
+
+function addPoint(vertex) {
+  const name = `P${state.points.length + 1}`;
+  const ref = new Mesh(pointGeometry, new MeshBasicMaterial({ color: 0x8a8a8a }));
+  ref.position.set(...[0, 1, 2].map((d) => reference[3 * vertex + d]));
+  const deformed = new Mesh(pointGeometry, new MeshBasicMaterial({ color: 0xd62728 }));
+  scene.add(ref, deformed);
+  state.points.push({ name, vertex, ref, deformed });
+  update();
+}
+
+const raycaster = new Raycaster();
+let pressed = null;
+canvas.addEventListener('pointerdown', (e) => { pressed = [e.clientX, e.clientY]; });
+canvas.addEventListener('pointerup', (e) => {
+  if (!pressed || Math.hypot(e.clientX - pressed[0], e.clientY - pressed[1]) > 4) return;
+  const rect = canvas.getBoundingClientRect();
+  const at = new Vector2(((e.clientX - rect.left) / rect.width) * 2 - 1,
+    -((e.clientY - rect.top) / rect.height) * 2 + 1);
+  raycaster.setFromCamera(at, camera);
+  const hit = raycaster.intersectObject(breast)[0];
+  if (!hit) return;
+  const { a, b, c } = hit.face;
+  const nearest = [a, b, c].reduce((best, v) => {
+    const d = hit.point.distanceTo(new Vector3().fromBufferAttribute(positions, v));
+    return d < best[1] ? [v, d] : best;
+  }, [a, Infinity])[0];
+  addPoint(nearest);
+});
+
+// -- wiring ---------------------------------------------------------------------------------
+function setQuery(C1, phi, theta) {
+  inputs.C1.value = String(C1);
+  inputs.phi.value = String(phi);
+  inputs.theta.value = String(theta);
+  update();
+}
+
+for (const input of Object.values(inputs)) input.addEventListener('input', update);
+for (const button of document.querySelectorAll('[data-phi]')) {
+  button.addEventListener('click', () => setQuery(inputs.C1.value, button.dataset.phi,
+    button.dataset.theta));
+}
+const select = $('fe-case');
+feCases.forEach((c, i) => {
+  const option = document.createElement('option');
+  option.value = String(i);
+  option.textContent = c.label;
+  select.appendChild(option);
+});
+select.addEventListener('change', () => {
+  const c = feCases[Number(select.value)];
+  if (c) setQuery(c.C1, c.phi, c.theta);
+});
+for (const radio of document.querySelectorAll('input[name=mode]')) {
+  radio.addEventListener('change', () => { state.mode = radio.value; update(); });
+}
+controls.addEventListener('change', () => renderer.render(scene, camera));
+window.addEventListener('resize', () => { resize(); renderer.render(scene, camera); });
+resize();
+update();
+
+// -- for the browser test and the benchmark ------------------------------------------------
+window.viewer = {
+  ready: true,
+  nPoints: surrogate.n,
+  nSurface: nv,
+  // displacement (mm) of every material point, in the model's order
+  predictAll: (C1, phi, theta) => Array.from(surrogate.evaluate(everywhere, C1, phi, theta)),
+  warnings: (C1, phi, theta) => surrogate.warnings(C1, phi, theta),
+  setQuery,
+  addPoint,
+  state: () => ({ ...query(), mode: state.fe ? state.mode : 'surrogate',
+    fe: state.fe && state.fe.id, lastMs: state.lastMs,
+    warnings: $('warnings').hidden ? [] : $('warnings').textContent.split('\n') }),
+  // n updates (prediction on the surface, colours, one frame drawn and finished), in ms
+  benchmark: (n) => {
+    const gl = renderer.getContext();
+    const times = [];
+    for (let i = 0; i < n; i += 1) {
+      const start = performance.now();
+      inputs.phi.value = String(-180 + ((37 * i) % 360));
+      update();
+      gl.finish();
+      times.push(performance.now() - start);
+    }
+    return times;
+  },
+};

@@ -1,0 +1,124 @@
+"""The interactive view in a real browser: headless Chromium, driven by Playwright.
+
+The page is the one the small workflow wrote (``results/viewer/index.html``), opened from the
+file system. Its predictions are compared with Python's, its controls are moved, and the
+screenshots are kept beside it (``screenshot-*.png``) to look at.
+"""
+
+from __future__ import annotations
+
+import re
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from studies.browser import open_page
+from surrogate.exceptions import ExtrapolationWarning
+from surrogate.export import decode_array, encode_array
+from surrogate.predict import Surrogate
+
+pytestmark = pytest.mark.workflow
+
+READY = "window.viewer && window.viewer.ready"
+
+
+@pytest.fixture(scope="module")
+def viewer(small_run: Path) -> Path:
+    return small_run / "results" / "viewer" / "index.html"
+
+
+@pytest.fixture(scope="module")
+def model(small_run: Path) -> Surrogate:
+    return Surrogate.load(small_run / "results" / "surrogate" / "model")
+
+
+def test_arrays_travel_exactly() -> None:
+    rng = np.random.default_rng(0)
+    for values, dtype in ((rng.normal(size=(5, 3)), "float32"), (np.arange(7), "int32"),
+                          (np.array([True, False, True]), "uint8")):
+        back = decode_array(encode_array(values, dtype))
+        assert back.shape == values.shape and np.array_equal(back, values.astype(dtype))
+
+
+def test_the_page_predicts_what_python_predicts(viewer: Path, model: Surrogate) -> None:
+    """20 random setups in the training range: every material point within 1e-4 mm."""
+    lo, hi = model.range_checks()["c1_kPa"]
+    rng = np.random.default_rng(24)
+    setups = np.column_stack([rng.uniform(lo, hi, 20), rng.uniform(-150, 180, 20),
+                              rng.uniform(-180, 180, 20)])
+    with open_page(viewer, ready=READY) as (page, errors, _):
+        for C1, phi, theta in setups:
+            in_page = np.asarray(page.evaluate(
+                f"window.viewer.predictAll({C1}, {phi}, {theta})")).reshape(-1, 3)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", ExtrapolationWarning)  # θ ≠ 0: the test's own
+                expected = model.predict(C1, phi, theta)
+            assert in_page.shape == expected.shape
+            assert np.abs(in_page - expected).max() <= 1e-4, (C1, phi, theta)
+        assert not errors
+
+
+def _picture(page, path: Path) -> np.ndarray:
+    page.locator("#view").screenshot(path=str(path))
+    return np.asarray(Image.open(path).convert("RGB"), dtype=float)
+
+
+def test_moving_a_slider_changes_the_picture(viewer: Path) -> None:
+    """A slider moved as a user moves it (input events) redraws the breast under new gravity.
+
+    The screenshots are kept beside the page.
+    """
+    with open_page(viewer, ready=READY) as (page, errors, requests):
+        page.evaluate("window.viewer.setQuery(1.0, 180, 0)")
+        page.screenshot(path=str(viewer.parent / "screenshot-prone.png"))
+        before = _picture(page, viewer.parent / "view-prone.png")
+        page.locator("#phi").fill("0")  # a range input takes fill(); it fires input events
+        state = page.evaluate("window.viewer.state()")
+        assert state["phi"] == 0 and state["C1"] == 1.0
+        page.screenshot(path=str(viewer.parent / "screenshot-supine.png"))
+        after = _picture(page, viewer.parent / "view-supine.png")
+        changed = np.mean(np.abs(after - before).sum(axis=2) > 30)
+        assert changed > 0.01, f"only {changed:.2%} of the picture changed"
+        assert "Φ (gravity elevation)" in page.inner_text("#panel")
+        assert re.search(r"\|u\|, surrogate \(mm\)", page.inner_text("#scale"))
+        assert not errors
+        assert all(url.startswith("file://") for url in requests), requests
+
+
+def test_outside_the_training_range_the_page_says_what_predict_warns(
+    viewer: Path, model: Surrogate
+) -> None:
+    lo, hi = model.range_checks()["c1_kPa"]
+    with open_page(viewer, ready=READY) as (page, _, _):
+        for C1, phi, theta in ((hi * 1.4, 180.0, 0.0), (lo, 120.0, 30.0), (lo, 180.0, 0.0)):
+            page.evaluate(f"window.viewer.setQuery({C1}, {phi}, {theta})")
+            shown = page.evaluate("window.viewer.state()")["warnings"]
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always", ExtrapolationWarning)
+                model.predict(float(page.evaluate("window.viewer.state()")["C1"]), phi, theta)
+            assert shown == [str(w.message) for w in caught], (C1, phi, theta)
+            assert page.locator("#warnings").is_visible() == bool(shown)
+
+
+def test_an_fe_case_can_be_shown_and_compared(viewer: Path) -> None:
+    with open_page(viewer, ready=READY) as (page, errors, _):
+        page.select_option("#fe-case", index=1)
+        state = page.evaluate("window.viewer.state()")
+        assert state["fe"] is not None and state["mode"] == "surrogate"
+        page.check("input[name=mode][value=difference]")
+        assert page.evaluate("window.viewer.state()")["mode"] == "difference"
+        assert "|u surrogate − u FE| (mm)" in page.inner_text("#scale-title")
+        page.evaluate("window.viewer.addPoint(0)")
+        assert "P1" in page.inner_text("#points")
+        page.locator("#phi").fill("17")  # off the solved case: FE is not offered
+        assert page.evaluate("window.viewer.state()")["fe"] is None
+        assert page.locator("input[name=mode][value=fe]").is_disabled()
+        assert not errors
+
+
+def test_the_page_and_its_library_stay_small(viewer: Path) -> None:
+    assert viewer.stat().st_size <= 5e6
+    assert "MIT" in (viewer.parent / "THREE-LICENSE.txt").read_text()

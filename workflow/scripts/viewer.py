@@ -1,0 +1,17 @@
+"""Snakemake adapter: write the interactive 3D view (report.viewer)."""
+
+from surrogate.runtime import configure_cpu
+
+configure_cpu()
+
+from report.viewer import build_viewer  # noqa: E402
+from studies.joblog import job_log  # noqa: E402
+
+job_log(snakemake.log[0])
+build_viewer(
+    snakemake.input.model.rsplit("/", 1)[0],
+    snakemake.input.mesh,
+    snakemake.input.dataset,
+    snakemake.output.html,
+    snakemake.params.clinical,
+)
