@@ -110,8 +110,9 @@ def build_report(
                            "error")
         sections.append({"id": section_id, "title": title, "html": content})
     viewer = inputs.get("viewer")
-    link = Path(os.path.relpath(Path(str(viewer)).resolve(), out_dir.resolve())).as_posix()
-    html_path.write_text(render_page(sections, link if viewer else None))
+    if viewer:
+        viewer = Path(os.path.relpath(Path(str(viewer)).resolve(), out_dir.resolve())).as_posix()
+    html_path.write_text(render_page(sections, viewer or None))
     log.info("wrote %s with %d sections", html_path, len(sections))
     return html_path
 

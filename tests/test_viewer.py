@@ -122,3 +122,8 @@ def test_an_fe_case_can_be_shown_and_compared(viewer: Path) -> None:
 def test_the_page_and_its_library_stay_small(viewer: Path) -> None:
     assert viewer.stat().st_size <= 5e6
     assert "MIT" in (viewer.parent / "THREE-LICENSE.txt").read_text()
+
+
+def test_the_report_links_the_view(small_run: Path) -> None:
+    report = (small_run / "results" / "report" / "index.html").read_text()
+    assert '<a href="../viewer/index.html">' in report

@@ -40,9 +40,17 @@ class WebSurrogate {
     this.parts = Object.values(model.parts).map((part) => ({
       points: decode(part.points),
       gain: decode(part.gain),
-      layers: part.layers.map((layer) => ({
-        W: decode(layer.W), b: decode(layer.b), nIn: layer.W.shape[0], nOut: layer.W.shape[1],
-      })),
+      layers: part.layers.map((layer) => {
+        const [nIn, nOut] = layer.W.shape;
+        const W = decode(layer.W);
+        // W transposed (row o holds the weights into output o): each output is then one dot
+        // product over contiguous memory, summed in a local variable
+        const Wt = new Float64Array(nIn * nOut);
+        for (let k = 0; k < nIn; k += 1) {
+          for (let o = 0; o < nOut; o += 1) Wt[o * nIn + k] = W[k * nOut + o];
+        }
+        return { W, Wt, b: decode(layer.b), nIn, nOut };
+      }),
     }));
     this.range = model.training_range;
   }
@@ -90,6 +98,7 @@ class WebSurrogate {
         gain: Float32Array.from(local, (i) => part.gain[i]),
         pre,
         layers: part.layers,
+        q: new Float64Array(w),
         h: new Float64Array(rows.length * widest),
         g: new Float64Array(rows.length * widest),
       });
@@ -106,8 +115,9 @@ class WebSurrogate {
       const n = part.rows.length;
       const first = part.layers[0];
       const w = first.nOut;
-      const q = new Float64Array(w);
+      const q = part.q;
       for (let j = 0; j < w; j += 1) {
+        q[j] = 0;
         for (let k = 0; k < 4; k += 1) q[j] += c[k] * first.W[(3 + k) * w + j];
       }
       let h = part.h;
@@ -117,17 +127,44 @@ class WebSurrogate {
       }
       const last = part.layers.length - 1;
       for (let l = 1; l <= last; l += 1) {
-        const { W, b, nIn, nOut } = part.layers[l];
-        for (let i = 0; i < n; i += 1) {
+        const { Wt, b, nIn, nOut } = part.layers[l];
+        const hidden = l < last;
+        // four points at a time share each weight they load; each sum keeps the order of one
+        let i = 0;
+        for (; i + 3 < n; i += 4) {
+          const ha = i * nIn;
+          const hb = ha + nIn;
+          const hc = hb + nIn;
+          const hd = hc + nIn;
+          const go = i * nOut;
+          for (let o = 0; o < nOut; o += 1) {
+            const wo = o * nIn;
+            let sa = b[o];
+            let sb = sa;
+            let sc = sa;
+            let sd = sa;
+            for (let k = 0; k < nIn; k += 1) {
+              const wk = Wt[wo + k];
+              sa += h[ha + k] * wk;
+              sb += h[hb + k] * wk;
+              sc += h[hc + k] * wk;
+              sd += h[hd + k] * wk;
+            }
+            g[go + o] = hidden ? act(sa) : sa;
+            g[go + nOut + o] = hidden ? act(sb) : sb;
+            g[go + 2 * nOut + o] = hidden ? act(sc) : sc;
+            g[go + 3 * nOut + o] = hidden ? act(sd) : sd;
+          }
+        }
+        for (; i < n; i += 1) {
           const hi = i * nIn;
           const go = i * nOut;
-          for (let o = 0; o < nOut; o += 1) g[go + o] = b[o];
-          for (let k = 0; k < nIn; k += 1) {
-            const hk = h[hi + k];
-            const wk = k * nOut;
-            for (let o = 0; o < nOut; o += 1) g[go + o] += hk * W[wk + o];
+          for (let o = 0; o < nOut; o += 1) {
+            const wo = o * nIn;
+            let s = b[o];
+            for (let k = 0; k < nIn; k += 1) s += h[hi + k] * Wt[wo + k];
+            g[go + o] = hidden ? act(s) : s;
           }
-          if (l < last) for (let o = 0; o < nOut; o += 1) g[go + o] = act(g[go + o]);
         }
         [h, g] = [g, h];
       }
@@ -213,6 +250,7 @@ const everywhere = surrogate.evaluator(Array.from({ length: surrogate.n }, (_, i
 const feCases = DATA.fe_cases.map((c) => ({ ...c, u: decode(c.u_mm) }));
 
 const reference = new Float32Array(3 * nv);
+const magnitude = new Float32Array(nv);
 for (let v = 0; v < nv; v += 1) {
   for (let d = 0; d < 3; d += 1) reference[3 * v + d] = 1000 * surrogate.X[3 * surface[v] + d];
 }
@@ -282,7 +320,6 @@ function update() {
   state.fe = matchingFeCase(q);
   const mode = state.fe ? state.mode : 'surrogate';
   const shown = mode === 'fe' ? state.fe.u : current;
-  const magnitude = new Float32Array(nv);
   let largest = 0;
   for (let v = 0; v < nv; v += 1) {
     let s = 0;
@@ -331,7 +368,8 @@ function showState(q, mode, top, largest) {
 }
 
 // -- named points ---------------------------------------------------------------------------
-const pointGeometry = new SphereGeometry(radius / 60, 12, 8);
+const pointGeometry = new SphereGeometry(radius / 30, 16, 12);
+const fixed1 = (x) => x.toFixed(1).replace(/^-(0\.0)$/, '$1');  // no "-0.0"
 function placePoints(shown) {
   const rows = state.points.map((point) => {
     const v = point.vertex;
@@ -339,7 +377,7 @@ function placePoints(shown) {
     const u = [0, 1, 2].map((d) => shown[3 * v + d]);
     const size = Math.hypot(...u);
     return `<tr><td>${point.name}</td><td>${size.toFixed(2)}</td>`
-      + `<td>${u.map((x) => x.toFixed(1)).join(', ')}</td></tr>`;
+      + `<td>${u.map(fixed1).join(', ')}</td></tr>`;
   });
   $('points').innerHTML = rows.join('');
 }
@@ -418,6 +456,16 @@ window.viewer = {
   state: () => ({ ...query(), mode: state.fe ? state.mode : 'surrogate',
     fe: state.fe && state.fe.id, lastMs: state.lastMs,
     warnings: $('warnings').hidden ? [] : $('warnings').textContent.split('\n') }),
+  // n predictions at the surface vertices alone (no drawing), in ms
+  benchmarkPrediction: (n) => {
+    const times = [];
+    for (let i = 0; i < n; i += 1) {
+      const start = performance.now();
+      surrogate.evaluate(onSurface, Number(inputs.C1.value), -180 + ((37 * i) % 360), 0);
+      times.push(performance.now() - start);
+    }
+    return times;
+  },
   // n updates (prediction on the surface, colours, one frame drawn and finished), in ms
   benchmark: (n) => {
     const gl = renderer.getContext();
