@@ -83,16 +83,16 @@ def bundle_script(entry: Path = HERE / "app.js") -> str:
     return run.stdout
 
 
-def surface(model: Surrogate, mesh_xdmf: str | Path) -> dict[str, Any]:
-    """The mesh's exterior triangles on the material points: vertices and triangles."""
+def surface(model: Surrogate, mesh_xdmf: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """The mesh's exterior triangles on the material points.
+
+    Returns:
+        ``(vertices, triangles)``: the material point of each surface vertex, and the triangles
+        (m, 3) on the surface vertices.
+    """
     _, cells = read_mesh_vertices(mesh_xdmf, model.node_index, model.X)
-    faces = exterior_faces(cells)
-    vertices, triangles = np.unique(faces, return_inverse=True)
-    return {
-        "points": encode_array(vertices, "int32"),
-        "triangles": encode_array(triangles.reshape(-1, 3), "int32"),
-        "_vertices": vertices,
-    }
+    vertices, triangles = np.unique(exterior_faces(cells), return_inverse=True)
+    return vertices, triangles.reshape(-1, 3)
 
 
 def fe_cases(
@@ -154,10 +154,14 @@ def build_viewer(
         What the page holds: points, surface vertices and triangles, FE cases, bytes.
     """
     model = Surrogate.load(model_dir)
-    skin = surface(model, mesh_xdmf)
-    vertices = skin.pop("_vertices")
+    vertices, triangles = surface(model, mesh_xdmf)
     cases = fe_cases(dataset_path, vertices, clinical)
-    data = {"model": export_web(model), "surface": skin, "fe_cases": cases}
+    data = {
+        "model": export_web(model),
+        "surface": {"points": encode_array(vertices, "int32"),
+                    "triangles": encode_array(triangles, "int32")},
+        "fe_cases": cases,
+    }
     C1s = [c for c in model.range_checks()["c1_kPa"] if c is not None]
     first = cases[0] if cases else {"C1": float(np.median(C1s)) if C1s else 1.0, "phi": 180.0,
                                     "theta": 0.0}
@@ -183,7 +187,7 @@ def build_viewer(
     tmp.replace(output)
     shutil.copyfile(THREE_LICENSE, output.parent / "THREE-LICENSE.txt")
     info = {"points": len(model.X), "surface_vertices": int(len(vertices)),
-            "triangles": skin["triangles"]["shape"][0],
+            "triangles": len(triangles),
             "fe_cases": len(cases), "bytes": output.stat().st_size}
     log.info("viewer: %s", info)
     return info

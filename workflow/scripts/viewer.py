@@ -1,5 +1,7 @@
 """Snakemake adapter: write the interactive 3D view (report.viewer)."""
 
+from pathlib import Path
+
 from surrogate.runtime import configure_cpu
 
 configure_cpu()
@@ -9,7 +11,7 @@ from studies.joblog import job_log  # noqa: E402
 
 job_log(snakemake.log[0])
 build_viewer(
-    snakemake.input.model.rsplit("/", 1)[0],
+    Path(snakemake.input.model).parent,
     snakemake.input.mesh,
     snakemake.input.dataset,
     snakemake.output.html,
