@@ -43,6 +43,7 @@ from meshes.checks import (
     merge_duplicate_points,
 )
 from meshes.exceptions import GeometryError, MeshInputError
+from meshes.orientation import Orientation, check_chest_wall_posterior
 from meshes.quality import exterior_faces, tet_volumes
 from meshes.reading import SURFACE_SUFFIXES, VOLUME_SUFFIXES, InputMesh, read_input
 from meshes.sizing import MeshSize
@@ -61,12 +62,15 @@ class ImportSpec:
         surfaces: a rule per named boundary; ``rib`` is required.
         remesh: for a surface input, remesh the surface to ``mesh.size`` (True) or
             keep its triangles as the boundary of the volume mesh (False).
+        orientation: how the file's axes lie in the patient (default: the project's frame);
+            the boundary rules are in the file's axes and units.
     """
 
     path: str
     units: str = "m"
     surfaces: dict[Boundary, BoundaryRule] = field(default_factory=dict)
     remesh: bool = False
+    orientation: Orientation = field(default_factory=Orientation)
 
     def __post_init__(self) -> None:
         if self.units not in UNITS:
@@ -88,7 +92,7 @@ class ImportSpec:
     @classmethod
     def from_mapping(cls, values: dict[str, Any]) -> ImportSpec:
         """Build from the ``mesh.file`` config mapping (boundary names as in :class:`Boundary`)."""
-        known = {"path", "units", "surfaces", "remesh"}
+        known = {"path", "units", "surfaces", "remesh", "orientation"}
         unknown = sorted(set(values) - known)
         if unknown:
             raise GeometryError(f"unknown mesh.file key(s): {', '.join(unknown)}")
@@ -106,11 +110,19 @@ class ImportSpec:
             units=units,
             surfaces=surfaces,
             remesh=bool(values.get("remesh", False)),
+            orientation=Orientation.from_mapping(values.get("orientation")),
         )
 
     def input_files(self) -> list[str]:
         """Every file the import reads (for the workflow's dependencies)."""
         return [self.path] + [r.surface for r in self.surfaces.values() if r.surface is not None]
+
+    def to_file_frame(self, values: np.ndarray) -> np.ndarray:
+        """Positions or displacements (m, project's frame) in the file's axes and units.
+
+        The import does not translate, so points and vectors go back by the same linear map.
+        """
+        return self.orientation.to_file(values) / UNITS[self.units]
 
 
 def tetrahedralise_surface(
@@ -205,7 +217,28 @@ def prepare_input(
         groups = None
     facets = classify_boundary(x, faces, spec.surfaces, spec.units, groups, mesh.group_names)
     info["rules"] = {b.label: r.describe() for b, r in spec.surfaces.items()}
+    x, tets, facets = into_project_frame(x, tets, facets, spec.orientation)
+    info["orientation"] = spec.orientation.describe()
+    if spec.orientation.declared:
+        check_chest_wall_posterior(x, facets[Boundary.RIB], spec.orientation, what)
     return x, tets, facets, info
+
+
+def into_project_frame(
+    x: np.ndarray, tets: np.ndarray, facets: dict[Boundary, np.ndarray], orientation: Orientation
+) -> tuple[np.ndarray, np.ndarray, dict[Boundary, np.ndarray]]:
+    """Carry a tagged mesh from the file's axes into the project's frame.
+
+    A reflection (a left breast) reverses every cell's and facet's orientation: two vertices of
+    each are swapped back, so that tetrahedra stay positive and facets face outwards.
+    """
+    if not orientation.declared:
+        return x, tets, facets
+    x = orientation.to_project(x)
+    if orientation.mirrors:
+        tets = tets[:, [0, 2, 1, 3]]
+        facets = {b: f[:, [0, 2, 1]] for b, f in facets.items()}
+    return x, tets, facets
 
 
 def imported_anatomy(x: np.ndarray, facets: dict[Boundary, np.ndarray]) -> dict[str, Any]:

@@ -1,0 +1,145 @@
+"""A person's geometry in her own orientation: scanner axes (LPS, RAS), the breast's side, units.
+
+The same body is written in the project's frame (metres) and in DICOM's LPS axes in
+millimetres as a left breast (a mirror image): imported with its orientation declared, it is
+the same mesh, and the same case solved on it gives the same displacement, mapped back into
+the file's axes.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import meshio
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from meshes.exceptions import GeometryError
+from meshes.importing import ImportSpec, write_imported_mesh
+from meshes.orientation import Orientation
+from meshes.quality import tet_volumes
+from tests.test_mesh_import import BOX, SIZE, box_mesh
+
+# In the project's frame the chest wall is posterior: the box's face at x = BOX[0].
+RIB = {"plane": {"point": [BOX[0], 0.0, 0.0], "normal": [1.0, 0.0, 0.0]}, "distance": 0.001}
+LEFT_LPS = Orientation("LPS", "left")
+
+
+def _spec(path: Path, units: str, rib: dict, orientation: dict | None = None) -> ImportSpec:
+    values = {"path": str(path), "units": units, "surfaces": {"rib": rib}}
+    if orientation is not None:
+        values["orientation"] = orientation
+    return ImportSpec.from_mapping(values)
+
+
+def _in_lps_mm(folder: Path) -> tuple[Path, dict, Path]:
+    """The box as tetrahedra in the project's frame (m) and in LPS mm of a left breast."""
+    x, tets = box_mesh(3)
+    project = folder / "box_project.vtu"
+    meshio.write(str(project), meshio.Mesh(x, [("tetra", tets)]))
+    lps = folder / "box_lps_mm.vtu"
+    # a mirror image: its tetrahedra are written inside out, as a left-breast file holds them
+    meshio.write(str(lps), meshio.Mesh(1000.0 * LEFT_LPS.to_file(x), [("tetra", tets)]))
+    point, normal = (np.asarray(RIB["plane"][k]) for k in ("point", "normal"))
+    rib = {"plane": {"point": (1000.0 * LEFT_LPS.to_file(point)).tolist(),
+                     "normal": LEFT_LPS.to_file(normal).tolist()}, "distance": 1.0}
+    return project, rib, lps
+
+
+@pytest.mark.unit
+def test_codes_map_scanner_axes_to_the_body() -> None:
+    # LPS, right breast: posterior is +y of the file, lateral (the right) is -x, superior +z
+    right = Orientation("lps", "right")
+    assert right.axes == "LPS" and not right.mirrors
+    assert np.allclose(right.to_project([[0, 1, 0], [-1, 0, 0], [0, 0, 1]]), np.eye(3))
+    # a left breast is a mirror image of the project's frame
+    assert LEFT_LPS.mirrors and np.allclose(LEFT_LPS.to_project([1, 0, 0]), [0, 1, 0])
+    # RAS is LPS with x and y reversed
+    assert np.allclose(Orientation("RAS", "left").matrix,
+                       LEFT_LPS.matrix @ np.diag([-1.0, -1.0, 1.0]))
+    for orientation in (right, LEFT_LPS, Orientation("RAS", "right"), Orientation()):
+        x = np.random.default_rng(0).normal(size=(5, 3))
+        assert np.allclose(orientation.to_file(orientation.to_project(x)), x)
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize(
+    "values, message",
+    [
+        ({"axes": "LPQ", "side": "left"}, "not an anatomical code"),
+        ({"axes": "LRS", "side": "left"}, "one of each pair"),
+        ({"axes": "LPS"}, "side must be left or right with axes LPS"),
+        ({"axes": "LPS", "side": "middle"}, "side must be left or right"),
+        ({"axes": "LPS", "side": "left", "flip": True}, "unknown mesh.file.orientation key"),
+    ],
+)
+def test_a_bad_orientation_is_named(values: dict, message: str) -> None:
+    with pytest.raises(GeometryError, match=message):
+        Orientation.from_mapping(values)
+
+
+@pytest.mark.unit
+def test_a_left_breast_in_lps_mm_imports_as_the_same_mesh(tmp_path: Path) -> None:
+    project, rib_lps, lps = _in_lps_mm(tmp_path)
+    direct = write_imported_mesh(_spec(project, "m", RIB), SIZE, tmp_path / "a.xdmf")
+    declared = _spec(lps, "mm", rib_lps, {"axes": "LPS", "side": "left"})
+    mapped = write_imported_mesh(declared, SIZE, tmp_path / "b.xdmf")
+    assert mapped["cells"] == direct["cells"]
+    assert mapped["volume_m3"] == pytest.approx(direct["volume_m3"], rel=1e-12)
+    for name, area in direct["area_m2"].items():
+        assert mapped["area_m2"][name] == pytest.approx(area, rel=1e-12), name
+    assert mapped["input"]["orientation"]["mirrored"] is True
+    # the cells of the mirrored file are positive again, in the same places
+    xa, ca = _written(tmp_path / "a.xdmf")
+    xb, cb = _written(tmp_path / "b.xdmf")
+    assert (tet_volumes(xa, ca) > 0).all() and (tet_volumes(xb, cb) > 0).all()
+    assert np.allclose(np.sort(xa, axis=0), np.sort(xb, axis=0), atol=1e-12)
+    # positions go back into the file's axes and units: the chest wall is the file's +y (P) face
+    assert declared.to_file_frame(xb)[:, 1].max() == pytest.approx(1000.0 * BOX[0])
+
+
+def _written(xdmf: Path) -> tuple[np.ndarray, np.ndarray]:
+    """The vertices and tetrahedra of a mesh as the import wrote it."""
+    import h5py
+
+    with h5py.File(xdmf.with_suffix(".h5")) as h5:
+        return h5["Mesh/mesh/geometry"][...], h5["Mesh/mesh/topology"][...][:, :4]
+
+
+@pytest.mark.unit
+def test_an_orientation_that_puts_the_chest_wall_anterior_is_refused(tmp_path: Path) -> None:
+    """The LPS file declared as RAS: posterior becomes anterior."""
+    _, rib_lps, lps = _in_lps_mm(tmp_path)
+    with pytest.raises(GeometryError, match=r"axes RAS, side left, the chest wall .* lies "
+                       r"2\d\.\d mm anterior of the breast's centroid, where it belongs posterior"):
+        write_imported_mesh(_spec(lps, "mm", rib_lps, {"axes": "RAS", "side": "left"}), SIZE,
+                            tmp_path / "m.xdmf")
+
+
+@pytest.mark.solve
+def test_the_displacement_is_the_same_in_either_frame(tmp_path: Path) -> None:
+    """Prone at C1 = 1 kPa on the box and on its LPS-mm left-breast twin agree at every vertex.
+
+    The twin's field is mapped back into the file's axes and units (mm) for the comparison.
+    """
+    from fem.case import run_case
+    from fem.dataset import read_points
+    from fem.sweep import Case
+
+    project, rib_lps, lps = _in_lps_mm(tmp_path)
+    declared = _spec(lps, "mm", rib_lps, {"axes": "LPS", "side": "left"})
+    fields = {}
+    for name, spec in (("project", _spec(project, "m", RIB)), ("lps", declared)):
+        write_imported_mesh(spec, SIZE, tmp_path / f"{name}.xdmf")
+        summary = run_case(tmp_path / f"{name}.xdmf", Case(1.0, 180.0), tmp_path / name)
+        assert summary["status"] == "converged"
+        points = read_points(tmp_path / name / "points.h5")
+        fields[name] = (points["X"], points["u"])
+    (xa, ua), (xb, ub) = fields["project"], fields["lps"]
+    _, match = cKDTree(xa).query(xb)
+    assert np.allclose(xa[match], xb, atol=1e-12)
+    u_file = declared.to_file_frame(ub)  # mm, the file's axes
+    expected = declared.to_file_frame(ua[match])
+    assert np.abs(expected).max() > 1.0  # the box sags by more than a millimetre
+    assert np.abs(u_file - expected).max() < 1e-6 * np.abs(expected).max()
