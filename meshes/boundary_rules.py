@@ -18,18 +18,27 @@ from meshes.quality import triangle_areas
 from meshes.reading import InputMesh, read_surface
 from meshes.tags import Boundary
 
+KINDS = ("group", "plane", "surface", "posterior")
+"""The ways a rule can select facets."""
+
+POSTERIOR = np.array([1.0, 0.0, 0.0])
+"""The patient's posterior in the project's frame (x runs anterior to posterior)."""
+
 
 @dataclass(frozen=True, slots=True)
 class BoundaryRule:
     """How to find one named boundary among the boundary facets of an imported mesh.
 
-    Exactly one of ``group``, ``plane`` or ``surface`` is set.
+    Exactly one of ``group``, ``plane``, ``surface`` or ``posterior`` is set.
 
     Attributes:
         group: a physical-group name (gmsh ``.msh``) or an integer tag of the file's
             triangle cell data.
         plane: ``(point, normal)`` of a plane, metres after unit conversion.
         surface: path of a triangulated surface (STL/OBJ/PLY, same units as the model).
+        posterior: ``(angle, band)``: the facets that face posterior, their outward normal
+            within ``angle`` degrees of the patient's posterior, and lie within ``band``
+            (metres) of the model's most posterior point: a chest wall that is not a plane.
         distance: facets whose every vertex lies within this distance of the plane or
             surface are selected, metres.
     """
@@ -37,15 +46,23 @@ class BoundaryRule:
     group: str | int | None = None
     plane: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
     surface: str | None = None
+    posterior: tuple[float, float] | None = None
     distance: float = 0.001
 
     def __post_init__(self) -> None:
-        given = [k for k in ("group", "plane", "surface") if getattr(self, k) is not None]
+        given = [k for k in KINDS if getattr(self, k) is not None]
         if len(given) != 1:
             raise GeometryError(
-                "a boundary rule needs exactly one of group, plane or surface, "
+                "a boundary rule needs exactly one of group, plane, surface or posterior, "
                 f"got {given or 'none'}"
             )
+        if self.posterior is not None:
+            angle, band = self.posterior
+            if not (0 < angle <= 90 and math.isfinite(band) and band > 0):
+                raise GeometryError(
+                    "a posterior rule needs an angle in (0, 90] degrees and a positive band, "
+                    f"got angle {angle!r}, band {band!r}"
+                )
         if not (math.isfinite(self.distance) and self.distance > 0):
             raise GeometryError(
                 f"a boundary rule's distance must be positive, got {self.distance!r}"
@@ -64,7 +81,7 @@ class BoundaryRule:
         Forms: ``{group: rib}``, ``{plane: {point: [x, y, z], normal: [nx, ny, nz]},
         distance: d}``, ``{surface: path.stl, distance: d}``.
         """
-        known = {"group", "plane", "surface", "distance"}
+        known = {"group", "plane", "surface", "posterior", "distance"}
         unknown = sorted(set(values) - known)
         if unknown:
             raise GeometryError(f"unknown boundary-rule key(s): {', '.join(unknown)}")
@@ -78,12 +95,21 @@ class BoundaryRule:
                 tuple(scale * float(v) for v in p["point"]),
                 tuple(float(v) for v in p["normal"]),
             )
+        posterior = None
+        if values.get("posterior") is not None:
+            q = values["posterior"]
+            if set(q) - {"angle", "band"}:
+                raise GeometryError("a posterior rule is {angle: degrees, band: length}")
+            # the band is in the file's units; 10 mm by default
+            band = scale * float(q["band"]) if "band" in q else 0.01
+            posterior = (float(q.get("angle", 30.0)), band)
         # like the plane's point, the distance is in the file's units; 1 mm by default
         distance = scale * float(values["distance"]) if "distance" in values else 0.001
         return cls(
             group=values.get("group"),
             plane=plane,
             surface=str(values["surface"]) if values.get("surface") is not None else None,
+            posterior=posterior,
             distance=distance,
         )
 
@@ -94,7 +120,25 @@ class BoundaryRule:
         if self.plane is not None:
             point, normal = self.plane
             return f"within {1e3 * self.distance:g} mm of the plane through {point} normal {normal}"
+        if self.posterior is not None:
+            angle, band = self.posterior
+            return (f"facing posterior within {angle:g}° and within {1e3 * band:g} mm of the most "
+                    "posterior point")
         return f"within {1e3 * self.distance:g} mm of the surface {self.surface}"
+
+
+def _posterior_facets(
+    x: np.ndarray, faces: np.ndarray, rule: BoundaryRule, posterior: np.ndarray
+) -> np.ndarray:
+    """Facets facing ``posterior`` within the rule's angle, in its band of the back (mask)."""
+    angle, band = rule.posterior
+    direction = np.asarray(posterior, dtype=float) / np.linalg.norm(posterior)
+    a, b, c = (x[faces[:, i]] for i in range(3))
+    normal = np.cross(b - a, c - a)
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    depth = x @ direction
+    back = depth[faces].min(axis=1) >= depth.max() - band
+    return (normal @ direction >= math.cos(math.radians(angle))) & back
 
 
 def _facet_distance(x: np.ndarray, faces: np.ndarray, rule: BoundaryRule, units: str) -> np.ndarray:
@@ -144,35 +188,34 @@ def _check_rib_share(
     raise SurfaceRuleError(f"{what}: {remedy}")
 
 
-def classify_boundary(
+def select_facets(
     x: np.ndarray,
     faces: np.ndarray,
     rules: dict[Boundary, BoundaryRule],
     units: str,
     face_groups: np.ndarray | None = None,
     group_names: dict[str, int] | None = None,
+    posterior: np.ndarray = POSTERIOR,
 ) -> dict[Boundary, np.ndarray]:
-    """Name the boundary faces by the rules; the faces no rule selects are skin.
+    """The boundary facets each rule selects, as a mask per boundary.
 
     Args:
         x: points (N, 3), metres.
-        faces: boundary triangles (m, 3).
+        faces: boundary triangles (m, 3), facing outwards.
         rules: a rule per boundary (``rib`` required).
         units: the model's units (surface rules read their file in them).
         face_groups: group integer of each face from the file (-1: none), or None.
         group_names: physical name -> group integer of the file.
-
-    Returns:
-        Boundary -> its faces (every boundary present, possibly empty).
+        posterior: the patient's posterior in the points' axes (for a ``posterior`` rule).
 
     Raises:
         NoRibFacetsError: if the rib rule selects nothing, with how near the closest facet was.
-        SurfaceRuleError: if another rule selects nothing, names an unknown group, or a
-            facet is selected by two rules.
+        SurfaceRuleError: if another rule selects nothing or names an unknown group.
     """
     group_names = group_names or {}
     selected: dict[Boundary, np.ndarray] = {}
     for boundary, rule in rules.items():
+        error = NoRibFacetsError if boundary == Boundary.RIB else SurfaceRuleError
         if rule.group is not None:
             if face_groups is None or np.all(face_groups < 0):
                 raise SurfaceRuleError(
@@ -192,10 +235,17 @@ def classify_boundary(
             mask = face_groups == value
             if not mask.any():
                 present = sorted(set(face_groups[face_groups >= 0].tolist()))
-                error = NoRibFacetsError if boundary == Boundary.RIB else SurfaceRuleError
                 raise error(
                     f"no boundary facets found for the {boundary.label} surface: {rule.describe()} "
                     f"(tag {value}) holds no boundary triangles; tags on the boundary: {present}"
+                )
+        elif rule.posterior is not None:
+            mask = _posterior_facets(x, faces, rule, posterior)
+            if not mask.any():
+                raise error(
+                    f"no boundary facets found for the {boundary.label} surface: none is "
+                    f"{rule.describe()}; widen the angle or the band, or check "
+                    "mesh.file.orientation"
                 )
         else:
             distance = _facet_distance(x, faces, rule, units)
@@ -207,15 +257,29 @@ def classify_boundary(
                     if math.isfinite(nearest)
                     else f"no facet comes within {1e3 * 10 * rule.distance:.3g} mm of it"
                 )
-                error = NoRibFacetsError if boundary == Boundary.RIB else SurfaceRuleError
                 raise error(
                     f"no boundary facets found for the {boundary.label} surface: none lies "
                     f"{rule.describe()}; {how_far}. Check the rule's position, the distance and "
                     f"mesh.file.units ({units})"
                 )
         selected[boundary] = mask
-    for i, first in enumerate(list(selected)):
-        for second in list(selected)[i + 1 :]:
+    return selected
+
+
+def check_selection(
+    x: np.ndarray,
+    faces: np.ndarray,
+    selected: dict[Boundary, np.ndarray],
+    rules: dict[Boundary, BoundaryRule],
+) -> None:
+    """Refuse a facet that two rules select, and a rib that is too much or too little.
+
+    Raises:
+        SurfaceRuleError: naming the rules, or the rib's share of the boundary.
+    """
+    names = list(selected)
+    for i, first in enumerate(names):
+        for second in names[i + 1 :]:
             both = int(np.sum(selected[first] & selected[second]))
             if both:
                 raise SurfaceRuleError(
@@ -223,6 +287,25 @@ def classify_boundary(
                     f"{second.label} rules; make the rules exclusive (e.g. a smaller distance)"
                 )
     _check_rib_share(x, faces, selected[Boundary.RIB], rules[Boundary.RIB])
+
+
+def selection_summary(
+    x: np.ndarray, faces: np.ndarray, selected: dict[Boundary, np.ndarray]
+) -> dict[str, dict[str, float]]:
+    """What each rule selects: facets, area (m²) and share of the boundary's area."""
+    areas = triangle_areas(x, faces)
+    total = float(areas.sum())
+    return {
+        b.label: {"facets": int(mask.sum()), "area_m2": float(areas[mask].sum()),
+                  "share": float(areas[mask].sum() / total)}
+        for b, mask in selected.items()
+    }
+
+
+def name_facets(
+    faces: np.ndarray, selected: dict[Boundary, np.ndarray]
+) -> dict[Boundary, np.ndarray]:
+    """Boundary -> its faces (every boundary present); the faces no rule selects are skin."""
     taken = np.zeros(len(faces), dtype=bool)
     for mask in selected.values():
         taken |= mask
@@ -232,6 +315,32 @@ def classify_boundary(
     }
     out[Boundary.SKIN] = np.concatenate([out[Boundary.SKIN], faces[~taken]])
     return out
+
+
+def classify_boundary(
+    x: np.ndarray,
+    faces: np.ndarray,
+    rules: dict[Boundary, BoundaryRule],
+    units: str,
+    face_groups: np.ndarray | None = None,
+    group_names: dict[str, int] | None = None,
+    posterior: np.ndarray = POSTERIOR,
+) -> dict[Boundary, np.ndarray]:
+    """Name the boundary faces by the rules; the faces no rule selects are skin.
+
+    Arguments as :func:`select_facets`.
+
+    Returns:
+        Boundary -> its faces (every boundary present, possibly empty).
+
+    Raises:
+        NoRibFacetsError: if the rib rule selects nothing, with how near the closest facet was.
+        SurfaceRuleError: if another rule selects nothing, names an unknown group, a facet is
+            selected by two rules, or the rib is too much or too little of the boundary.
+    """
+    selected = select_facets(x, faces, rules, units, face_groups, group_names, posterior)
+    check_selection(x, faces, selected, rules)
+    return name_facets(faces, selected)
 
 
 def face_groups(mesh: InputMesh, faces: np.ndarray) -> np.ndarray | None:

@@ -29,7 +29,16 @@ from typing import Any
 
 import numpy as np
 
-from meshes.boundary_rules import BoundaryRule, classify_boundary, face_groups
+from meshes.boundary_rules import (
+    POSTERIOR,
+    BoundaryRule,
+    check_selection,
+    classify_boundary,
+    face_groups,
+    name_facets,
+    select_facets,
+    selection_summary,
+)
 from meshes.checks import (
     UNITS,
     check_closed,
@@ -42,7 +51,7 @@ from meshes.checks import (
     enclosed_volume,
     merge_duplicate_points,
 )
-from meshes.exceptions import GeometryError, MeshInputError
+from meshes.exceptions import GeometryError, MeshInputError, SurfaceRuleError
 from meshes.orientation import Orientation, check_chest_wall_posterior
 from meshes.quality import exterior_faces, tet_volumes
 from meshes.reading import SURFACE_SUFFIXES, VOLUME_SUFFIXES, InputMesh, read_input
@@ -168,13 +177,58 @@ def tetrahedralise_surface(
     return x[used], remap[tets]
 
 
+@dataclass(frozen=True)
+class InputVolume:
+    """An input read, checked and filled with tetrahedra, in the file's axes (metres).
+
+    Attributes:
+        x: points (N, 3).
+        tets: tetrahedra (n, 4), positively oriented.
+        faces: boundary triangles (m, 3), facing outwards.
+        groups: the file's group of each boundary triangle (-1: none), or None.
+        group_names: physical name -> group integer of the file.
+        info: what was read and done, for the quality report.
+    """
+
+    x: np.ndarray
+    tets: np.ndarray
+    faces: np.ndarray
+    groups: np.ndarray | None
+    group_names: dict[str, int]
+    info: dict[str, Any]
+
+
 def prepare_input(
     spec: ImportSpec, size: MeshSize
 ) -> tuple[np.ndarray, np.ndarray, dict[Boundary, np.ndarray], dict[str, Any]]:
     """Read, check, tetrahedralise (if a surface) and name the boundary of an input.
 
+    The boundary is named in the file's axes (the rules are written in them); the mesh is then
+    carried into the project's frame (``spec.orientation``).
+
     Returns:
         ``(points, tets, facets, info)``: the tagged volume mesh and what was done.
+
+    Raises:
+        MeshInputError: (a subclass naming the problem) for any broken input.
+    """
+    volume = read_volume(spec, size)
+    x, tets, info = volume.x, volume.tets, volume.info
+    facets = classify_boundary(
+        x, volume.faces, spec.surfaces, spec.units, volume.groups, volume.group_names,
+        spec.orientation.to_file(POSTERIOR),
+    )
+    info["rules"] = {b.label: r.describe() for b, r in spec.surfaces.items()}
+    x, tets, facets = into_project_frame(x, tets, facets, spec.orientation)
+    info["orientation"] = spec.orientation.describe()
+    if spec.orientation.declared:
+        check_chest_wall_posterior(x, facets[Boundary.RIB], spec.orientation,
+                                   f"the input {spec.path}")
+    return x, tets, facets, info
+
+
+def read_volume(spec: ImportSpec, size: MeshSize) -> InputVolume:
+    """Read and check an input, and fill a surface with tetrahedra (gmsh).
 
     Raises:
         MeshInputError: (a subclass naming the problem) for any broken input.
@@ -215,13 +269,41 @@ def prepare_input(
         tets = check_tetrahedra(x, tets, "the tetrahedralised surface")
         faces = exterior_faces(tets)
         groups = None
-    facets = classify_boundary(x, faces, spec.surfaces, spec.units, groups, mesh.group_names)
-    info["rules"] = {b.label: r.describe() for b, r in spec.surfaces.items()}
-    x, tets, facets = into_project_frame(x, tets, facets, spec.orientation)
-    info["orientation"] = spec.orientation.describe()
-    if spec.orientation.declared:
-        check_chest_wall_posterior(x, facets[Boundary.RIB], spec.orientation, what)
-    return x, tets, facets, info
+    return InputVolume(x, tets, faces, groups, mesh.group_names, info)
+
+
+def preview_rules(
+    spec: ImportSpec, size: MeshSize, png_path: str | Path | None = None
+) -> tuple[dict[str, dict[str, float]], str | None]:
+    """What each boundary rule selects, without meshing for the solver or solving.
+
+    Returns:
+        ``(summary, problem)``: per boundary its facets, area (m²) and share of the boundary's
+        area (:func:`meshes.boundary_rules.selection_summary`); and why the import would stop
+        (two rules claim a facet, the rib is too much or too little), or None.
+
+    Raises:
+        MeshInputError: for broken input, or a rule that selects nothing.
+    """
+    volume = read_volume(spec, size)
+    selected = select_facets(
+        volume.x, volume.faces, spec.surfaces, spec.units, volume.groups, volume.group_names,
+        spec.orientation.to_file(POSTERIOR),
+    )
+    summary = selection_summary(volume.x, volume.faces, selected)
+    try:
+        check_selection(volume.x, volume.faces, selected, spec.surfaces)
+        problem = None
+    except SurfaceRuleError as err:
+        problem = str(err)
+    if png_path is not None:
+        from meshes.plot import plot_boundaries
+
+        x, _, facets = into_project_frame(
+            volume.x, volume.tets, name_facets(volume.faces, selected), spec.orientation
+        )
+        plot_boundaries(x, facets, png_path, title=f"rules on {Path(spec.path).name}")
+    return summary, problem
 
 
 def into_project_frame(

@@ -143,3 +143,60 @@ def test_the_displacement_is_the_same_in_either_frame(tmp_path: Path) -> None:
     expected = declared.to_file_frame(ua[match])
     assert np.abs(expected).max() > 1.0  # the box sags by more than a millimetre
     assert np.abs(u_file - expected).max() < 1e-6 * np.abs(expected).max()
+
+
+# -- a chest wall that is not a plane: the posterior rule, and the preview -------------------
+
+POSTERIOR_RULE = {"posterior": {"angle": 30.0, "band": 1.0}}  # file units: mm below
+
+
+@pytest.mark.unit
+def test_the_posterior_rule_finds_the_chest_wall_in_either_frame(tmp_path: Path) -> None:
+    """On the box, the facets facing posterior near the back are its posterior face.
+
+    So in the project's frame and in LPS mm of a left breast (where posterior is +y).
+    """
+    project, _, lps = _in_lps_mm(tmp_path)
+    rule_m = {"posterior": {"angle": 30.0, "band": 0.001}}
+    direct = write_imported_mesh(_spec(project, "m", rule_m), SIZE, tmp_path / "a.xdmf")
+    declared = _spec(lps, "mm", POSTERIOR_RULE, {"axes": "LPS", "side": "left"})
+    mapped = write_imported_mesh(declared, SIZE, tmp_path / "b.xdmf")
+    for report in (direct, mapped):
+        assert report["area_m2"]["rib"] == pytest.approx(BOX[1] * BOX[2], rel=1e-9)
+    # without the orientation, posterior is the file's +x: the box's left face, 5 x 15 cm
+    undeclared = write_imported_mesh(_spec(lps, "mm", POSTERIOR_RULE), SIZE, tmp_path / "c.xdmf")
+    assert undeclared["area_m2"]["rib"] == pytest.approx(BOX[0] * BOX[2], rel=1e-9)
+
+
+@pytest.mark.unit
+def test_the_preview_prints_what_each_rule_selects(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    import yaml
+
+    _, rib_lps, lps = _in_lps_mm(tmp_path)
+    mesh = {"source": "file", "size": {"fold_size": None, "order": 1, "global_size": 0.03},
+            "file": {"path": str(lps), "units": "mm",
+                     "orientation": {"axes": "LPS", "side": "left"},
+                     "surfaces": {"rib": POSTERIOR_RULE, "cranial": {
+                         "plane": {"point": [0, 0, 1000 * BOX[2]], "normal": [0, 0, 1]},
+                         "distance": 1.0}}}}
+    config = tmp_path / "import.yaml"
+    config.write_text(yaml.safe_dump({"mesh": mesh}))
+    cmd = [sys.executable, "-m", "meshes.preview", str(config), "--png", str(tmp_path / "r.png")]
+    run = subprocess.run(cmd, capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    total = 2 * (BOX[0] * BOX[1] + BOX[1] * BOX[2] + BOX[0] * BOX[2])
+    rib = next(line for line in run.stdout.splitlines() if line.startswith("rib"))
+    assert f"{1e4 * BOX[1] * BOX[2]:.1f}" in rib and f"{100 * BOX[1] * BOX[2] / total:.1f}%" in rib
+    assert "facing posterior within 30°" in rib
+    assert run.stdout.splitlines()[-1] == "the rules would do"
+    assert (tmp_path / "r.png").stat().st_size > 10_000
+    # a rule that takes the whole boundary: the preview says the import would stop
+    mesh["file"]["surfaces"] = {"rib": {"plane": {"point": [0, 0, 0], "normal": [0, 1, 0]},
+                                        "distance": 1000.0}}
+    config.write_text(yaml.safe_dump({"mesh": mesh}))
+    run = subprocess.run(cmd, capture_output=True, text=True)
+    assert run.returncode == 1
+    assert "the import would stop: the rib rule" in run.stdout and "narrow the rule" in run.stdout
