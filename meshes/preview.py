@@ -39,9 +39,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {err}", file=sys.stderr)
         return 2
     print(f"{'boundary':<10} {'facets':>7} {'area cm²':>10} {'share':>7}  rule")
-    for name, row in summary.items():
-        rule = config.file.surfaces[next(b for b in config.file.surfaces if b.label == name)]
-        print(f"{name:<10} {row['facets']:>7d} {1e4 * row['area_m2']:>10.1f} "
+    for boundary, rule in config.file.surfaces.items():
+        row = summary[boundary.label]
+        print(f"{boundary.label:<10} {row['facets']:>7d} {1e4 * row['area_m2']:>10.1f} "
               f"{100 * row['share']:>6.1f}%  {rule.describe()}")
     if args.png:
         print(f"picture: {args.png}")
