@@ -34,16 +34,17 @@ import numpy as np
 import yaml
 
 REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))  # run as a script: the suite's helpers are in tests/
+from tests.conftest import snakemake_command  # noqa: E402
+
 BASE_CONFIG = yaml.safe_load((REPO / "tests" / "config.yaml").read_text())
 RIB = {"plane": {"point": [0.0, 0.0, 0.0], "normal": [1.0, 0.0, 0.0]}, "distance": 0.001}
 
 
 def snakemake(workdir: Path, config: Path | None, *args: str) -> subprocess.CompletedProcess:
     """The project's Snakefile in ``workdir`` (on ``config``, or on its own config.yaml)."""
-    configfile = ["--configfile", str(config)] if config is not None else []
-    cmd = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-d", str(workdir),
-           *configfile, *args]
-    return subprocess.run(cmd, cwd=workdir, capture_output=True, text=True, timeout=300)
+    return subprocess.run(snakemake_command(workdir, *args, config=config), cwd=workdir,
+                          capture_output=True, text=True, timeout=300)
 
 
 @dataclass(frozen=True)

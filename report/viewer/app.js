@@ -40,16 +40,17 @@ class WebSurrogate {
     this.parts = Object.values(model.parts).map((part) => ({
       points: decode(part.points),
       gain: decode(part.gain),
-      layers: part.layers.map((layer) => {
+      layers: part.layers.map((layer, l) => {
         const [nIn, nOut] = layer.W.shape;
         const W = decode(layer.W);
+        if (l === 0) return { W, b: decode(layer.b), nIn, nOut };  // used per point, as it is
         // W transposed (row o holds the weights into output o): each output is then one dot
         // product over contiguous memory, summed in a local variable
         const Wt = new Float64Array(nIn * nOut);
         for (let k = 0; k < nIn; k += 1) {
           for (let o = 0; o < nOut; o += 1) Wt[o * nIn + k] = W[k * nOut + o];
         }
-        return { W, Wt, b: decode(layer.b), nIn, nOut };
+        return { Wt, b: decode(layer.b), nIn, nOut };
       }),
     }));
     this.range = model.training_range;
