@@ -112,6 +112,7 @@ class CaseRunner:
             "first_failure": result.first_failure,
             "failure_kinds": result.failure_kinds,
             "rescued": result.rescued,
+            "exact_retries": result.exact_retries,
             "newton_iterations": result.newton_iterations,
             "total_newton_iterations": result.total_iterations,
             "final_residual": accepted[-1].final_residual if accepted else None,

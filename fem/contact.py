@@ -20,6 +20,7 @@ on every mesh.
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -29,6 +30,8 @@ import numpy as np
 import ufl
 
 from fem.exceptions import InvalidParameterError
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True, slots=True)
@@ -231,12 +234,33 @@ def resolve_obstacle(fe: dict[str, Any], mesh: dict[str, Any]) -> dict[str, Any]
     The solve jobs then need no mesh section to build their contact, and their
     parameters change exactly when the obstacle does. Without contact ``fe`` is
     returned unchanged.
+
+    The default obstacle (``fe.contact`` without an ``obstacle`` key) is the parametric
+    breast's chest. An imported mesh has none: there contact is off, said in one line, so that
+    switching ``mesh.source`` to ``file`` changes only the ``mesh:`` section. An obstacle
+    named ``chest`` explicitly on an imported mesh is refused.
     """
     contact = fe.get("contact")
     if contact is None or contact.get("obstacle", "chest") != "chest":
         return fe
-    geometry = (
-        mesh.get("geometry", {}) if mesh.get("source", "parametric") == "parametric" else None
-    )
+    imported = mesh.get("source", "parametric") != "parametric"
+    if imported and "obstacle" not in contact:
+        _say_once(
+            "fe.contact: off for the imported mesh (its default obstacle is the parametric "
+            "breast's chest); name an obstacle, e.g. {plane: {point: [...], normal: [...]}}, "
+            "to turn it on"
+        )
+        return {key: value for key, value in fe.items() if key != "contact"}
+    geometry = mesh.get("geometry", {}) if not imported else None
     obstacle = obstacle_from_mapping("chest", geometry)
     return {**fe, "contact": {**contact, "obstacle": obstacle.as_mapping()}}
+
+
+_SAID: set[str] = set()
+
+
+def _say_once(message: str) -> None:
+    """Log a warning once per process (the config is resolved more than once per parse)."""
+    if message not in _SAID:
+        _SAID.add(message)
+        log.warning(message)

@@ -41,6 +41,7 @@ class StepRecord:
     min_detF: float | None
     linear_iterations: int = 0
     rescue: bool = False
+    exact_retry: bool = False
 
 
 @dataclass
@@ -85,6 +86,11 @@ class LoadingResult:
     def linear_iterations(self) -> int:
         """Krylov iterations of all attempts (one per Newton iteration for a direct solver)."""
         return sum(a.linear_iterations for a in self.attempts)
+
+    @property
+    def exact_retries(self) -> int:
+        """Increments that the inexact solve failed and exact Newton was tried on."""
+        return sum(a.exact_retry for a in self.attempts)
 
     @property
     def rescued(self) -> bool:
@@ -138,6 +144,7 @@ def solve_incrementally(
     The problem's state must hold the solution at λ = 0 (zero for a fresh case).
     On return the state holds the last converged load fraction.
     """
+    solver.scale_to_load()
     state = problem.w.x.array
     history: list[tuple[float, np.ndarray]] = [(0.0, state.copy())]
     rest = history[0]
@@ -171,6 +178,7 @@ def solve_incrementally(
                 min_detF=min_det,
                 linear_iterations=outcome.linear_iterations,
                 rescue=newton is not None,
+                exact_retry=outcome.exact_retry,
             )
         )
         log.debug("λ=%.4f step=%.4f %s in %d its", target, step, reason, outcome.iterations)

@@ -9,11 +9,17 @@ Presets (``fe.solver`` in the config):
 ``direct`` (default)
     Newton–Krylov on a reused factorisation. The tangent is assembled at every
     Newton iteration, but factorised only when it has to be: GMRES solves each
-    Newton system to ``ksp_rtol`` (1e-5, so the Newton iterates are those of exact
-    Newton to ~1e-5 of the step), preconditioned by the last MUMPS LDLᵀ
-    factorisation, and the tangent is re-factorised at the first iteration of every
-    load step and whenever the previous Krylov solve needed more than
-    ``refactor_above_its`` iterations or failed. One MUMPS solve with the factors
+    Newton system to ``ksp_rtol`` (1e-5) of the *true* residual (right
+    preconditioning: with PETSc's default left preconditioning the test is on the
+    preconditioned residual, which a stale factorisation of an ill-conditioned
+    tangent makes meaningless, and Newton then stalls where exact Newton converges),
+    preconditioned by the last MUMPS LDLᵀ factorisation. The tangent is
+    re-factorised at the first iteration of every load step, whenever the previous
+    Krylov solve needed more than ``refactor_above_its`` iterations or failed, and
+    whenever the last Newton iteration reduced the residual by less than the factor
+    ``refactor_above_ratio`` (a stall). An increment that still fails is tried again
+    from the same guess with a fresh factorisation at every iteration (exact Newton)
+    before the loader cuts the step. One MUMPS solve with the factors
     costs about 1/40 of a factorisation, so a stale factorisation is worth keeping
     while it preconditions to ~10 iterations. Measured on the default mesh, one
     pinned core (the four clinical cases): 1–2 factorisations instead of 3–6, the
@@ -54,7 +60,12 @@ LINE_SEARCHES = ("bt", "l2", "cp", "basic")
 #: Options read by :class:`fem.solver.NewtonSolver` itself, never handed to PETSc.
 #: ``refactor_above_its``: re-factorise the tangent when the previous Krylov solve
 #: took more iterations than this (0: factorise at every Newton iteration).
-SOLVER_KEYS = ("refactor_above_its",)
+#: ``refactor_above_ratio``: re-factorise when the last Newton iteration left more than
+#: this fraction of the residual (a stalling inexact solve; 1 never).
+#: ``load_atol``: Newton's absolute residual tolerance as a fraction of the norm of the
+#: full gravity load, so that the test means the same on every mesh, unit and size
+#: (PETSc's ``snes_atol``, an absolute force, is applied as well where it is larger).
+SOLVER_KEYS = ("refactor_above_its", "refactor_above_ratio", "load_atol")
 
 #: Preconditioners whose set-up is a factorisation that a Krylov method can reuse.
 _FACTORISATIONS = ("lu", "cholesky")
@@ -67,7 +78,10 @@ _NEWTON: dict[str, Any] = {
     # (measured on the default mesh, supine C1 = 1.0 kPa: 8e-8 mm from a solve to
     # 1e-12), and Newton stops one quadratic iteration earlier than at 1e-9.
     "snes_rtol": 1e-7,
-    "snes_atol": 1e-10,
+    # Below one part in 1e9 of the gravity load no step can improve the field (the
+    # round-off of the assembled forces is of that order on a mesh of slivers).
+    "load_atol": 1e-9,
+    "snes_atol": 0.0,
     "snes_stol": 0.0,
     # Past ~15 iterations a step is better cut back than continued: the adaptive
     # loader retries from the last converged state with a smaller increment.
@@ -92,7 +106,9 @@ _MUMPS: dict[str, Any] = {
 RESCUE_OPTIONS: dict[str, Any] = {"snes_linesearch_type": "l2", "snes_max_it": 60}
 
 # A factorisation at every Newton iteration: exact Newton.
-_FACTORISE_EVERY_ITERATION: dict[str, Any] = {"ksp_type": "preonly", "refactor_above_its": 0}
+_FACTORISE_EVERY_ITERATION: dict[str, Any] = {
+    "ksp_type": "preonly", "refactor_above_its": 0, "refactor_above_ratio": 1.0,
+}
 
 # GMRES on the current tangent, preconditioned by the last factorisation.
 _REUSE_FACTORISATION: dict[str, Any] = {
@@ -104,6 +120,8 @@ _REUSE_FACTORISATION: dict[str, Any] = {
     # 5.1 s and at most 2 factorisations; 25 let supine C1 = 1 kPa take 89 Krylov
     # iterations on one factorisation, 10.4 s against 7.4 s.
     "refactor_above_its": 10,
+    "refactor_above_ratio": 0.5,
+    "ksp_pc_side": "right",
     # A Krylov failure on stale factors is not fatal: the next iteration re-factorises.
     "snes_max_linear_solve_fail": 3,
 }
@@ -232,6 +250,15 @@ def solver_options(
         raise InvalidParameterError(
             f"refactor_above_its must be a non-negative integer, got {lag!r}"
         )
+    ratio = options.get("refactor_above_ratio", 1.0)
+    if isinstance(ratio, bool) or not isinstance(ratio, int | float) or not 0 < ratio <= 1:
+        raise InvalidParameterError(
+            f"refactor_above_ratio must be a number in (0, 1], got {ratio!r}"
+        )
+    load_atol = options.get("load_atol", 0.0)
+    if (isinstance(load_atol, bool) or not isinstance(load_atol, int | float)
+            or not math.isfinite(load_atol) or load_atol < 0):
+        raise InvalidParameterError(f"load_atol must be a non-negative number, got {load_atol!r}")
     if lag and (
         options.get("pc_type") not in _FACTORISATIONS or options.get("ksp_type") == "preonly"
     ):

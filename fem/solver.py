@@ -21,6 +21,7 @@ from dolfinx.fem import petsc as fem_petsc
 from petsc4py import PETSc
 
 from fem.exceptions import InvalidParameterError
+from fem.parameters import STANDARD_GRAVITY
 from fem.options import (
     LINE_SEARCHES,
     SOLVER_KEYS,
@@ -69,6 +70,8 @@ class SolveResult:
         linear_iterations: Krylov iterations summed over the Newton iterations
             (1 per iteration for the direct solvers).
         linear_reason: the last linear solve's reason (e.g. a failed factorisation).
+        exact_retry: the inexact solve failed and the increment was solved again with a
+            fresh factorisation at every iteration (the figures add both attempts).
     """
 
     converged: bool
@@ -77,6 +80,7 @@ class SolveResult:
     residuals: list[float] = field(default_factory=list)
     linear_iterations: int = 0
     linear_reason: str = ""
+    exact_retry: bool = False
 
 
 class NewtonSolver:
@@ -102,6 +106,16 @@ class NewtonSolver:
         self.timings = Timings()
         #: Re-factorise when the previous Krylov solve took more iterations (0: always).
         self.refactor_above_its = int(self.options.get("refactor_above_its", 0))
+        #: Re-factorise when the last Newton iteration left more of the residual (1: never).
+        self.refactor_above_ratio = float(self.options.get("refactor_above_ratio", 1.0))
+        #: Newton's absolute tolerance over the full gravity load's norm (:meth:`scale_to_load`).
+        self.load_atol = float(self.options.get("load_atol", 0.0))
+        #: Newton's absolute tolerance, once :meth:`scale_to_load` has set it.
+        self._atol: float | None = None
+        #: Factorise at every iteration (the retry of a failed inexact increment).
+        self._exact = False
+        #: Residual norms of the running Newton solve (its monitor).
+        self._norms: list[float] = []
         comm = problem.mesh.comm
         self.A = fem_petsc.create_matrix(problem.tangent)
         self.A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
@@ -135,6 +149,7 @@ class NewtonSolver:
         self.snes.setFromOptions()
         self._configure_pc(self.snes.getKSP(), self.A)
         self.snes.setConvergenceHistory(reset=True)
+        self.snes.setMonitor(self._monitor)
 
     # -- set-up ---------------------------------------------------------------------------
     @property
@@ -258,14 +273,60 @@ class NewtonSolver:
         self.timings.jacobian += time.perf_counter() - start
         self.timings.jacobian_evaluations += 1
 
+    def _monitor(self, snes: PETSc.SNES, its: int, norm: float) -> None:
+        if its == 0:
+            self._norms = []
+        self._norms.append(float(norm))
+
     def _factorisation_stale(self, snes: PETSc.SNES) -> bool:
-        """Re-factorise at a load step's first iteration, or after a slow or failed Krylov solve."""
+        """Re-factorise at a load step's first iteration, after a slow or failed Krylov solve,
+        after a Newton iteration that stalled, and always in the exact retry."""
         ksp = snes.getKSP()
+        norms = self._norms
         return (
-            snes.getIterationNumber() == 0
+            self._exact
+            or snes.getIterationNumber() == 0
             or ksp.getIterationNumber() > self.refactor_above_its
             or ksp.getConvergedReason() < 0
+            or (len(norms) >= 2 and norms[-1] > self.refactor_above_ratio * norms[-2])
         )
+
+    # -- tolerances -------------------------------------------------------------------------------
+    def scale_to_load(self) -> float:
+        """Set Newton's absolute tolerance to ``load_atol`` times the full gravity load's norm.
+
+        Call after :meth:`fem.problem.GravityProblem.set_case`. The load is the residual at
+        rest under the full body force (the internal forces vanish there), assembled once;
+        the state and the load fraction are left as they were. Returns the tolerance.
+        """
+        problem = self.problem
+        state = problem.w.x.array.copy()
+        body_force = problem.body_force.value.copy()
+        problem.w.x.array[:] = 0.0
+        # the weight under the case's gravity (under standard gravity where it is zero, so that
+        # a case without load still has a tolerance above round-off)
+        gravity = np.asarray(problem.gravity, dtype=float)
+        if not np.any(gravity):
+            gravity = np.array([STANDARD_GRAVITY, 0.0, 0.0])
+        problem.body_force.value[:] = problem.density * gravity
+        counts = (self.timings.residual, self.timings.residual_evaluations)
+        b = self.b.duplicate()
+        self._residual(self.snes, problem.w.vector, b)
+        load = b.norm()
+        b.destroy()
+        self.timings.residual, self.timings.residual_evaluations = counts
+        problem.w.x.array[:] = state
+        problem.body_force.value[:] = body_force
+        self._atol = max(float(self.options.get("snes_atol", 0.0)), self.load_atol * load)
+        self._set_from_options()
+        return self._atol
+
+    def _set_from_options(self) -> None:
+        """Read the options database into the SNES, keeping the load-scaled tolerance."""
+        self.snes.setFromOptions()
+        if self._atol is not None:
+            rtol, _, stol, max_it = self.snes.getTolerances()
+            self.snes.setTolerances(rtol=rtol, atol=self._atol, stol=stol, max_it=max_it)
 
     def _keep_for_factorisation(self, A: PETSc.Mat) -> None:
         """Copy the fresh tangent into P, so that the next PCSetUp factorises it."""
@@ -306,14 +367,47 @@ class NewtonSolver:
         try:
             for key, value in newton.items():
                 opts[f"{self.prefix}{key}"] = value
-            self.snes.setFromOptions()
+            self._set_from_options()
             return self._solve()
         finally:
             for key, value in own.items():
                 opts[f"{self.prefix}{key}"] = value
-            self.snes.setFromOptions()
+            self._set_from_options()
 
     def _solve(self) -> SolveResult:
+        """Newton from the problem's state; an inexact solve that fails is retried exact.
+
+        With a kept factorisation, an increment that fails for any reason but a non-finite
+        residual or a PETSc error (an iteration limit, a stalled or failed line search, a
+        failed Krylov solve) is solved again from the same guess with a fresh factorisation
+        at every iteration, so that the loader cuts the step only where exact Newton fails
+        too. The result counts the work of both.
+        """
+        guess = self.problem.w.x.array.copy()
+        first = self._newton()
+        if first.converged or not self.refactor_above_its or first.reason in _NOT_RETRIED \
+                or first.reason.startswith("petsc_error"):
+            return first
+        log.info("inexact Newton failed (%s after %d its, residual %s): again with a fresh "
+                 "factorisation at every iteration", first.reason, first.iterations,
+                 f"{first.residuals[-1]:.3g}" if first.residuals else "?")
+        self.problem.w.x.array[:] = guess  # the residual callbacks moved the state
+        self._exact = True
+        try:
+            second = self._newton()
+        finally:
+            self._exact = False
+        return SolveResult(
+            second.converged,
+            second.reason,
+            first.iterations + second.iterations,
+            first.residuals + second.residuals,
+            linear_iterations=first.linear_iterations + second.linear_iterations,
+            linear_reason=second.linear_reason,
+            exact_retry=True,
+        )
+
+    def _newton(self) -> SolveResult:
         self.problem.w.vector.copy(self.x)
         self.snes.setConvergenceHistory(reset=True)
         start = time.perf_counter()
@@ -428,6 +522,10 @@ _KSP_REASONS = {
     for name in dir(PETSc.KSP.ConvergedReason)
     if name.isupper() or name.startswith(("CONVERGED", "DIVERGED"))
 }
+
+
+#: Failures that exact Newton from the same guess would meet as well: the state itself is bad.
+_NOT_RETRIED = ("diverged_fnorm_nan",)
 
 
 def _reason_name(reason: int) -> str:

@@ -23,7 +23,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -51,7 +51,12 @@ from meshes.checks import (
     enclosed_volume,
     merge_duplicate_points,
 )
-from meshes.exceptions import GeometryError, MeshInputError, SurfaceRuleError
+from meshes.exceptions import (
+    GeometryError,
+    InvalidElementsError,
+    MeshInputError,
+    SurfaceRuleError,
+)
 from meshes.orientation import Orientation, check_chest_wall_posterior
 from meshes.quality import exterior_faces, tet_volumes
 from meshes.reading import SURFACE_SUFFIXES, VOLUME_SUFFIXES, InputMesh, read_input
@@ -168,13 +173,67 @@ def tetrahedralise_surface(
         gmsh.option.setNumber("Mesh.MeshSizeMin", 0.0)
         gmsh.option.setNumber("Mesh.Algorithm3D", 1)
         gmsh.option.setNumber("Mesh.Optimize", 1)
+        # Netgen's optimiser moves and swaps to remove slivers (the tetrahedra of a
+        # remeshed noisy surface otherwise reach dihedral angles near 1°)
+        gmsh.option.setNumber("Mesh.OptimizeNetgen", 1)
         gmsh.option.setNumber("Mesh.RandomSeed", 1)
         model.mesh.generate(3)
         x, tets, _ = mesh_arrays(model, {})
+        if _worst_dihedral(x, tets) < MIN_DIHEDRAL_DEG:
+            for method in ("Relocate3D", "Netgen"):
+                model.mesh.optimize(method)
+            x, tets, _ = mesh_arrays(model, {})
     used = np.unique(tets)
     remap = np.full(len(x), -1, dtype=np.int64)
     remap[used] = np.arange(len(used))
     return x[used], remap[tets]
+
+
+#: Smallest dihedral angle (degrees) accepted in a tetrahedron the import makes: below it a
+#: cell is a sliver, whose stiffness conditions the tangent badly and whose P2 interpolation
+#: errs (a regular tetrahedron has 70.5°).
+MIN_DIHEDRAL_DEG = 10.0
+
+
+def _worst_dihedral(x: np.ndarray, tets: np.ndarray) -> float:
+    from meshes.quality import dihedral_angles
+
+    return float(dihedral_angles(x, tets).min()) if len(tets) else 180.0
+
+
+def check_dihedral_floor(x: np.ndarray, tets: np.ndarray, what: str, strict: bool) -> dict:
+    """Count the cells below :data:`MIN_DIHEDRAL_DEG`; refuse them (``strict``) or warn.
+
+    Returns:
+        ``{"min_dihedral_deg", "cells_below_floor", "floor_deg"}`` for the quality report.
+
+    Raises:
+        InvalidElementsError: if ``strict`` and a cell is below the floor, naming the worst
+            cells (index, smallest angle, centroid).
+    """
+    from meshes.quality import dihedral_angles
+
+    angles = dihedral_angles(x, tets).min(axis=1)
+    below = np.flatnonzero(angles < MIN_DIHEDRAL_DEG)
+    record = {"min_dihedral_deg": float(angles.min()), "cells_below_floor": int(below.size),
+              "floor_deg": MIN_DIHEDRAL_DEG}
+    if below.size == 0:
+        return record
+    worst = below[np.argsort(angles[below])][:3]
+    named = "; ".join(
+        f"cell {i}: {angles[i]:.2f}° at ({', '.join(f'{1e3 * c:.1f}' for c in x[tets[i]].mean(0))})"
+        " mm" for i in worst
+    )
+    message = (f"{what}: {below.size} of {len(tets)} tetrahedra have a dihedral angle below "
+               f"{MIN_DIHEDRAL_DEG:g}° (worst {named})")
+    if strict:
+        raise InvalidElementsError(
+            f"{message}, after gmsh's optimisers: remesh with a smaller mesh.size.global_size, "
+            "or smooth the surface"
+        )
+    log.warning("%s; slivers condition the solver badly: remesh them (mesh.file.remesh: true "
+                "for a surface) where the solve struggles", message)
+    return record
 
 
 @dataclass(frozen=True)
@@ -252,6 +311,7 @@ def read_volume(spec: ImportSpec, size: MeshSize) -> InputVolume:
         check_face_manifold(tets, what)
         faces = exterior_faces(tets)
         check_closed(x, faces, f"the boundary of {spec.path}")
+        info["quality_floor"] = check_dihedral_floor(x, tets, what, strict=False)
         info["kind"] = "volume mesh"
         groups = face_groups(mesh, faces)
     else:
@@ -267,6 +327,12 @@ def read_volume(spec: ImportSpec, size: MeshSize) -> InputVolume:
         info["remeshed"] = spec.remesh
         x, tets = tetrahedralise_surface(x, tris, size, spec.remesh)
         tets = check_tetrahedra(x, tets, "the tetrahedralised surface")
+        # a remeshed surface is the import's own work: it must meet the floor; kept triangles
+        # bound what the optimisers can do, so there the import warns
+        info["quality_floor"] = check_dihedral_floor(
+            x, tets, "the tetrahedralised surface" + (" (remeshed)" if spec.remesh else ""),
+            strict=spec.remesh,
+        )
         faces = exterior_faces(tets)
         groups = None
     return InputVolume(x, tets, faces, groups, mesh.group_names, info)
@@ -338,6 +404,24 @@ def imported_anatomy(x: np.ndarray, facets: dict[Boundary, np.ndarray]) -> dict[
     }
 
 
+def import_size(size: MeshSize) -> MeshSize:
+    """The part of ``mesh.size`` that applies to an imported geometry.
+
+    ``order: 2`` curves cells onto the parametric CAD and ``fold_size`` refines the parametric
+    fold; an import has neither, so switching ``mesh.source`` to ``file`` keeps the config's
+    sizes and says in one line which keys it leaves aside.
+    """
+    ignored = []
+    if size.order != 1:
+        ignored.append(f"order: {size.order}")
+    if size.fold_size is not None:
+        ignored.append(f"fold_size: {size.fold_size}")
+    if ignored:
+        log.info("mesh.size %s: parametric only; the import is meshed linear with "
+                 "global_size %g m", ", ".join(ignored), size.global_size)
+    return replace(size, order=1, fold_size=None)
+
+
 def write_imported_mesh(
     spec: ImportSpec,
     size: MeshSize,
@@ -346,26 +430,15 @@ def write_imported_mesh(
 ) -> dict[str, Any]:
     """Import, check and tag a user's geometry; write XDMF (and a PNG); return the quality report.
 
-    Imported meshes are linear (``mesh.size.order`` 2 needs the CAD of the parametric
-    model to place curved nodes on, so it is refused here).
+    Imported meshes are linear and have no fold to refine (:func:`import_size`).
 
     Raises:
-        GeometryError: if ``size.order`` is 2 or ``size.fold_size`` is set.
         MeshInputError: (a subclass naming the problem) for any broken input.
     """
     from meshes.build import gmsh_quality, gmsh_session
     from meshes.io import add_tagged_mesh, write_gmsh_model
 
-    if size.order != 1:
-        raise GeometryError(
-            "mesh.size.order 2 needs the parametric CAD to curve elements on; imported "
-            "meshes are linear: set mesh.size.order: 1"
-        )
-    if size.fold_size is not None:
-        raise GeometryError(
-            "mesh.size.fold_size refines the parametric breast's inframammary fold, which an "
-            "imported geometry does not name: set mesh.size.fold_size: null"
-        )
+    size = import_size(size)
     start = time.perf_counter()
     x, tets, facets, info = prepare_input(spec, size)
     mesh_s = time.perf_counter() - start

@@ -185,7 +185,8 @@ CONFIG_PROBES: dict[str, Callable[[Path], Outcome]] = {
     ),
     "the parametric chest as an import's obstacle": config_probe(
         config_with(mesh__source="file", mesh__size={"fold_size": None, "order": 1},
-                    mesh__file={"path": "b.stl", "surfaces": {"rib": RIB}}, fe__contact={}),
+                    mesh__file={"path": "b.stl", "surfaces": {"rib": RIB}},
+                    fe__contact={"obstacle": "chest"}),
         r"fe\.contact\.obstacle 'chest'",
     ),
 }

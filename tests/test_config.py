@@ -225,6 +225,7 @@ def test_an_imported_mesh_needs_an_explicit_obstacle() -> None:
     raw = read("tests/config.yaml")
     raw["mesh"]["source"] = "file"
     raw["mesh"]["file"] = {"path": "box.stl", "surfaces": {"rib": {"group": "rib"}}}
+    raw["fe"]["contact"] = {"obstacle": "chest"}
     with pytest.raises(ConfigError, match=r"^fe\.contact\.obstacle 'chest' is the parametric"):
         WorkflowConfig.from_mapping(raw)
 

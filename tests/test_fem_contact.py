@@ -44,7 +44,7 @@ from meshes.tags import Boundary
 
 pytestmark = pytest.mark.solve
 
-TIGHT = {"snes_rtol": 1e-12, "snes_atol": 1e-11}
+TIGHT = {"snes_rtol": 1e-12, "snes_atol": 1e-11, "load_atol": 0.0}
 
 
 def standing_block(side: float, n: int):
@@ -191,9 +191,14 @@ def test_bad_contact_settings_are_refused_by_name(values, geometry, message) -> 
         contact_from_mapping(values, geometry)
 
 
-def test_an_imported_mesh_with_chest_contact_is_refused_by_the_settings() -> None:
+def test_the_default_contact_is_off_on_an_imported_mesh() -> None:
+    """`contact: {}` names no obstacle: on an import it is off; `chest` by name is refused."""
+    settings = SolverSettings.from_config({"fe": {"contact": {}}, "mesh": {"source": "file"}})
+    assert settings.contact is None
     with pytest.raises(InvalidParameterError, match="explicit obstacle"):
-        SolverSettings.from_config({"fe": {"contact": {}}, "mesh": {"source": "file"}})
+        SolverSettings.from_config(
+            {"fe": {"contact": {"obstacle": "chest"}}, "mesh": {"source": "file"}}
+        )
 
 
 def test_contact_keeps_the_skin_out_of_the_chest(coarse_mesh: Path, tmp_path: Path) -> None:

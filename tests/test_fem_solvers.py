@@ -163,3 +163,47 @@ def test_config_selects_preset_and_overrides() -> None:
     options = solver_options(settings.solver, settings.petsc_options)
     assert options["pc_type"] == "fieldsplit" and options["ksp_rtol"] == 1e-6
     assert settings.describe(options)["solver"] == "iterative"
+
+
+def test_a_failed_inexact_increment_is_solved_exactly_before_the_load_is_cut(
+    coarse_mesh: Path, reference: np.ndarray
+) -> None:
+    """The default's fallback: where the kept factorisation cannot carry Newton, the same
+    increment is solved again with a fresh factorisation at every iteration.
+
+    Crippled on purpose: two Krylov iterations on a factorisation that is never refreshed
+    (no count, ratio or failure triggers it) and no Krylov failure tolerated stall the
+    inexact path; the whole load must still go on in one step, to the reference answer.
+    """
+    crippled = {"ksp_max_it": 2, "refactor_above_its": 1000, "refactor_above_ratio": 1.0,
+                "snes_max_linear_solve_fail": 0, "snes_max_it": 4}
+    u, result = _displacement(coarse_mesh, petsc_options=crippled)
+    assert result.exact_retries == 1 and len(result.attempts) == 1, result.as_dict()
+    assert not result.rescued
+    assert np.max(np.abs(u - reference)) <= 1e-7 * np.abs(reference).max()
+
+
+def test_newtons_absolute_tolerance_is_scaled_to_the_load(coarse_mesh: Path) -> None:
+    """`load_atol` is a fraction of the full weight's norm; finding it moves no state."""
+    from fem.case import CaseRunner
+
+    runner = CaseRunner(coarse_mesh, SolverSettings(petsc_options={"load_atol": 1e-6}))
+    problem, solver = runner.problem, runner.solver
+    problem.set_case(CASE.material(), CASE.gravity())
+    problem.set_load_fraction(0.25)
+    problem.w.x.array[:] = 1e-6
+    atol = solver.scale_to_load()
+    assert np.all(problem.w.x.array == 1e-6)
+    assert np.allclose(problem.body_force.value, 0.25 * problem.density * problem.gravity)
+    # the weight ρ g V spread over the n nodes: its norm is near |ρ g| V / √n (the clamped
+    # nodes carry none of it, and P2's vertex loads are negative, so allow a factor 2 each way)
+    weight = problem.density * np.linalg.norm(problem.gravity) * problem.volume
+    nodes = problem.num_dofs() // 3
+    assert 0.5 < (atol / 1e-6) / (weight / np.sqrt(nodes)) < 2.0
+    assert solver.snes.getTolerances()[1] == atol
+    twice = CaseRunner(coarse_mesh, SolverSettings(density=1800.0,
+                                                   petsc_options={"load_atol": 1e-6}))
+    twice.problem.set_case(CASE.material(1800.0), CASE.gravity())
+    assert twice.solver.scale_to_load() == pytest.approx(2 * atol, rel=1e-12)
+    runner.solver.destroy()
+    twice.solver.destroy()

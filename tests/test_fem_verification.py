@@ -27,7 +27,7 @@ from meshes.tags import Boundary
 
 pytestmark = pytest.mark.solve
 
-TIGHT = {"snes_rtol": 1e-12, "snes_atol": 1e-11}
+TIGHT = {"snes_rtol": 1e-12, "snes_atol": 1e-11, "load_atol": 0.0}
 
 
 # -- homogeneous uniaxial stretch ---------------------------------------------------------------

@@ -297,12 +297,18 @@ def test_unreadable_or_unsupported_input(tmp_path: Path) -> None:
     garbage.write_bytes(b"solid nothing\n  facet normal oops\n")
     with pytest.raises(MeshInputError, match="cannot read"):
         write_imported_mesh(spec(garbage), SIZE, tmp_path / "m.xdmf")
-    with pytest.raises(GeometryError, match="order 2"):
-        write_imported_mesh(spec(garbage), MeshSize(order=2), tmp_path / "m.xdmf")
-    with pytest.raises(GeometryError, match="fold_size"):
-        write_imported_mesh(spec(garbage), MeshSize(fold_size=0.004), tmp_path / "m.xdmf")
     with pytest.raises(GeometryError, match="rule for the rib"):
         ImportSpec.from_mapping({"path": "a.stl", "surfaces": {"cranial": RIB_PLANE}})
+
+
+def test_the_parametric_sizes_are_left_aside_on_import(caplog) -> None:
+    """Curved cells and the fold grading need the parametric CAD: an import says so once."""
+    from meshes.importing import import_size
+
+    with caplog.at_level("INFO", logger="meshes.importing"):
+        size = import_size(MeshSize(order=2, fold_size=0.004))
+    assert (size.order, size.fold_size) == (1, None)
+    assert "order: 2, fold_size: 0.004: parametric only" in caplog.text
 
 
 # -- the checks as functions -----------------------------------------------------------------
@@ -393,20 +399,27 @@ def test_mesh_rule_depends_on_the_imported_file(tmp_path: Path) -> None:
     assert "input: box.stl" in plan and "results/mesh/mesh.png" in plan
 
 
-def test_the_default_contact_on_an_imported_mesh_is_refused(tmp_path: Path) -> None:
-    """The workflow refuses `contact: {}` with an imported mesh before it plans a job.
+def test_an_import_changes_only_the_mesh_section(tmp_path: Path) -> None:
+    """config.yaml with only `mesh.source` and `mesh.file` changed plans the import.
 
-    config.yaml's `contact: {}` rests the skin on the parametric breast's chest, which an
-    imported mesh does not have.
+    Its `contact: {}` rests the skin on the parametric breast's chest, which an imported mesh
+    does not have: contact is off, said in one line; its curved cells and fold grading are left
+    aside. An obstacle named `chest` explicitly is still refused before any job.
     """
     write_surface(tmp_path / "box.stl", *box_mesh(2))
     config = file_config()
     config["fe"]["contact"] = {}
+    config["mesh"]["size"] = {**config["mesh"]["size"], "order": 2, "fold_size": 0.006}
+    run = _plan(tmp_path, config, "results/mesh/mesh.xdmf")
+    said = run.stdout + run.stderr
+    assert run.returncode == 0, said[-3000:]
+    assert said.count("fe.contact: off for the imported mesh") == 1
+    config["fe"]["contact"] = {"obstacle": "chest"}
     run = _plan(tmp_path, config, "results/mesh/mesh.xdmf")
     said = run.stdout + run.stderr
     assert run.returncode != 0 and "invalid configuration: fe.contact.obstacle 'chest'" in said
     assert "an imported mesh (mesh.source: file) needs an explicit obstacle" in said
-    assert "or no fe.contact" in said and not (tmp_path / "results").exists()
+    assert not (tmp_path / "results").exists()
 
 
 def test_clamping_a_surface_no_rule_names_is_refused() -> None:
