@@ -377,16 +377,17 @@ class NewtonSolver:
     def _solve(self) -> SolveResult:
         """Newton from the problem's state; an inexact solve that fails is retried exact.
 
-        With a kept factorisation, an increment that fails for any reason but a non-finite
-        residual or a PETSc error (an iteration limit, a stalled or failed line search, a
-        failed Krylov solve) is solved again from the same guess with a fresh factorisation
-        at every iteration, so that the loader cuts the step only where exact Newton fails
-        too. The result counts the work of both.
+        With a kept factorisation, an increment whose Newton got close and stalled (below
+        :data:`RETRY_BELOW` of its first residual: the inexact solves no longer carry it) or
+        whose Krylov solves failed is solved again from the same guess with a fresh
+        factorisation at every iteration, so that the loader cuts the step only where exact
+        Newton fails too. An increment that never got close is cut at once: there the stall
+        refactorisation (``refactor_above_ratio``) has already made the iterations exact
+        Newton's, which a retry would repeat. The result counts the work of both.
         """
         guess = self.problem.w.x.array.copy()
         first = self._newton()
-        if first.converged or not self.refactor_above_its or first.reason in _NOT_RETRIED \
-                or first.reason.startswith("petsc_error"):
+        if first.converged or not self.refactor_above_its or not _worth_retrying(first):
             return first
         log.info("inexact Newton failed (%s after %d its, residual %s): again with a fresh "
                  "factorisation at every iteration", first.reason, first.iterations,
@@ -524,8 +525,19 @@ _KSP_REASONS = {
 }
 
 
-#: Failures that exact Newton from the same guess would meet as well: the state itself is bad.
-_NOT_RETRIED = ("diverged_fnorm_nan",)
+#: A failed inexact solve whose residual fell below this fraction of its first one is retried
+#: exactly (:meth:`NewtonSolver._solve`).
+RETRY_BELOW = 1e-3
+
+
+def _worth_retrying(result: SolveResult) -> bool:
+    """Whether exact Newton from the same guess may succeed where the inexact solve failed."""
+    if result.reason == "diverged_fnorm_nan" or result.reason.startswith("petsc_error"):
+        return False  # the state itself is bad: exact Newton meets it as well
+    if "linear_solve" in result.reason or result.linear_reason.startswith("diverged"):
+        return True
+    residuals = result.residuals
+    return len(residuals) >= 2 and residuals[-1] <= RETRY_BELOW * residuals[0]
 
 
 def _reason_name(reason: int) -> str:

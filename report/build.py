@@ -24,6 +24,7 @@ import jinja2
 
 from report.context import INPUT_NAMES, Context
 from report.html import para
+from report.sections.corpus import corpus_section
 from report.sections.fe import fe_speed_accuracy_section
 from report.sections.mesh import mesh_section
 from report.sections.paper import paper_section
@@ -51,6 +52,7 @@ SECTIONS: tuple[tuple[str, str, Callable[[Context], str]], ...] = (
      surrogate_speed_accuracy_section),
     ("scene-needs", "Model no more than a scene needs", scene_needs_section),
     ("stability", "Stability", stability_section),
+    ("corpus", "A corpus of anatomies", corpus_section),
     ("paper", "The paper side by side", paper_section),
     ("sweep-cost", "Sweep cost", sweep_cost_section),
     ("training", "Surrogate training", training_section),

@@ -14,6 +14,7 @@ from fem.dataset import read_case_columns, read_dataset
 from report.common import case_id
 from report.html import figure
 from studies.architecture import ArchitectureTable, VariantComparison
+from studies.corpus import CorpusTable
 from studies.fe_benchmark import ClinicalBenchmark
 from studies.fe_speed_accuracy import SpeedAccuracy
 from studies.mesh_quality import MeshQuality
@@ -28,7 +29,7 @@ log = logging.getLogger(__name__)
 INPUT_NAMES = (
     "dataset", "quality", "mesh_png", "model", "history", "table2", "variants", "clinical",
     "extrapolation", "benchmark", "clinical_fields", "fe_clinical", "fe_speed_accuracy",
-    "fe_stability", "viewer",
+    "fe_stability", "corpus", "viewer",
 )
 
 
@@ -46,6 +47,7 @@ RESULT_TYPES: dict[str, Callable[[Path], Any]] = {
     "fe_clinical": ClinicalBenchmark.read,
     "fe_speed_accuracy": SpeedAccuracy.read,
     "fe_stability": StabilityMap.read,
+    "corpus": CorpusTable.read,
 }
 
 

@@ -38,6 +38,21 @@ def test_prone_case_converges_conserves_volume_and_sags(runner) -> None:
     assert timings["solve"] > 0
 
 
+def test_a_large_case_skips_measuring_the_factorisation_unit(
+    runner, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Above MEASURE_UNIT_MAX_DOFS the summary does not pay a second factorisation."""
+    import fem.case
+
+    monkeypatch.setattr(fem.case, "MEASURE_UNIT_MAX_DOFS", 10)
+    calls = []
+    monkeypatch.setattr(runner.solver, "time_linear_system", lambda: calls.append(1) or 1.0)
+    case = Case(5.0, 0.0)
+    summary = runner.summary(case, *runner.solve(case))
+    assert summary["linear_system_s"] is None and summary["factorization_equivalents"] is None
+    assert calls == [] and summary["status"] == "converged"
+
+
 def test_run_case_writes_complete_outputs(coarse_mesh: Path, tmp_path: Path) -> None:
     from fem.case import run_case
     from fem.dataset import read_points

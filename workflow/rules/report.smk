@@ -19,6 +19,7 @@ rule report:
         fe_clinical=FE_CLINICAL_JSON,
         fe_speed_accuracy=FE_SPEED_ACCURACY_JSON,
         fe_stability=FE_STABILITY_JSON,
+        corpus=CORPUS_JSON,
         viewer=VIEWER,
     output:
         html=REPORT,

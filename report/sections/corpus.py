@@ -1,0 +1,35 @@
+"""The corpus of anatomies: the import and the default solver beyond the project's own breast."""
+
+from __future__ import annotations
+
+from report.context import Context
+from report.html import missing, para, table
+from studies.corpus import CORPUS_HEADER, EXACT, SOFT_C1, SOFT_PHI, corpus_rows
+
+
+def corpus_section(ctx: Context) -> str:
+    """One row per anatomy: its mesh, and its cases with the default solver and exact Newton."""
+    corpus = ctx.results.get("corpus")
+    if corpus is None:
+        return missing("results/corpus/corpus.json")
+    runs = corpus.anatomies
+    cases = len(runs[0].by_solver(EXACT)) if runs else 0
+    missed = sum(len(run.missed) for run in runs)
+    out = [para(
+        "Six geometries the project makes itself, each imported the way a user's file would "
+        "be (the parametric ones built from the config with another shape): the config's "
+        "breast, a small and a large ptotic one, a hemisphere on a flat chest wall, an "
+        "irregular scan-like surface in scanner axes (LPS, a left breast, remeshed, its chest "
+        "wall chosen by the posterior rule) and a tetrahedral volume mesh in RAS axes. On each, "
+        f"{cases} cases: the clinical cases and C1 = {SOFT_C1:g} kPa at Φ = "
+        f"{', '.join(f'{p:g}' for p in SOFT_PHI)}°, solved with the config's solver (the "
+        f"default) and with exact Newton ({EXACT}), alternately in one process. Newton "
+        "iterations count every attempt, failed ones included; times are one solve's wall "
+        "time, in the same job for both paths.", "caption")]
+    out.append(table(CORPUS_HEADER, corpus_rows(corpus), table_id="corpus"))
+    out.append(para(
+        "The default converged every case that exact Newton converged."
+        if not missed else
+        f"{missed} case(s) converged with exact Newton but not with the default: see the last "
+        "column."))
+    return "".join(out)

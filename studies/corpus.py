@@ -1,0 +1,174 @@
+"""The corpus of anatomies (:mod:`meshes.corpus`) solved with the default solver and exact Newton.
+
+For every anatomy: the config's clinical cases and :data:`SOFT_C1` kPa at the eight directions
+of :data:`SOFT_PHI`, each solved with the config's solver settings (the default) and again with
+``direct-refactor`` (exact Newton, a fresh factorisation at every iteration), in one process on
+one mesh. The default must converge every case exact Newton converges; the table gives each
+anatomy's volume, cells, unknowns, cases converged, Newton iterations and time.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fem.parameters import SolverSettings
+from fem.sweep import Case
+from studies.machine import machine_state
+from studies.mesh_quality import MeshQuality
+from studies.results import Record, Result
+
+log = logging.getLogger(__name__)
+
+#: The soft stiffness (kPa) solved at eight directions: the paper's softest C1, where the
+#: solver is tried hardest.
+SOFT_C1 = 0.8
+#: Eight gravity directions Φ (degrees) in the paper's plane, 45° apart.
+SOFT_PHI = (-135.0, -90.0, -45.0, 0.0, 45.0, 90.0, 135.0, 180.0)
+#: The reference path: exact Newton.
+EXACT = "direct-refactor"
+
+
+def corpus_cases(clinical: list[dict[str, Any]]) -> list[Case]:
+    """The config's clinical cases, then :data:`SOFT_C1` at every :data:`SOFT_PHI`."""
+    cases = [Case(float(c["C1"]), float(c["phi"]), float(c.get("theta", 0.0))) for c in clinical]
+    cases += [Case(SOFT_C1, phi) for phi in SOFT_PHI]
+    return list(dict.fromkeys(cases))
+
+
+@dataclass(frozen=True, slots=True)
+class CorpusSolve(Record):
+    """One case solved with one solver path."""
+
+    case: str
+    C1: float
+    phi: float
+    theta: float
+    solver: str
+    converged: bool
+    load_fraction: float
+    load_steps: int
+    newton_iterations: int
+    preconditioner_builds: int
+    exact_retries: int
+    rescued: bool
+    solve_s: float
+    max_disp_mm: float
+    reason: str
+
+
+@dataclass(frozen=True, slots=True)
+class AnatomyRun(Result):
+    """An anatomy's mesh and its cases, with the default solver and with exact Newton."""
+
+    name: str
+    description: str
+    source: str
+    volume_ml: float
+    cells: int
+    dofs: int
+    min_dihedral_deg: float
+    solver: str
+    solves: list[CorpusSolve]
+    machine: dict[str, Any]
+
+    def by_solver(self, solver: str) -> list[CorpusSolve]:
+        """The solves of one path, in case order."""
+        return [s for s in self.solves if s.solver == solver]
+
+    @property
+    def missed(self) -> list[str]:
+        """Cases exact Newton converges and the default does not."""
+        default = {s.case: s.converged for s in self.by_solver(self.solver)}
+        return [s.case for s in self.by_solver(EXACT) if s.converged and not default.get(s.case)]
+
+
+@dataclass(frozen=True, slots=True)
+class CorpusTable(Result):
+    """Every anatomy's run, in the corpus's order."""
+
+    anatomies: list[AnatomyRun]
+
+
+def solve_anatomy(
+    name: str,
+    description: str,
+    mesh_path: str | Path,
+    quality: MeshQuality,
+    settings: SolverSettings,
+    cases: list[Case],
+) -> AnatomyRun:
+    """Solve ``cases`` on one anatomy's mesh with ``settings`` and with exact Newton.
+
+    The two paths run alternately case by case in one process (one mesh read and form
+    compilation each), so their times are comparable under the same load on the machine.
+    """
+    from fem.case import CaseRunner
+
+    exact = replace(settings, solver=EXACT, petsc_options={})
+    paths = {settings.solver: CaseRunner(mesh_path, settings)}
+    if settings.solver != EXACT:
+        paths[EXACT] = CaseRunner(mesh_path, exact)
+    before = machine_state().to_json()
+    solves = []
+    for case in cases:
+        for solver, runner in paths.items():
+            start = time.perf_counter()
+            result, timings = runner.solve(case)
+            elapsed = time.perf_counter() - start
+            u = runner.problem.displacement().x.array.reshape(-1, 3)
+            solves.append(CorpusSolve(
+                case=case.id, C1=case.C1, phi=case.phi, theta=case.theta, solver=solver,
+                converged=result.converged, load_fraction=result.fraction,
+                load_steps=len(result.accepted), newton_iterations=result.total_iterations,
+                preconditioner_builds=int(timings["preconditioner_builds"]),
+                exact_retries=result.exact_retries, rescued=result.rescued, solve_s=elapsed,
+                max_disp_mm=float(1e3 * np.linalg.norm(u, axis=1).max(initial=0.0)),
+                reason=result.reason,
+            ))
+            log.info("%s %s %s: %s, %d Newton its, %.1f s", name, case.id, solver,
+                     result.reason, result.total_iterations, elapsed)
+    dofs = paths[settings.solver].problem.num_dofs()
+    for runner in paths.values():
+        runner.solver.destroy()
+    return AnatomyRun(
+        name=name, description=description, source=quality.source,
+        volume_ml=quality.volume_ml, cells=quality.cells, dofs=int(dofs),
+        min_dihedral_deg=quality.min_dihedral_deg, solver=settings.solver, solves=solves,
+        machine={"before": before, "after": machine_state().to_json()},
+    )
+
+
+def corpus_rows(table: CorpusTable) -> list[list[str]]:
+    """The report's rows: one per anatomy, the default beside exact Newton."""
+    rows = []
+    for run in table.anatomies:
+        default, exact = run.by_solver(run.solver), run.by_solver(EXACT)
+        row = [run.name, run.description, f"{run.volume_ml:.0f}", f"{run.cells:d}",
+               f"{run.dofs:d}", f"{run.min_dihedral_deg:.1f}"]
+        for solves in (default, exact):
+            done = [s for s in solves if s.converged]
+            its = [s.newton_iterations for s in solves]
+            row += [f"{len(done)}/{len(solves)}",
+                    f"{np.median(its):.0f} ({max(its)})" if its else "n/a",
+                    f"{np.median([s.solve_s for s in solves]):.1f}" if solves else "n/a"]
+        row.append(", ".join(run.missed) or "none")
+        rows.append(row)
+    return rows
+
+
+CORPUS_HEADER = [
+    "anatomy", "geometry", "volume (ml)", "cells", "P2/P1 unknowns", "min dihedral (°)",
+    "default: converged", "default: Newton its median (max)", "default: median time (s)",
+    "exact Newton: converged", "exact: Newton its median (max)", "exact: median time (s)",
+    "converged by exact Newton only",
+]
+
+
+__all__ = ["AnatomyRun", "CORPUS_HEADER", "CorpusSolve", "CorpusTable", "EXACT", "SOFT_C1",
+           "SOFT_PHI", "corpus_cases", "corpus_rows", "solve_anatomy"]

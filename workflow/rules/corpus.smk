@@ -1,0 +1,70 @@
+# The corpus of anatomies (meshes.corpus, studies.corpus): six geometries the project makes
+# itself, from the config's breast to a scan-like surface in scanner axes and a volume mesh in
+# another axis convention, each imported as a user's file would be, then solved with the
+# config's solver and with exact Newton. A benchmark of the import and the solver on more than
+# one mesh; `snakemake -j2 corpus` runs it alone, the report shows its table.
+wildcard_constraints:
+    anatomy="|".join(ANATOMIES),
+
+
+rule corpus:
+    input:
+        CORPUS_JSON,
+
+
+rule corpus_mesh:
+    output:
+        xdmf=f"{CORPUS_DIR}/{{anatomy}}/mesh.xdmf",
+        h5=f"{CORPUS_DIR}/{{anatomy}}/mesh.h5",
+        quality=f"{CORPUS_DIR}/{{anatomy}}/quality.json",
+        png=f"{CORPUS_DIR}/{{anatomy}}/mesh.png",
+        section=f"{CORPUS_DIR}/{{anatomy}}/mesh.yaml",
+        inputs=directory(f"{CORPUS_DIR}/{{anatomy}}/input"),
+    params:
+        mesh=CONFIG.section("mesh"),
+    log:
+        f"results/logs/corpus/mesh_{{anatomy}}.log",
+    threads: 1
+    resources:
+        mem_mb=4000,
+    conda:
+        ENV
+    script:
+        "../scripts/corpus_mesh.py"
+
+
+rule corpus_solve:
+    input:
+        mesh=f"{CORPUS_DIR}/{{anatomy}}/mesh.xdmf",
+        quality=f"{CORPUS_DIR}/{{anatomy}}/quality.json",
+        section=f"{CORPUS_DIR}/{{anatomy}}/mesh.yaml",
+    output:
+        f"{CORPUS_DIR}/{{anatomy}}/solves.json",
+    params:
+        config=CONFIG.sections_of("fe", "material"),
+        clinical=CONFIG.section("clinical"),
+    log:
+        f"results/logs/corpus/solve_{{anatomy}}.log",
+    benchmark:
+        f"results/benchmarks/corpus/solve_{{anatomy}}.tsv"
+    threads: 1
+    resources:
+        mem_mb=6000,
+    conda:
+        ENV
+    script:
+        "../scripts/corpus_solve.py"
+
+
+rule corpus_table:
+    input:
+        expand(f"{CORPUS_DIR}/{{anatomy}}/solves.json", anatomy=ANATOMIES),
+    output:
+        CORPUS_JSON,
+    log:
+        "results/logs/corpus/table.log",
+    threads: 1
+    conda:
+        ENV
+    script:
+        "../scripts/corpus_table.py"
