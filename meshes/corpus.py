@@ -37,8 +37,9 @@ import numpy as np
 from meshes.exceptions import GeometryError
 from meshes.orientation import Orientation
 
-#: Element sizes of the imported anatomies (metres): fine enough for a 60 mm hemisphere.
-IMPORT_SIZE = {"global_size": 0.008, "mound_size": 0.008, "order": 1}
+#: Default largest element size (m) of the imported anatomies: fine enough for a 60 mm
+#: hemisphere.
+IMPORT_SIZE = 0.008
 
 
 @dataclass(frozen=True, slots=True)
@@ -54,6 +55,7 @@ class Anatomy:
     name: str
     description: str
     write: Callable[[Path], dict[str, Any]]
+    """Writes the input into a folder; returns the ``mesh:`` section (sizes filled later)."""
 
 
 def _parametric(geometry: dict[str, float] | None) -> Callable[[Path], dict[str, Any]]:
@@ -221,7 +223,6 @@ def _write_hemisphere(folder: Path) -> dict[str, Any]:
     _write_stl(folder / "hemisphere.stl", 1e3 * x, tris)
     return {
         "source": "file",
-        "size": dict(IMPORT_SIZE),
         "file": {
             "path": str(folder / "hemisphere.stl"),
             "units": "mm",
@@ -244,7 +245,6 @@ def _write_scan(folder: Path) -> dict[str, Any]:
     _write_stl(folder / "scan_lps.stl", file_x, tris)
     return {
         "source": "file",
-        "size": dict(IMPORT_SIZE),
         "file": {
             "path": str(folder / "scan_lps.stl"),
             "units": "mm",
@@ -274,7 +274,6 @@ def _write_volume(folder: Path) -> dict[str, Any]:
     meshio.write(path, mesh, file_format="gmsh22", binary=False)
     return {
         "source": "file",
-        "size": dict(IMPORT_SIZE),
         "file": {
             "path": str(path),
             "units": "mm",
@@ -300,7 +299,9 @@ ANATOMIES: dict[str, Anatomy] = {
 }
 
 
-def write_anatomy(name: str, folder: str | Path, base: dict[str, Any]) -> dict[str, Any]:
+def write_anatomy(
+    name: str, folder: str | Path, base: dict[str, Any], import_size: float = IMPORT_SIZE
+) -> dict[str, Any]:
     """Write anatomy ``name``'s input into ``folder``; return its complete ``mesh:`` section.
 
     Args:
@@ -308,6 +309,7 @@ def write_anatomy(name: str, folder: str | Path, base: dict[str, Any]) -> dict[s
         folder: where its input file goes (created).
         base: the config's ``mesh:`` section, whose size and fixed surfaces the parametric
             anatomies keep (and whose geometry they change).
+        import_size: the largest element size (m) of an imported anatomy.
 
     Raises:
         GeometryError: for an unknown name.
@@ -317,11 +319,12 @@ def write_anatomy(name: str, folder: str | Path, base: dict[str, Any]) -> dict[s
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     section = ANATOMIES[name].write(folder)
-    out = {key: value for key, value in base.items() if key in ("size", "fixed")}
     if section["source"] == "parametric":
         geometry = {**(base.get("geometry") or {}), **section.get("geometry", {})}
-        return {**out, "source": "parametric", "geometry": geometry}
-    return {**out, **section, "fixed": {"rib": "all"}}
+        kept = {key: value for key, value in base.items() if key in ("size", "fixed")}
+        return {**kept, "source": "parametric", "geometry": geometry}
+    size = {"global_size": import_size, "mound_size": import_size, "order": 1}
+    return {**section, "size": size, "fixed": {"rib": "all"}}
 
 
 __all__ = ["ANATOMIES", "Anatomy", "dome_volume_mesh", "hemisphere_surface", "scan_surface",

@@ -22,12 +22,10 @@ from meshes.parametric import BreastGeometry
 
 REPO = Path(__file__).resolve().parent.parent
 BASE = yaml.safe_load((REPO / "config.yaml").read_text())["mesh"]
-COARSE = {"global_size": 0.015, "mound_size": 0.015, "order": 1}
 
 
 def _import(name: str, folder: Path) -> tuple[dict, dict]:
-    section = write_anatomy(name, folder / "input", BASE)
-    section["size"] = COARSE
+    section = write_anatomy(name, folder / "input", BASE, import_size=0.015)
     report = make_mesh(MeshConfig.from_mapping(section), folder / "mesh.xdmf",
                        folder / "quality.json", folder / "mesh.png")
     return section, report
@@ -115,7 +113,7 @@ def test_the_corpus_study_solves_an_anatomy_with_both_paths(tmp_path: Path) -> N
     assert [s.converged for s in default + exact] == [True, True] and run.missed == []
     assert default[0].max_disp_mm == pytest.approx(exact[0].max_disp_mm, rel=1e-6)
     assert default[0].preconditioner_builds < exact[0].preconditioner_builds
-    table = CorpusTable([run])
+    table = CorpusTable([run], soft_C1=0.8, soft_phi=[])
     table.write(tmp_path / "corpus.json")
     row = corpus_rows(CorpusTable.read(tmp_path / "corpus.json"))[0]
     assert row[0] == "scan" and row[6] == "1/1" and row[-1] == "none"

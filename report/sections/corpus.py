@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from report.context import Context
 from report.html import missing, para, table
-from studies.corpus import CORPUS_HEADER, EXACT, SOFT_C1, SOFT_PHI, corpus_rows
+from studies.corpus import CORPUS_HEADER, EXACT, corpus_rows
 
 
 def corpus_section(ctx: Context) -> str:
@@ -16,13 +16,13 @@ def corpus_section(ctx: Context) -> str:
     cases = len(runs[0].by_solver(EXACT)) if runs else 0
     missed = sum(len(run.missed) for run in runs)
     out = [para(
-        "Six geometries the project makes itself, each imported the way a user's file would "
-        "be (the parametric ones built from the config with another shape): the config's "
+        "Geometries the project makes itself, each imported the way a user's file would be "
+        "(the parametric ones built from the config with another shape): of the config's "
         "breast, a small and a large ptotic one, a hemisphere on a flat chest wall, an "
         "irregular scan-like surface in scanner axes (LPS, a left breast, remeshed, its chest "
-        "wall chosen by the posterior rule) and a tetrahedral volume mesh in RAS axes. On each, "
-        f"{cases} cases: the clinical cases and C1 = {SOFT_C1:g} kPa at Φ = "
-        f"{', '.join(f'{p:g}' for p in SOFT_PHI)}°, solved with the config's solver (the "
+        "wall chosen by the posterior rule) and a tetrahedral volume mesh in RAS axes, those "
+        f"the config's corpus names. On each, {cases} cases: the clinical cases and C1 = "
+        f"{corpus.soft_C1:g} kPa at Φ = {', '.join(f'{p:g}' for p in corpus.soft_phi)}°, solved with the config's solver (the "
         f"default) and with exact Newton ({EXACT}), alternately in one process. Newton "
         "iterations count every attempt, failed ones included; times are one solve's wall "
         "time, in the same job for both paths.", "caption")]

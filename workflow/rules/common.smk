@@ -7,7 +7,6 @@ from studies.config import ConfigError, WorkflowConfig
 from studies.fe_variants import MESH_ID_PATTERN, VARIANT_ID_PATTERN, Variant
 from studies.workdir import RunLock
 from fem.sweep import ANGLE_PATTERN, C1_PATTERN
-from meshes.corpus import ANATOMIES
 
 # Every job's software under --use-conda (the env file says how it relates to `make setup`).
 ENV = "../envs/fenicsx-jax.yaml"
@@ -76,6 +75,7 @@ FE_STABILITY_JSON = f"{FE_STUDY_DIR}/stability.json"
 FE_STUDY_RESULTS = [FE_CLINICAL_JSON, FE_SPEED_ACCURACY_JSON, FE_STABILITY_JSON]
 CORPUS_DIR = "results/corpus"
 CORPUS_JSON = f"{CORPUS_DIR}/corpus.json"
+CORPUS_ANATOMIES = CONFIG.section("corpus", "anatomies")
 
 
 def fe_study_mesh(spec):

@@ -4,7 +4,7 @@
 # config's solver and with exact Newton. A benchmark of the import and the solver on more than
 # one mesh; `snakemake -j2 corpus` runs it alone, the report shows its table.
 wildcard_constraints:
-    anatomy="|".join(ANATOMIES),
+    anatomy="|".join(CORPUS_ANATOMIES),
 
 
 rule corpus:
@@ -22,6 +22,7 @@ rule corpus_mesh:
         inputs=directory(f"{CORPUS_DIR}/{{anatomy}}/input"),
     params:
         mesh=CONFIG.section("mesh"),
+        import_size=CONFIG.section("corpus", "import_size"),
     log:
         f"results/logs/corpus/mesh_{{anatomy}}.log",
     threads: 1
@@ -43,6 +44,8 @@ rule corpus_solve:
     params:
         config=CONFIG.sections_of("fe", "material"),
         clinical=CONFIG.section("clinical"),
+        soft_C1=CONFIG.section("corpus", "soft_C1"),
+        soft_phi=CONFIG.section("corpus", "soft_phi"),
     log:
         f"results/logs/corpus/solve_{{anatomy}}.log",
     benchmark:
@@ -58,9 +61,12 @@ rule corpus_solve:
 
 rule corpus_table:
     input:
-        expand(f"{CORPUS_DIR}/{{anatomy}}/solves.json", anatomy=ANATOMIES),
+        expand(f"{CORPUS_DIR}/{{anatomy}}/solves.json", anatomy=CORPUS_ANATOMIES),
     output:
         CORPUS_JSON,
+    params:
+        soft_C1=CONFIG.section("corpus", "soft_C1"),
+        soft_phi=CONFIG.section("corpus", "soft_phi"),
     log:
         "results/logs/corpus/table.log",
     threads: 1

@@ -11,7 +11,7 @@ from studies.joblog import job_log
 job_log(snakemake.log[0])
 
 section = write_anatomy(snakemake.wildcards.anatomy, snakemake.output.inputs,
-                        snakemake.params.mesh)
+                        snakemake.params.mesh, snakemake.params.import_size)
 make_mesh(MeshConfig.from_mapping(section), snakemake.output.xdmf, snakemake.output.quality,
           snakemake.output.png)
 Path(snakemake.output.section).write_text(yaml.safe_dump(section, sort_keys=False))

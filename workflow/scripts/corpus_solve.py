@@ -18,5 +18,6 @@ mesh = yaml.safe_load(Path(snakemake.input.section).read_text())
 settings = SolverSettings.from_config({**snakemake.params.config, "mesh": mesh})
 run = solve_anatomy(name, ANATOMIES[name].description, snakemake.input.mesh,
                     MeshQuality.read(snakemake.input.quality), settings,
-                    corpus_cases(snakemake.params.clinical))
+                    corpus_cases(snakemake.params.clinical, snakemake.params.soft_C1,
+                                 snakemake.params.soft_phi))
 run.write(snakemake.output[0])
