@@ -133,6 +133,7 @@ class CaseRunner:
             "self_overlap": self_overlap(self.mesh, u) if self.comm.size == 1 else None,
             "contact": problem.contact_status(),
             "dofs": dofs,
+            "linear_path": self.solver.linear_path,
             "wall_s": {
                 "setup": self.setup_s,
                 **{k: timings[k] for k in ("solve", "assembly", "linear_solve")},

@@ -23,6 +23,7 @@ from petsc4py import PETSc
 from fem.exceptions import InvalidParameterError
 from fem.parameters import STANDARD_GRAVITY
 from fem.options import (
+    BLR_OPTIONS,
     LINE_SEARCHES,
     SOLVER_KEYS,
     SOLVER_PRESETS,
@@ -106,6 +107,12 @@ class NewtonSolver:
         self.timings = Timings()
         #: Re-factorise when the previous Krylov solve took more iterations (0: always).
         self.refactor_above_its = int(self.options.get("refactor_above_its", 0))
+        blr_above = self.options.get("blr_above_dofs")
+        #: The kept factorisation is block low-rank (large problems: :data:`BLR_OPTIONS`).
+        self.low_rank = bool(self.refactor_above_its) and blr_above is not None \
+            and problem.num_dofs() > blr_above
+        if self.low_rank:  # the config's own values of these options win
+            self.options = {**BLR_OPTIONS, **self.options}
         #: Re-factorise when the last Newton iteration left more of the residual (1: never).
         self.refactor_above_ratio = float(self.options.get("refactor_above_ratio", 1.0))
         #: Newton's absolute tolerance over the full gravity load's norm (:meth:`scale_to_load`).
@@ -152,6 +159,21 @@ class NewtonSolver:
         self.snes.setMonitor(self._monitor)
 
     # -- set-up ---------------------------------------------------------------------------
+    @property
+    def linear_path(self) -> str:
+        """The linear solver this problem got, in words (recorded in every case's summary)."""
+        pc = self.options.get("pc_type")
+        if pc == "fieldsplit":
+            return "FGMRES, fieldsplit Schur complement with AMG"
+        if pc in _FACTORISATION_NAMES:
+            name = f"MUMPS {_FACTORISATION_NAMES[pc]}"
+            if not self.refactor_above_its:
+                return f"{name} at every Newton iteration"
+            low_rank = f", block low-rank (ε {self.options['mat_mumps_cntl_7']:g})" \
+                if self.low_rank else ""
+            return f"GMRES on a kept {name}{low_rank}"
+        return f"{self.options.get('ksp_type')} with {pc}"
+
     @property
     def _petsc_options(self) -> dict[str, Any]:
         return {k: v for k, v in self.options.items() if k not in SOLVER_KEYS}
@@ -524,6 +546,8 @@ _KSP_REASONS = {
     if name.isupper() or name.startswith(("CONVERGED", "DIVERGED"))
 }
 
+
+_FACTORISATION_NAMES = {"cholesky": "LDLᵀ", "lu": "LU"}
 
 #: A failed inexact solve whose residual fell below this fraction of its first one is retried
 #: exactly (:meth:`NewtonSolver._solve`).

@@ -46,6 +46,8 @@ def reference(coarse_mesh: Path) -> np.ndarray:
         ("direct", {"snes_linesearch_type": "l2"}),
         ("direct", {"snes_linesearch_type": "cp"}),
         ("direct", {"snes_linesearch_type": "basic"}),
+        # the block low-rank factorisation that large problems get, here on a small one
+        ("direct", {"blr_above_dofs": 0}),
     ],
 )
 def test_solver_options_agree(
@@ -207,3 +209,23 @@ def test_newtons_absolute_tolerance_is_scaled_to_the_load(coarse_mesh: Path) -> 
     assert twice.solver.scale_to_load() == pytest.approx(2 * atol, rel=1e-12)
     runner.solver.destroy()
     twice.solver.destroy()
+
+
+def test_the_linear_path_is_chosen_by_size_and_named(coarse_mesh: Path) -> None:
+    """Above blr_above_dofs the kept factorisation is block low-rank, and the summary says so;
+    exact Newton never is (its factorisation is the solve)."""
+    from fem.case import CaseRunner
+
+    def path(**settings) -> str:
+        runner = CaseRunner(coarse_mesh, SolverSettings(**settings))
+        name = runner.solver.linear_path
+        runner.solver.destroy()
+        return name
+
+    assert path() == "GMRES on a kept MUMPS LDLᵀ"
+    assert path(petsc_options={"blr_above_dofs": 0}) == \
+        "GMRES on a kept MUMPS LDLᵀ, block low-rank (ε 0.001)"
+    assert path(petsc_options={"blr_above_dofs": 0, "mat_mumps_cntl_7": 1e-5}).endswith("1e-05)")
+    assert path(solver="direct-refactor") == "MUMPS LDLᵀ at every Newton iteration"
+    with pytest.raises(InvalidParameterError, match="blr_above_dofs must be a non-negative"):
+        SolverSettings(petsc_options={"blr_above_dofs": -1})
