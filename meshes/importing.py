@@ -131,6 +131,10 @@ class ImportSpec:
         """Every file the import reads (for the workflow's dependencies)."""
         return [self.path] + [r.surface for r in self.surfaces.values() if r.surface is not None]
 
+    def to_project_frame(self, values: np.ndarray) -> np.ndarray:
+        """Positions or displacements in the file's axes and units into the project's frame (m)."""
+        return self.orientation.to_project(np.asarray(values, dtype=float) * UNITS[self.units])
+
     def to_file_frame(self, values: np.ndarray) -> np.ndarray:
         """Positions or displacements (m, project's frame) in the file's axes and units.
 

@@ -200,3 +200,31 @@ def test_the_preview_prints_what_each_rule_selects(tmp_path: Path) -> None:
     run = subprocess.run(cmd, capture_output=True, text=True)
     assert run.returncode == 1
     assert "the import would stop: the rib rule" in run.stdout and "narrow the rule" in run.stdout
+
+
+@pytest.mark.unit
+def test_named_points_go_to_the_project_frame_and_back(tmp_path: Path) -> None:
+    """`python -m meshes.frame`: a tumour picked in LPS mm of a left breast lands where the
+    import puts the same material point, and comes back unchanged."""
+    import yaml
+
+    from meshes.frame import main
+
+    config = tmp_path / "c.yaml"
+    config.write_text(yaml.safe_dump({"mesh": {"source": "file", "file": {
+        "path": "b.stl", "units": "mm", "orientation": {"axes": "LPS", "side": "left"},
+        "surfaces": {"rib": {"group": "chest"}}}}}))
+    points = tmp_path / "p.csv"
+    # LPS: +x left (lateral for a left breast), +y posterior, +z superior
+    points.write_text("name,x,y,z\ntumour,30,-40,10\nmargin,32.5,-40,10\n")
+    assert main([str(config), str(points), str(tmp_path / "q.csv"), "--to", "project"]) == 0
+    lines = (tmp_path / "q.csv").read_text().splitlines()
+    tumour = np.array([float(v) for v in lines[1].split(",")[1:]])
+    # project: x posterior, y lateral, z cranial, metres
+    assert np.allclose(tumour, [-0.040, 0.030, 0.010])
+    assert main([str(config), str(tmp_path / "q.csv"), str(tmp_path / "r.csv"), "--to",
+                 "file"]) == 0
+    back = (tmp_path / "r.csv").read_text().splitlines()
+    assert np.allclose([float(v) for v in back[2].split(",")[1:]], [32.5, -40, 10])
+    points.write_text("name,x,y\ntumour,1,2\n")
+    assert main([str(config), str(points), str(tmp_path / "q.csv"), "--to", "project"]) == 2
