@@ -221,6 +221,19 @@ class GravityProblem:
         points, _ = basix.make_quadrature(basix.CellType.tetrahedron, max(degree, 1))
         return points
 
+    # -- geometry -------------------------------------------------------------------------------
+    def set_geometry(self, x: np.ndarray) -> None:
+        """Move the mesh's geometry nodes to ``x`` (the reference configuration of the next solve).
+
+        The compiled forms read the coordinates at assembly, so nothing is rebuilt; the
+        reference volume is measured again. The contact zone stays the one found at set-up.
+        """
+        self.mesh.geometry.x[:] = x
+        self._volume = self.mesh.comm.allreduce(
+            fem.assemble_scalar(fem.form(fem.Constant(self.mesh, PETSc.ScalarType(1.0)) * self.dx)),
+            op=MPI.SUM,
+        )
+
     # -- case parameters ----------------------------------------------------------------------
     def set_case(self, material: Material, gravity: Gravity) -> None:
         """Set C1 and the (full) gravity load of a case; the load fraction starts at 0."""

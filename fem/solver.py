@@ -21,7 +21,6 @@ from dolfinx.fem import petsc as fem_petsc
 from petsc4py import PETSc
 
 from fem.exceptions import InvalidParameterError
-from fem.parameters import STANDARD_GRAVITY
 from fem.options import (
     BLR_OPTIONS,
     LINE_SEARCHES,
@@ -30,6 +29,7 @@ from fem.options import (
     default_parameters,
     solver_options,
 )
+from fem.parameters import STANDARD_GRAVITY
 from fem.problem import GravityProblem
 
 log = logging.getLogger(__name__)
@@ -301,8 +301,11 @@ class NewtonSolver:
         self._norms.append(float(norm))
 
     def _factorisation_stale(self, snes: PETSc.SNES) -> bool:
-        """Re-factorise at a load step's first iteration, after a slow or failed Krylov solve,
-        after a Newton iteration that stalled, and always in the exact retry."""
+        """Whether the next Krylov solve needs a fresh factorisation.
+
+        At a load step's first iteration, after a slow or failed Krylov solve, after a Newton
+        iteration that stalled, and always in the exact retry.
+        """
         ksp = snes.getKSP()
         norms = self._norms
         return (

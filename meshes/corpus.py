@@ -28,9 +28,10 @@ Every random relief is drawn from a fixed seed, so the corpus is the same on eve
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -109,9 +110,9 @@ def _write_stl(path: Path, x_mm: np.ndarray, tris: np.ndarray) -> None:
 
 def hemisphere_surface(radius: float = 0.06, size: float = 0.006) -> tuple[np.ndarray, np.ndarray]:
     """A closed hemisphere standing anterior (−x) of a flat chest wall at x = 0, metres."""
-    from meshes.build import gmsh_session
-
     import gmsh
+
+    from meshes.build import gmsh_session
 
     with gmsh_session("hemisphere") as model:
         ball = model.occ.addSphere(0, 0, 0, radius)
@@ -137,9 +138,9 @@ def scan_surface(
     waves, ``relief`` metres) and by independent noise (``noise`` metres), as a surface scan or a
     segmentation gives.
     """
-    from meshes.build import gmsh_session
-
     import gmsh
+
+    from meshes.build import gmsh_session
 
     rng = np.random.default_rng(seed)
     chest = 0.16
@@ -178,9 +179,9 @@ def dome_volume_mesh(size: float = 0.007) -> tuple[np.ndarray, np.ndarray, np.nd
     Returns:
         ``(x (m), tets, chest-wall triangles, skin triangles)``.
     """
-    from meshes.build import gmsh_session
-
     import gmsh
+
+    from meshes.build import gmsh_session
 
     with gmsh_session("dome") as model:
         dome = model.occ.addSphere(0, 0, 0, 1.0)

@@ -20,6 +20,7 @@ __all__ = [
     "geometry_nodes",
     "read_mesh",
     "write_gmsh_model",
+    "write_tagged_mesh",
 ]
 
 log = logging.getLogger(__name__)
@@ -59,11 +60,22 @@ def write_gmsh_model(model: Any, xdmf_path: str | Path) -> None:
     The pair ``<name>.xdmf`` / ``<name>.h5`` is written in a temporary folder
     beside the target and moved into place, so a crash never leaves half a mesh.
     """
-    from dolfinx.io import XDMFFile, gmshio
+    from dolfinx.io import gmshio
     from mpi4py import MPI
 
-    comm = MPI.COMM_SELF
-    mesh, cell_tags, facet_tags = gmshio.model_to_mesh(model, comm, 0, gdim=3)
+    mesh, cell_tags, facet_tags = gmshio.model_to_mesh(model, MPI.COMM_SELF, 0, gdim=3)
+    write_tagged_mesh(mesh, cell_tags, facet_tags, xdmf_path)
+
+
+def write_tagged_mesh(mesh: Any, cell_tags: Any, facet_tags: Any, xdmf_path: str | Path) -> None:
+    """Write a dolfinx mesh with its cell and facet tags as XDMF, under the names it is read by.
+
+    The pair ``<name>.xdmf`` / ``<name>.h5`` is written in a temporary folder beside the
+    target and moved into place, so a crash never leaves half a mesh (serial meshes).
+    """
+    from dolfinx.io import XDMFFile
+
+    comm = mesh.comm
     mesh.name = MESH_NAME
     cell_tags.name = CELL_TAGS_NAME
     facet_tags.name = FACET_TAGS_NAME

@@ -1,10 +1,11 @@
 """The corpus of anatomies (:mod:`meshes.corpus`) solved with the default solver and exact Newton.
 
 For every anatomy of the config's ``corpus`` section: the config's clinical cases and a soft C1
-(``corpus.soft_C1``) at several directions (``corpus.soft_phi``), each solved with the config's solver settings (the default) and again with
-``direct-refactor`` (exact Newton, a fresh factorisation at every iteration), in one process on
-one mesh. The default must converge every case exact Newton converges; the table gives each
-anatomy's volume, cells, unknowns, cases converged, Newton iterations and time.
+(``corpus.soft_C1``) at several directions (``corpus.soft_phi``), each solved with the config's
+solver settings (the default) and again with ``direct-refactor`` (exact Newton, a fresh
+factorisation at every iteration), in one process on one mesh. The default must converge every
+case exact Newton converges; the table gives each anatomy's volume, cells, unknowns, cases
+converged, Newton iterations and time.
 """
 
 from __future__ import annotations
@@ -167,7 +168,8 @@ def corpus_rows(table: CorpusTable) -> list[list[str]]:
 
 
 CORPUS_HEADER = [
-    "anatomy", "geometry", "breast (model) volume (ml)", "cells", "P2/P1 unknowns", "min dihedral (°)",
+    "anatomy", "geometry", "breast (model) volume (ml)", "cells", "P2/P1 unknowns",
+    "min dihedral (°)",
     "default: converged", "default: Newton its median (max)", "default: median time (s)",
     "exact Newton: converged", "exact: Newton its median (max)", "exact: median time (s)",
     "converged by exact Newton only",

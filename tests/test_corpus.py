@@ -82,8 +82,7 @@ def test_an_imported_anatomy_lands_posterior_in_the_project_frame(
 
 @pytest.mark.unit
 def test_a_remeshed_import_below_the_dihedral_floor_names_its_worst_cells(tmp_path: Path) -> None:
-    """A noisy surface remeshed coarsely: if the optimisers cannot lift it, the import says
-    which cells; a kept surface only warns."""
+    """Cells below the floor: a remeshed surface names the worst; a kept surface warns."""
     from meshes.importing import check_dihedral_floor
 
     x = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0.3, 0.3, 0.01], [0, 0, 1.0]]) * 0.05

@@ -170,9 +170,9 @@ def test_config_selects_preset_and_overrides() -> None:
 def test_a_failed_inexact_increment_is_solved_exactly_before_the_load_is_cut(
     coarse_mesh: Path, reference: np.ndarray
 ) -> None:
-    """The default's fallback: where the kept factorisation cannot carry Newton, the same
-    increment is solved again with a fresh factorisation at every iteration.
+    """Where the kept factorisation cannot carry Newton, the increment is solved exactly.
 
+    The same increment is solved again with a fresh factorisation at every iteration.
     Crippled on purpose: two Krylov iterations on a factorisation that is never refreshed
     (no count, ratio or failure triggers it) and no Krylov failure tolerated stall the
     inexact path; the whole load must still go on in one step, to the reference answer.
@@ -212,8 +212,10 @@ def test_newtons_absolute_tolerance_is_scaled_to_the_load(coarse_mesh: Path) -> 
 
 
 def test_the_linear_path_is_chosen_by_size_and_named(coarse_mesh: Path) -> None:
-    """Above blr_above_dofs the kept factorisation is block low-rank, and the summary says so;
-    exact Newton never is (its factorisation is the solve)."""
+    """Above blr_above_dofs the kept factorisation is block low-rank, and says so.
+
+    Exact Newton never is (its factorisation is the solve).
+    """
     from fem.case import CaseRunner
 
     def path(**settings) -> str:

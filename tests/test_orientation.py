@@ -204,8 +204,11 @@ def test_the_preview_prints_what_each_rule_selects(tmp_path: Path) -> None:
 
 @pytest.mark.unit
 def test_named_points_go_to_the_project_frame_and_back(tmp_path: Path) -> None:
-    """`python -m meshes.frame`: a tumour picked in LPS mm of a left breast lands where the
-    import puts the same material point, and comes back unchanged."""
+    """`python -m meshes.frame`: a tumour picked in LPS mm lands in the project's frame.
+
+    A left breast's point goes where the import puts the same material point, and comes back
+    unchanged.
+    """
     import yaml
 
     from meshes.frame import main

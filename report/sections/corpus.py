@@ -22,7 +22,8 @@ def corpus_section(ctx: Context) -> str:
         "irregular scan-like surface in scanner axes (LPS, a left breast, remeshed, its chest "
         "wall chosen by the posterior rule) and a tetrahedral volume mesh in RAS axes, those "
         f"the config's corpus names. On each, {cases} cases: the clinical cases and C1 = "
-        f"{corpus.soft_C1:g} kPa at Φ = {', '.join(f'{p:g}' for p in corpus.soft_phi)}°, solved with the config's solver (the "
+        f"{corpus.soft_C1:g} kPa at Φ = {', '.join(f'{p:g}' for p in corpus.soft_phi)}°, "
+        "solved with the config's solver (the "
         f"default) and with exact Newton ({EXACT}), alternately in one process. Newton "
         "iterations count every attempt, failed ones included; times are one solve's wall "
         "time, in the same job for both paths.", "caption")]

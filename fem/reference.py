@@ -1,0 +1,274 @@
+"""The unloaded reference state of an imaged (already loaded) shape.
+
+A breast imaged prone hangs under gravity: its mesh is a *deformed* configuration x. Taken as
+stress-free, a supine prediction from it carries the prone sag twice. The reference
+configuration X is the one whose forward solve under the imaged posture's gravity reproduces x:
+
+    X + u(X) = x,
+
+with u(X) the displacement of the forward problem on the reference X (same C1, boundary
+conditions and contact). This module finds X by the fixed-point iteration of Sellier (2011),
+accelerated by Aitken's dynamic relaxation:
+
+    r_k = X_k + u(X_k) − x,    X_{k+1} = X_k − ω_k r_k,
+    ω_{k+1} = −ω_k (r_k · (r_{k+1} − r_k)) / |r_{k+1} − r_k|²,
+
+starting from X_0 = x (the first iterate is the naive "reverse the sag" guess). Each forward
+solve starts from the previous iterate's converged state at the full load (a warm start: the
+fields of neighbouring iterates differ little), falling back to the adaptive load path from rest
+where the warm start fails. The clamped chest wall does not move (u = 0 there), so its nodes
+keep their imaged positions. The estimate is returned as geometry-node positions and written
+as a tagged mesh (:func:`write_reference_mesh`) that every rule can take as its reference.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fem.case import CaseRunner
+from fem.exceptions import InvalidParameterError
+from fem.loading import solve_incrementally
+from fem.parameters import Gravity, Material
+from meshes.io import geometry_nodes
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ReferenceEstimate:
+    """Outcome of :func:`estimate_reference`.
+
+    Attributes:
+        converged: the misfit fell below the tolerance within the iteration budget.
+        reason: why it stopped.
+        X: geometry-node positions of the reference (m), in the mesh's node order.
+        misfit_m: after each forward solve, the largest distance |X + u(X) − x| over the nodes.
+        newton_iterations: Newton iterations of each forward solve.
+        warm_starts: forward solves that converged from the previous iterate's state.
+        relaxation: Aitken's ω at each update.
+        wall_s: wall time of the whole estimate.
+        forward_solves: forward solves done.
+    """
+
+    converged: bool
+    reason: str
+    X: np.ndarray
+    misfit_m: list[float] = field(default_factory=list)
+    newton_iterations: list[int] = field(default_factory=list)
+    warm_starts: int = 0
+    relaxation: list[float] = field(default_factory=list)
+    wall_s: float = 0.0
+    forward_solves: int = 0
+
+    def record(self) -> dict[str, Any]:
+        """JSON-able summary (without the positions)."""
+        return {
+            "converged": self.converged, "reason": self.reason,
+            "iterations": self.forward_solves, "misfit_mm": [1e3 * m for m in self.misfit_m],
+            "newton_iterations": self.newton_iterations, "warm_starts": self.warm_starts,
+            "relaxation": self.relaxation, "wall_s": self.wall_s,
+        }
+
+
+def node_dofs(mesh: Any, V: Any) -> np.ndarray:
+    """The displacement space's (block) dof at every geometry node.
+
+    The geometry nodes of a straight mesh are its vertices, the first four local dofs of any
+    Lagrange element; those of a curved (order 2) mesh add the edge midpoints, which are the
+    dofs of a P2 displacement with the same local layout.
+
+    Raises:
+        InvalidParameterError: for a curved mesh with another displacement degree.
+    """
+    nodes = geometry_nodes(mesh)
+    dofs = V.dofmap.list.array.reshape(nodes.shape[0], -1)
+    k = nodes.shape[1]
+    if k > 4 and dofs.shape[1] != k:
+        raise InvalidParameterError(
+            f"the reference state of a curved mesh ({k} nodes per cell) needs a displacement "
+            f"with the same nodes (P2), not {dofs.shape[1]} dofs per cell"
+        )
+    out = np.full(mesh.geometry.x.shape[0], -1, dtype=np.int64)
+    out[nodes.ravel()] = dofs[:, :k].ravel()
+    return out
+
+
+def _forward(runner: CaseRunner, material: Material, gravity: Gravity, warm: np.ndarray | None
+             ) -> tuple[bool, int, bool]:
+    """One forward solve on the problem's current geometry; returns (converged, its, warm)."""
+    problem, solver = runner.problem, runner.solver
+    if warm is not None:
+        problem.w.x.array[:] = warm
+        problem.set_load_fraction(1.0)
+        outcome = solver.solve()
+        if outcome.converged and problem.min_detF() > 0:
+            return True, outcome.iterations, True
+        log.info("warm start failed (%s): the load path from rest", outcome.reason)
+    problem.set_case(material, gravity)
+    problem.w.x.array[:] = 0.0
+    result = solve_incrementally(problem, solver, runner.settings.loading)
+    return result.converged, result.total_iterations, False
+
+
+def estimate_reference(
+    runner: CaseRunner,
+    material: Material,
+    gravity: Gravity,
+    tolerance: float = 1e-5,
+    max_iterations: int = 30,
+) -> ReferenceEstimate:
+    """Find the reference geometry whose forward solve reproduces the runner's mesh.
+
+    Args:
+        runner: a runner on the *observed* (loaded) mesh; its geometry is moved while the
+            estimate runs and put back to the observed shape at the end.
+        material: C1 and density of the observation.
+        gravity: the gravity the observation was under (its posture).
+        tolerance: stop when every node's misfit |X + u(X) − x| is below this (m).
+        max_iterations: forward solves allowed.
+
+    Returns:
+        The estimate; ``converged`` False (with the reason) when a forward solve fails or the
+        budget runs out, with the best iterate found.
+    """
+    problem = runner.problem
+    mesh = problem.mesh
+    if mesh.comm.size != 1:
+        raise InvalidParameterError("the reference state is estimated in serial")
+    observed = mesh.geometry.x.copy()
+    start = time.perf_counter()
+    problem.set_case(material, gravity)
+    runner.solver.scale_to_load()
+    X = observed.copy()
+    best = (np.inf, X.copy())
+    misfits, iterations, relaxations = [], [], []
+    warm_starts = 0
+    warm: np.ndarray | None = None
+    previous: np.ndarray | None = None
+    omega = 1.0
+    reason = f"no reference within {max_iterations} forward solves"
+    converged = False
+    dofs = None
+    try:
+        for _ in range(max_iterations):
+            problem.set_geometry(X)
+            ok, its, was_warm = _forward(runner, material, gravity, warm)
+            iterations.append(its)
+            warm_starts += was_warm
+            if not ok:
+                reason = (f"the forward solve on iterate {len(iterations)} failed: no reference "
+                          "found (the shape may be out of reach for this C1 and posture)")
+                break
+            warm = problem.w.x.array.copy()
+            u = problem.displacement()
+            if dofs is None:
+                dofs = node_dofs(mesh, u.function_space)
+            residual = X + u.x.array.reshape(-1, 3)[dofs] - observed
+            misfit = float(np.linalg.norm(residual, axis=1).max())
+            misfits.append(misfit)
+            if misfit < best[0]:
+                best = (misfit, X.copy())
+            log.info("reference iterate %d: misfit %.3g mm, %d Newton its%s", len(misfits),
+                     1e3 * misfit, its, " (warm)" if was_warm else "")
+            if misfit <= tolerance:
+                converged, reason = True, "converged"
+                break
+            if previous is not None:
+                change = (residual - previous).ravel()
+                denominator = float(change @ change)
+                if denominator > 0:
+                    omega = -omega * float(previous.ravel() @ change) / denominator
+            relaxations.append(omega)
+            previous = residual
+            X = X - omega * residual
+    finally:
+        problem.set_geometry(observed)
+    return ReferenceEstimate(
+        converged=converged, reason=reason, X=best[1], misfit_m=misfits,
+        newton_iterations=iterations, warm_starts=int(warm_starts), relaxation=relaxations,
+        wall_s=time.perf_counter() - start, forward_solves=len(iterations),
+    )
+
+
+def write_reference_mesh(runner: CaseRunner, X: np.ndarray, xdmf_path: str | Path) -> Path:
+    """Write the runner's mesh moved to the reference positions ``X``, with the same tags."""
+    from meshes.io import write_tagged_mesh
+
+    mesh = runner.problem.mesh
+    observed = mesh.geometry.x.copy()
+    try:
+        mesh.geometry.x[:] = X
+        write_tagged_mesh(mesh, runner.cell_tags, runner.facet_tags, xdmf_path)
+    finally:
+        mesh.geometry.x[:] = observed
+    return Path(xdmf_path)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m fem.reference OBSERVED --c1 C1 --phi PHI [--theta T] --out DIR [--config]``.
+
+    Estimates the reference of the observed (loaded) mesh under that case's gravity and writes
+    ``DIR/reference.xdmf`` (the same tags: any rule's mesh) and ``DIR/reference.json`` (the
+    iterations, misfits and cost). Nothing is written when no reference is found: the exit
+    status is 1 and the reason is printed; 2 for bad input.
+    """
+    import argparse
+    import json
+    import sys
+
+    import yaml
+
+    from fem.exceptions import FEError
+    from fem.parameters import SolverSettings
+    from fem.sweep import Case
+    from meshes.exceptions import MeshInputError
+
+    parser = argparse.ArgumentParser(prog="python -m fem.reference",
+                                     description="the unloaded reference of a loaded shape")
+    parser.add_argument("observed", type=Path, help="the loaded shape: a mesh XDMF with tags")
+    parser.add_argument("--c1", type=float, required=True, help="C1 in kPa")
+    parser.add_argument("--phi", type=float, required=True, help="the observation's Φ (deg)")
+    parser.add_argument("--theta", type=float, default=0.0, help="the observation's θ (deg)")
+    parser.add_argument("--out", type=Path, required=True, help="folder to write")
+    parser.add_argument("--config", type=Path, help="config (sections fe, material, mesh)")
+    parser.add_argument("--tolerance-mm", type=float, default=1e-2,
+                        help="largest node misfit accepted, mm")
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    try:
+        config = yaml.safe_load(args.config.read_text()) if args.config else {}
+        settings = SolverSettings.from_config(config or {})
+        case = Case(args.c1, args.phi, args.theta)
+        runner = CaseRunner(args.observed, settings)
+        estimate = estimate_reference(runner, case.material(settings.density),
+                                      case.gravity(settings.gravity),
+                                      tolerance=1e-3 * args.tolerance_mm)
+    except (FEError, MeshInputError, OSError, yaml.YAMLError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    if not estimate.converged:
+        print(f"no reference: {estimate.reason}", file=sys.stderr)
+        return 1
+    args.out.mkdir(parents=True, exist_ok=True)
+    write_reference_mesh(runner, estimate.X, args.out / "reference.xdmf")
+    record = {"observed": str(args.observed), "case": case.id, **estimate.record()}
+    tmp = args.out / ".reference.json.tmp"
+    tmp.write_text(json.dumps(record, indent=2))
+    tmp.replace(args.out / "reference.json")
+    print(json.dumps({k: record[k] for k in ("case", "reason", "iterations", "wall_s")}))
+    return 0
+
+
+if __name__ == "__main__":
+    import sys
+
+    sys.exit(main())
+
+
+__all__ = ["ReferenceEstimate", "estimate_reference", "main", "node_dofs", "write_reference_mesh"]

@@ -1,0 +1,113 @@
+"""The reference state of an imaged (loaded) shape: a round trip on the coarse default breast.
+
+Solve from the true reference in one posture; take the loaded shape as the observation;
+estimate the reference with the same C1; compare with the truth, then predict supine from the
+estimate and from the loaded shape taken as stress-free (the naive way). One runner holds the
+mesh throughout (its geometry is moved), so every field is in the same node order.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fem.case import CaseRunner
+from fem.reference import estimate_reference, node_dofs, write_reference_mesh
+from fem.sweep import Case
+from meshes.io import read_mesh
+
+pytestmark = pytest.mark.solve
+
+
+def _deformed(runner: CaseRunner, case: Case, X: np.ndarray) -> np.ndarray:
+    """Geometry-node positions after solving ``case`` from the reference ``X``."""
+    runner.problem.set_geometry(X)
+    result, _ = runner.solve(case)
+    assert result.converged, result.reason
+    u = runner.problem.displacement()
+    return X + u.x.array.reshape(-1, 3)[node_dofs(runner.mesh, u.function_space)]
+
+
+@pytest.fixture(scope="module")
+def runner(coarse_mesh: Path) -> CaseRunner:
+    return CaseRunner(coarse_mesh)
+
+
+@pytest.mark.parametrize("observed_in", [Case(2.0, 180.0), Case(2.0, 60.0)],
+                         ids=["prone", "tilted"])
+def test_the_reference_of_a_loaded_shape_is_found_and_predicts_supine(
+    runner: CaseRunner, observed_in: Case, tmp_path: Path
+) -> None:
+    X_true = runner.mesh.geometry.x.copy()
+    try:
+        x_observed = _deformed(runner, observed_in, X_true)
+        runner.problem.set_geometry(x_observed)
+        estimate = estimate_reference(runner, observed_in.material(), observed_in.gravity())
+        assert estimate.converged, estimate.reason
+        assert np.array_equal(runner.mesh.geometry.x, x_observed)  # put back as observed
+        sag = np.linalg.norm(x_observed - X_true, axis=1).max()
+        error = np.linalg.norm(estimate.X - X_true, axis=1).max()
+        assert error <= min(0.01 * sag, 2e-4), (error, sag)
+        assert estimate.warm_starts == estimate.forward_solves - 1  # each later solve warm
+
+        supine = Case(2.0, 0.0)
+        from_truth = _deformed(runner, supine, X_true)
+        from_estimate = _deformed(runner, supine, estimate.X)
+        naive = _deformed(runner, supine, x_observed)  # the imaged shape taken as stress-free
+        sag_supine = np.linalg.norm(from_truth - X_true, axis=1).max()
+        proper = np.linalg.norm(from_estimate - from_truth, axis=1).max()
+        wrong = np.linalg.norm(naive - from_truth, axis=1).max()
+        assert proper <= 0.01 * sag_supine, (proper, sag_supine)
+        assert wrong > 20 * proper and wrong > 1e-3, (wrong, proper)
+
+        # the estimate as a mesh with the same tags, read back as any mesh is
+        path = write_reference_mesh(runner, estimate.X, tmp_path / "reference.xdmf")
+        mesh, _, facets = read_mesh(path)
+        written = np.asarray(mesh.geometry.input_global_indices)
+        assert np.allclose(mesh.geometry.x, estimate.X[written], atol=1e-12)
+        assert np.array_equal(np.sort(facets.values), np.sort(runner.facet_tags.values))
+    finally:
+        runner.problem.set_geometry(X_true)
+
+
+def test_a_shape_without_a_reference_in_the_budget_fails_with_its_reason(
+    runner: CaseRunner,
+) -> None:
+    X_true = runner.mesh.geometry.x.copy()
+    prone = Case(2.0, 180.0)
+    try:
+        x_observed = _deformed(runner, prone, X_true)
+        runner.problem.set_geometry(x_observed)
+        estimate = estimate_reference(runner, prone.material(), prone.gravity(),
+                                      max_iterations=2)
+        assert not estimate.converged and estimate.forward_solves == 2
+        assert estimate.reason == "no reference within 2 forward solves"
+        assert np.array_equal(runner.mesh.geometry.x, x_observed)
+        assert estimate.misfit_m[1] < estimate.misfit_m[0]  # the best iterate is returned
+    finally:
+        runner.problem.set_geometry(X_true)
+
+
+def test_the_command_line_writes_the_reference_mesh_and_its_record(
+    runner: CaseRunner, tmp_path: Path
+) -> None:
+    import json
+
+    from fem.reference import main
+
+    X_true = runner.mesh.geometry.x.copy()
+    prone = Case(2.0, 180.0)
+    try:
+        observed = write_reference_mesh(runner, _deformed(runner, prone, X_true),
+                                        tmp_path / "prone.xdmf")
+    finally:
+        runner.problem.set_geometry(X_true)
+    assert main([str(observed), "--c1", "2", "--phi", "180", "--out", str(tmp_path / "ref")]) == 0
+    record = json.loads((tmp_path / "ref" / "reference.json").read_text())
+    assert record["converged"] and record["misfit_mm"][-1] <= 1e-2
+    mesh, _, _ = read_mesh(tmp_path / "ref" / "reference.xdmf")
+    assert mesh.geometry.x.shape == X_true.shape
+    assert main([str(tmp_path / "missing.xdmf"), "--c1", "2", "--phi", "180", "--out",
+                 str(tmp_path / "none")]) == 2 and not (tmp_path / "none").exists()
