@@ -81,18 +81,43 @@ PTOTIC = {
 }
 
 
-def _surface_triangles(model: Any) -> tuple[np.ndarray, np.ndarray]:
-    """Nodes (m) and triangles of a gmsh model meshed in 2D."""
+def _nodes(model: Any) -> tuple[np.ndarray, Callable[..., np.ndarray]]:
+    """A meshed gmsh model's nodes (m), and its elements of a type as rows of node indices."""
     tags, coords, _ = model.mesh.getNodes()
-    x = coords.reshape(-1, 3)
     index = np.full(int(tags.max()) + 1, -1, dtype=np.int64)
     index[tags.astype(np.int64)] = np.arange(len(tags))
-    _, nodes = model.mesh.getElementsByType(2)
-    tris = index[nodes.astype(np.int64).reshape(-1, 3)]
+
+    def elements(element_type: int, per_element: int, entity: int = -1) -> np.ndarray:
+        _, nodes = model.mesh.getElementsByType(element_type, entity)
+        return index[nodes.astype(np.int64)].reshape(-1, per_element)
+
+    return coords.reshape(-1, 3), elements
+
+
+def _surface_triangles(model: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Nodes (m) and triangles of a gmsh model meshed in 2D."""
+    x, elements = _nodes(model)
+    tris = elements(2, 3)
     used = np.unique(tris)
     remap = np.full(len(x), -1, dtype=np.int64)
     remap[used] = np.arange(len(used))
     return x[used], remap[tris]
+
+
+def _meshed_surface(model: Any, size: float) -> tuple[np.ndarray, np.ndarray]:
+    """Mesh the model's OCC surfaces at ``size`` (m); nodes and outward-facing triangles."""
+    model.occ.synchronize()
+    _set_size(size)
+    model.mesh.generate(2)
+    x, tris = _surface_triangles(model)
+    return x, _outward(x, tris)
+
+
+def _set_size(size: float) -> None:
+    import gmsh
+
+    gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+    gmsh.option.setNumber("Mesh.MeshSizeMin", 0.5 * size)
 
 
 def _outward(x: np.ndarray, tris: np.ndarray) -> np.ndarray:
@@ -110,8 +135,6 @@ def _write_stl(path: Path, x_mm: np.ndarray, tris: np.ndarray) -> None:
 
 def hemisphere_surface(radius: float = 0.06, size: float = 0.006) -> tuple[np.ndarray, np.ndarray]:
     """A closed hemisphere standing anterior (−x) of a flat chest wall at x = 0, metres."""
-    import gmsh
-
     from meshes.build import gmsh_session
 
     with gmsh_session("hemisphere") as model:
@@ -119,12 +142,7 @@ def hemisphere_surface(radius: float = 0.06, size: float = 0.006) -> tuple[np.nd
         box = model.occ.addBox(-2 * radius, -2 * radius, -2 * radius, 2 * radius, 4 * radius,
                                4 * radius)
         model.occ.intersect([(3, ball)], [(3, box)])
-        model.occ.synchronize()
-        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
-        gmsh.option.setNumber("Mesh.MeshSizeMin", 0.5 * size)
-        model.mesh.generate(2)
-        x, tris = _surface_triangles(model)
-    return x, _outward(x, tris)
+        return _meshed_surface(model, size)
 
 
 def scan_surface(
@@ -138,8 +156,6 @@ def scan_surface(
     waves, ``relief`` metres) and by independent noise (``noise`` metres), as a surface scan or a
     segmentation gives.
     """
-    import gmsh
-
     from meshes.build import gmsh_session
 
     rng = np.random.default_rng(seed)
@@ -149,12 +165,7 @@ def scan_surface(
         model.occ.dilate([(3, dome)], 0, 0, 0, 0.060, 0.072, 0.066)
         body = model.occ.addCylinder(chest, 0, -0.2, 0, 0, 0.4, chest)
         model.occ.cut([(3, dome)], [(3, body)])
-        model.occ.synchronize()
-        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
-        gmsh.option.setNumber("Mesh.MeshSizeMin", 0.5 * size)
-        model.mesh.generate(2)
-        x, tris = _surface_triangles(model)
-    tris = _outward(x, tris)
+        x, tris = _meshed_surface(model, size)
     normals = np.zeros_like(x)
     a, b, c = x[tris[:, 0]], x[tris[:, 1]], x[tris[:, 2]]
     face_normals = np.cross(b - a, c - a)
@@ -179,8 +190,6 @@ def dome_volume_mesh(size: float = 0.007) -> tuple[np.ndarray, np.ndarray, np.nd
     Returns:
         ``(x (m), tets, chest-wall triangles, skin triangles)``.
     """
-    import gmsh
-
     from meshes.build import gmsh_session
 
     with gmsh_session("dome") as model:
@@ -199,23 +208,12 @@ def dome_volume_mesh(size: float = 0.007) -> tuple[np.ndarray, np.ndarray, np.nd
         model.addPhysicalGroup(3, [volume], 1, "tissue")
         model.addPhysicalGroup(2, flat, 2, "chest_wall")
         model.addPhysicalGroup(2, [f for f in faces if f not in flat], 3, "skin")
-        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
-        gmsh.option.setNumber("Mesh.MeshSizeMin", 0.5 * size)
+        _set_size(size)
         model.mesh.generate(3)
-        tags, coords, _ = model.mesh.getNodes()
-        x = coords.reshape(-1, 3)
-        index = np.full(int(tags.max()) + 1, -1, dtype=np.int64)
-        index[tags.astype(np.int64)] = np.arange(len(tags))
-        _, nodes = model.mesh.getElementsByType(4)
-        tets = index[nodes.astype(np.int64).reshape(-1, 4)]
-        chest = np.concatenate([
-            index[model.mesh.getElementsByType(2, f)[1].astype(np.int64)].reshape(-1, 3)
-            for f in flat
-        ])
-        skin = np.concatenate([
-            index[model.mesh.getElementsByType(2, f)[1].astype(np.int64)].reshape(-1, 3)
-            for f in faces if f not in flat
-        ])
+        x, elements = _nodes(model)
+        tets = elements(4, 4)
+        chest = np.concatenate([elements(2, 3, f) for f in flat])
+        skin = np.concatenate([elements(2, 3, f) for f in faces if f not in flat])
     return x, tets, chest, skin
 
 
