@@ -1,6 +1,7 @@
 """Benchmark: the reference state's round trip, beside the naive supine prediction.
 
-``python -m studies.reference_roundtrip MESH [--c1 1 2 5] [--observed 180 0 60]``
+``python -m studies.reference_roundtrip MESH [--config config.yaml] [--c1 1 2 5]
+[--observed 180 0 60]``
 
 For each C1 and each posture Φ of the observation: solve from the mesh (the true reference)
 to get the observed shape; estimate the reference from it
@@ -20,6 +21,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from fem.parameters import SolverSettings
 from fem.sweep import Case
@@ -33,10 +35,12 @@ def main(argv: list[str] | None = None) -> int:
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("mesh", type=Path)
+    parser.add_argument("--config", type=Path, help="solver settings (fe, material, mesh)")
     parser.add_argument("--c1", type=float, nargs="+", default=[1.0, 2.0, 5.0])
     parser.add_argument("--observed", type=float, nargs="+", default=[180.0, 0.0, 60.0])
     args = parser.parse_args(argv)
-    runner = CaseRunner(args.mesh, SolverSettings())
+    config = yaml.safe_load(args.config.read_text()) if args.config else {}
+    runner = CaseRunner(args.mesh, SolverSettings.from_config(config or {}))
     X = runner.mesh.geometry.x.copy()
     dofs = None
 
