@@ -107,12 +107,6 @@ class NewtonSolver:
         self.timings = Timings()
         #: Re-factorise when the previous Krylov solve took more iterations (0: always).
         self.refactor_above_its = int(self.options.get("refactor_above_its", 0))
-        blr_above = self.options.get("blr_above_dofs")
-        #: The kept factorisation is block low-rank (large problems: :data:`BLR_OPTIONS`).
-        self.low_rank = bool(self.refactor_above_its) and blr_above is not None \
-            and problem.num_dofs() > blr_above
-        if self.low_rank:  # the config's own values of these options win
-            self.options = {**BLR_OPTIONS, **self.options}
         #: Re-factorise when the last Newton iteration left more of the residual (1: never).
         self.refactor_above_ratio = float(self.options.get("refactor_above_ratio", 1.0))
         #: Newton's absolute tolerance over the full gravity load's norm (:meth:`scale_to_load`).
@@ -126,6 +120,12 @@ class NewtonSolver:
         comm = problem.mesh.comm
         self.A = fem_petsc.create_matrix(problem.tangent)
         self.A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+        blr_above = self.options.get("blr_above_dofs")
+        #: The kept factorisation is block low-rank (large problems: :data:`BLR_OPTIONS`).
+        self.low_rank = bool(self.refactor_above_its) and blr_above is not None \
+            and self.A.getSize()[0] > blr_above
+        if self.low_rank:  # the config's own values of these options win
+            self.options = {**BLR_OPTIONS, **self.options}
         self.P = None
         if self._fieldsplit:
             self.P = fem_petsc.create_matrix(problem.preconditioner)
