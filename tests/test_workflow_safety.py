@@ -37,6 +37,13 @@ def case_folders(workdir: Path) -> list[Path]:
     return sorted((workdir / "results" / "cases").iterdir())
 
 
+def solving(session: int) -> bool:
+    """Whether a solve job runs in the process session ``session`` (a run started alone)."""
+    found = subprocess.run(["pgrep", "-s", str(session), "-f", "solve_case"],
+                           capture_output=True, text=True)
+    return found.returncode == 0
+
+
 def wait_for(condition, timeout: float, what: str) -> None:
     end = time.monotonic() + timeout
     while not condition():
@@ -70,8 +77,14 @@ def test_runs_in_one_directory_cannot_overlap_and_a_killed_rerun_loses_nothing(
     before = [folder.name for folder in case_folders(workdir)]
     mesh = workdir / "results/mesh/mesh.xdmf"
     mesh_time = mesh.stat().st_mtime_ns
+    # the first run solves with 40 fixed load steps: slow enough that the checks below fall
+    # within its solves on any machine
+    slow = config.with_name("slow.yaml")
+    values = yaml.safe_load(config.read_text())
+    values["fe"]["loading"] = {"fixed_steps": 40}
+    slow.write_text(yaml.safe_dump(values))
     first = subprocess.Popen(
-        snakemake_command(workdir, "-j1", "--forcerun", "solve", "--", DATASET, config=config),
+        snakemake_command(workdir, "-j1", "--forcerun", "solve", "--", DATASET, config=slow),
         cwd=workdir, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
         start_new_session=True,
     )
@@ -79,10 +92,9 @@ def test_runs_in_one_directory_cannot_overlap_and_a_killed_rerun_loses_nothing(
         incomplete = workdir / ".snakemake" / "incomplete"
         wait_for(lambda: incomplete.is_dir() and any(incomplete.iterdir()), 60,
                  "the first run's first solve job")
-        # the second run and the dry run side by side, so that both fall within the first run's
-        # three solves even on a loaded machine
+        # the second run and the dry run side by side
         second, look = (
-            subprocess.Popen(snakemake_command(workdir, *args, config=config), cwd=workdir,
+            subprocess.Popen(snakemake_command(workdir, *args, config=slow), cwd=workdir,
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
             for args in (("-j1", "--forcerun", "mesh", "--", "results/mesh/mesh.xdmf"),
                          ("-n", DATASET))
@@ -94,6 +106,10 @@ def test_runs_in_one_directory_cannot_overlap_and_a_killed_rerun_loses_nothing(
         assert f"pid {first.pid}" in second_err
         assert mesh.stat().st_mtime_ns == mesh_time
         assert look.returncode == 0, look_err[-3000:]
+        # kill it mid-solve, not between two jobs
+        wait_for(lambda: solving(first.pid) or first.poll() is not None, 60,
+                 "a solve job of the first run")
+        assert first.poll() is None, "the first run ended before the test could kill it"
     finally:
         os.killpg(first.pid, signal.SIGKILL)
         first.wait()
