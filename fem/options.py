@@ -16,8 +16,8 @@ Presets (``fe.solver`` in the config):
     preconditioned by the last MUMPS LDLᵀ factorisation. The tangent is
     re-factorised at the first iteration of every load step, whenever the previous
     Krylov solve needed more than ``refactor_above_its`` iterations or failed, and
-    whenever the last Newton iteration reduced the residual by less than the factor
-    ``refactor_above_ratio`` (a stall). An increment that still fails after getting
+    whenever a Newton iteration close to the solution reduced the residual by less than
+    the factor ``refactor_above_ratio`` (a stall). An increment that still fails after getting
     within ``fem.solver.RETRY_BELOW`` of its first residual, or whose Krylov solves
     failed, is tried again from the same guess with a fresh factorisation at every
     iteration (exact Newton) before the loader cuts the step. Above ``blr_above_dofs``
@@ -62,8 +62,9 @@ LINE_SEARCHES = ("bt", "l2", "cp", "basic")
 #: Options read by :class:`fem.solver.NewtonSolver` itself, never handed to PETSc.
 #: ``refactor_above_its``: re-factorise the tangent when the previous Krylov solve
 #: took more iterations than this (0: factorise at every Newton iteration).
-#: ``refactor_above_ratio``: re-factorise when the last Newton iteration left more than
-#: this fraction of the residual (a stalling inexact solve; 1 never).
+#: ``refactor_above_ratio``: re-factorise when the last Newton iteration, already within
+#: ``fem.solver.RETRY_BELOW`` of its first residual, left more than this fraction of the
+#: residual (a stalling inexact solve; 1 never).
 #: ``load_atol``: Newton's absolute residual tolerance as a fraction of the norm of the
 #: full gravity load, so that the test means the same on every mesh, unit and size
 #: (PETSc's ``snes_atol``, an absolute force, is applied as well where it is larger).
