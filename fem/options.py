@@ -21,9 +21,9 @@ Presets (``fe.solver`` in the config):
     within ``fem.solver.RETRY_BELOW`` of its first residual, or whose Krylov solves
     failed, is tried again from the same guess with a fresh factorisation at every
     iteration (exact Newton) before the loader cuts the step. Above ``blr_above_dofs``
-    unknowns the kept factorisation is block low-rank (:data:`BLR_OPTIONS`). One MUMPS solve with the factors
-    costs about 1/40 of a factorisation, so a stale factorisation is worth keeping
-    while it preconditions to ~10 iterations. Measured on the default mesh, one
+    unknowns the kept factorisation is block low-rank (:data:`BLR_OPTIONS`). One MUMPS
+    solve with the factors costs about 1/40 of a factorisation, so a stale factorisation
+    is worth keeping while it preconditions to ~10 iterations. Measured on the default mesh, one
     pinned core (the four clinical cases): 1–2 factorisations instead of 3–6, the
     same Newton iterations, and displacements within 6.4e-9 mm of exact Newton's.
     The factorisation is MUMPS LDLᵀ (``pc_type cholesky`` on a matrix flagged

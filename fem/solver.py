@@ -557,13 +557,14 @@ RETRY_BELOW = 1e-3
 
 
 def _stalled_near_solution(norms: list[float], ratio: float) -> bool:
-    """Whether Newton, already within :data:`RETRY_BELOW` of its first residual, left more than
-    ``ratio`` of the residual in its last iteration.
+    """Whether Newton stalled close to the solution.
 
-    Far from the solution (the line search's global phase) a slow iteration is the nonlinearity's,
-    not the kept factorisation's, and a fresh factorisation there only costs time (measured on
-    the default mesh, C1 = 0.8 kPa at Φ = −90°: the same load path, 40 % more time per failed
-    step); close to it, a slow iteration is the inexact solve stalling.
+    Close: within :data:`RETRY_BELOW` of its first residual; stalled: its last iteration left
+    more than ``ratio`` of the residual. Far from the solution (the line search's global phase)
+    a slow iteration is the nonlinearity's, not the kept factorisation's, and a fresh
+    factorisation there only costs time (measured on the default mesh, C1 = 0.8 kPa at
+    Φ = −90°: the same load path, 40 % more time per failed step); close to it, a slow
+    iteration is the inexact solve stalling.
     """
     return (len(norms) >= 2 and norms[-1] <= RETRY_BELOW * norms[0]
             and norms[-1] > ratio * norms[-2])
