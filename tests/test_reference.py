@@ -111,3 +111,42 @@ def test_the_command_line_writes_the_reference_mesh_and_its_record(
     assert mesh.geometry.x.shape == X_true.shape
     assert main([str(tmp_path / "missing.xdmf"), "--c1", "2", "--phi", "180", "--out",
                  str(tmp_path / "none")]) == 2 and not (tmp_path / "none").exists()
+
+
+def test_points_seen_prone_are_tracked_to_supine_through_the_reference(runner: CaseRunner) -> None:
+    """Interior points seen prone, tracked to supine, land where the truth puts them.
+
+    A point outside the body is refused by name.
+    """
+    from fem.exceptions import InvalidParameterError
+    from fem.interpolation import evaluate
+    from fem.tracking import track
+
+    X_true = runner.mesh.geometry.x.copy()
+    prone, supine = Case(2.0, 180.0), Case(2.0, 0.0)
+    rng = np.random.default_rng(0)
+    # material points: centroids of random cells, inside the body
+    cells = rng.choice(runner.mesh.topology.index_map(3).size_local, 20, replace=False)
+    nodes = runner.mesh.geometry.dofmap.array.reshape(-1, runner.mesh.geometry.dofmap.links(0).size)
+    material = X_true[nodes[cells, :4]].mean(axis=1)
+    try:
+        runner.problem.set_geometry(X_true)
+        assert runner.solve(supine)[0].converged
+        truth_supine = material + evaluate(runner.problem.displacement(), material)[0]
+        x_prone = _deformed(runner, prone, X_true)
+        # seen in the image as the imaged mesh shows them: the same cells' centroids, prone
+        seen = x_prone[nodes[cells, :4]].mean(axis=1)
+        runner.problem.set_geometry(x_prone)
+        estimate = estimate_reference(runner, prone.material(), prone.gravity())
+        names = [f"p{i}" for i in range(len(seen))]
+        tracked = track(runner, estimate.X, names, seen, supine.material(), supine.gravity())
+        assert tracked.converged
+        assert np.array_equal(runner.mesh.geometry.x, x_prone)
+        sag = np.linalg.norm(truth_supine - material, axis=1).max()
+        assert np.abs(tracked.reference - material).max() <= 0.01 * sag
+        assert np.linalg.norm(tracked.target - truth_supine, axis=1).max() <= 0.01 * sag
+        far = np.array([[1.0, 1.0, 1.0]])
+        with pytest.raises(InvalidParameterError, match=r"1 point\(s\) lie outside .*: far \("):
+            track(runner, estimate.X, ["far"], far, supine.material(), supine.gravity())
+    finally:
+        runner.problem.set_geometry(X_true)
