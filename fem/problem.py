@@ -172,9 +172,8 @@ class GravityProblem:
         self.tangent = fem.form(tangent)
         self._preconditioner: fem.FormMetaClass | None = None
         self.bcs = self._dirichlet_bcs()
-        self._volume = mesh.comm.allreduce(
-            fem.assemble_scalar(fem.form(fem.Constant(mesh, scalar(1.0)) * dx)), op=MPI.SUM
-        )
+        self._volume_form = fem.form(fem.Constant(mesh, scalar(1.0)) * dx)
+        self._volume = self._measure_volume()
         self._volume_change = fem.form((self.J - 1) * dx)
         self._detF_points = self._quadrature_points(discretisation.quadrature)
         self._detF = fem.Expression(self.J, self._detF_points)
@@ -229,10 +228,11 @@ class GravityProblem:
         reference volume is measured again. The contact zone stays the one found at set-up.
         """
         self.mesh.geometry.x[:] = x
-        self._volume = self.mesh.comm.allreduce(
-            fem.assemble_scalar(fem.form(fem.Constant(self.mesh, PETSc.ScalarType(1.0)) * self.dx)),
-            op=MPI.SUM,
-        )
+        self._volume = self._measure_volume()
+
+    def _measure_volume(self) -> float:
+        """|Ω| of the mesh's current geometry, m³."""
+        return self.mesh.comm.allreduce(fem.assemble_scalar(self._volume_form), op=MPI.SUM)
 
     # -- case parameters ----------------------------------------------------------------------
     def set_case(self, material: Material, gravity: Gravity) -> None:
