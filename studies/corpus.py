@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from fem.parameters import SolverSettings
-from fem.sweep import Case
+from fem.sweep import Case, clinical_cases
 from studies.machine import machine_state
 from studies.mesh_quality import MeshQuality
 from studies.results import Record, Result
@@ -34,8 +34,7 @@ def corpus_cases(
     clinical: list[dict[str, Any]], soft_C1: float, soft_phi: list[float]
 ) -> list[Case]:
     """The config's clinical cases, then ``soft_C1`` at every ``soft_phi`` (each once)."""
-    cases = [Case(float(c["C1"]), float(c["phi"]), float(c.get("theta", 0.0))) for c in clinical]
-    cases += [Case(float(soft_C1), float(phi)) for phi in soft_phi]
+    cases = clinical_cases(clinical) + [Case(float(soft_C1), float(phi)) for phi in soft_phi]
     return list(dict.fromkeys(cases))
 
 

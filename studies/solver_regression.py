@@ -22,7 +22,7 @@ import numpy as np
 import yaml
 
 from fem.parameters import SolverSettings
-from fem.sweep import Case
+from fem.sweep import clinical_cases
 from studies.machine import machine_state, one_core
 
 #: The ``direct`` preset's options before issue 21, as overrides of today's.
@@ -41,8 +41,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     config = yaml.safe_load(args.config.read_text())
     settings = SolverSettings.from_config(config)
-    cases = [Case(float(c["C1"]), float(c["phi"]), float(c.get("theta", 0.0)))
-             for c in config.get("clinical", [])]
+    cases = clinical_cases(config.get("clinical", []))
     print(f"machine before: {machine_state().to_json()}")
     with one_core() as core:
         runners = {
