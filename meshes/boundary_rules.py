@@ -317,32 +317,6 @@ def name_facets(
     return out
 
 
-def classify_boundary(
-    x: np.ndarray,
-    faces: np.ndarray,
-    rules: dict[Boundary, BoundaryRule],
-    units: str,
-    face_groups: np.ndarray | None = None,
-    group_names: dict[str, int] | None = None,
-    posterior: np.ndarray = POSTERIOR,
-) -> dict[Boundary, np.ndarray]:
-    """Name the boundary faces by the rules; the faces no rule selects are skin.
-
-    Arguments as :func:`select_facets`.
-
-    Returns:
-        Boundary -> its faces (every boundary present, possibly empty).
-
-    Raises:
-        NoRibFacetsError: if the rib rule selects nothing, with how near the closest facet was.
-        SurfaceRuleError: if another rule selects nothing, names an unknown group, a facet is
-            selected by two rules, or the rib is too much or too little of the boundary.
-    """
-    selected = select_facets(x, faces, rules, units, face_groups, group_names, posterior)
-    check_selection(x, faces, selected, rules)
-    return name_facets(faces, selected)
-
-
 def face_groups(mesh: InputMesh, faces: np.ndarray) -> np.ndarray | None:
     """Group of each boundary face, looked up from the file's tagged triangles."""
     if len(mesh.triangles) == 0 or np.all(mesh.triangle_groups < 0):

@@ -33,7 +33,6 @@ from meshes.boundary_rules import (
     POSTERIOR,
     BoundaryRule,
     check_selection,
-    classify_boundary,
     face_groups,
     name_facets,
     select_facets,
@@ -260,6 +259,16 @@ class InputVolume:
     group_names: dict[str, int]
     info: dict[str, Any]
 
+    def select(self, spec: ImportSpec) -> dict[Boundary, np.ndarray]:
+        """The boundary faces each of ``spec``'s rules selects (in the file's axes and units).
+
+        Raises:
+            NoRibFacetsError, SurfaceRuleError: for a rule that selects nothing or names an
+                unknown group (:func:`meshes.boundary_rules.select_facets`).
+        """
+        return select_facets(self.x, self.faces, spec.surfaces, spec.units, self.groups,
+                             self.group_names, spec.orientation.to_file(POSTERIOR))
+
 
 def prepare_input(
     spec: ImportSpec, size: MeshSize
@@ -277,10 +286,9 @@ def prepare_input(
     """
     volume = read_volume(spec, size)
     x, tets, info = volume.x, volume.tets, volume.info
-    facets = classify_boundary(
-        x, volume.faces, spec.surfaces, spec.units, volume.groups, volume.group_names,
-        spec.orientation.to_file(POSTERIOR),
-    )
+    selected = volume.select(spec)
+    check_selection(x, volume.faces, selected, spec.surfaces)
+    facets = name_facets(volume.faces, selected)
     info["rules"] = {b.label: r.describe() for b, r in spec.surfaces.items()}
     x, tets, facets = into_project_frame(x, tets, facets, spec.orientation)
     info["orientation"] = spec.orientation.describe()
@@ -356,10 +364,7 @@ def preview_rules(
         MeshInputError: for broken input, or a rule that selects nothing.
     """
     volume = read_volume(spec, size)
-    selected = select_facets(
-        volume.x, volume.faces, spec.surfaces, spec.units, volume.groups, volume.group_names,
-        spec.orientation.to_file(POSTERIOR),
-    )
+    selected = volume.select(spec)
     summary = selection_summary(volume.x, volume.faces, selected)
     try:
         check_selection(volume.x, volume.faces, selected, spec.surfaces)
