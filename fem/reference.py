@@ -197,17 +197,15 @@ def estimate_reference(
 
 
 def write_reference_mesh(runner: CaseRunner, X: np.ndarray, xdmf_path: str | Path) -> Path:
-    """Write the runner's mesh moved to the reference positions ``X``, with the same tags."""
-    from meshes.io import write_tagged_mesh
+    """Write the runner's mesh file with its nodes at the reference positions ``X``.
 
-    mesh = runner.problem.mesh
-    observed = mesh.geometry.x.copy()
-    try:
-        mesh.geometry.x[:] = X
-        write_tagged_mesh(mesh, runner.cell_tags, runner.facet_tags, xdmf_path)
-    finally:
-        mesh.geometry.x[:] = observed
-    return Path(xdmf_path)
+    The cells, tags and node numbering are the observed file's (:func:`meshes.io.moved_mesh`):
+    node k of the reference file is node k of the imaged file, the same material point, which
+    is how tracking pairs the two.
+    """
+    from meshes.io import moved_mesh
+
+    return moved_mesh(runner.mesh_path, runner.mesh, X, xdmf_path)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -18,7 +18,10 @@ __all__ = [
     "add_tagged_mesh",
     "boundary_facets",
     "geometry_nodes",
+    "moved_mesh",
+    "nodes_in_file_order",
     "read_mesh",
+    "same_cells",
     "write_gmsh_model",
     "write_tagged_mesh",
 ]
@@ -91,6 +94,68 @@ def write_tagged_mesh(mesh: Any, cell_tags: Any, facet_tags: Any, xdmf_path: str
         for suffix in (".h5", ".xdmf"):  # the .xdmf last: it is what marks completion
             shutil.move(str(tmp_xdmf.with_suffix(suffix)), str(target.with_suffix(suffix)))
     log.info("wrote %s (%d cells)", target, mesh.topology.index_map(3).size_global)
+
+
+GEOMETRY_DATASET = f"/Mesh/{MESH_NAME}/geometry"
+TOPOLOGY_DATASET = f"/Mesh/{MESH_NAME}/topology"
+
+
+def nodes_in_file_order(mesh: Any) -> np.ndarray:
+    """Geometry-node positions of a serial mesh, ordered by their index in its file."""
+    index = np.asarray(mesh.geometry.input_global_indices, dtype=np.int64)
+    out = np.empty_like(mesh.geometry.x)
+    out[index] = mesh.geometry.x
+    return out
+
+
+def moved_mesh(source: str | Path, mesh: Any, x: np.ndarray, xdmf_path: str | Path) -> Path:
+    """Write the mesh file ``source`` with its nodes moved to ``x``, its numbering kept.
+
+    The file's cells, tags and node numbering are those of ``source``: node k of the new file
+    is node k of the source, the same material point in another configuration (a loaded shape
+    and its reference). Re-writing a mesh through dolfinx would renumber it.
+
+    Args:
+        source: a mesh file written by :func:`write_tagged_mesh`.
+        mesh: that file read (serially), whose node order ``x`` follows.
+        x: (nodes, 3) new positions, in ``mesh``'s node order.
+        xdmf_path: the file to write (with its ``.h5``); written whole or not at all.
+    """
+    import h5py
+
+    source, target = Path(source), Path(xdmf_path)
+    x = np.asarray(x, dtype=float)
+    if x.shape != mesh.geometry.x.shape:
+        raise MeshInputError(f"{x.shape[0]} positions for a mesh of {mesh.geometry.x.shape[0]} "
+                             "nodes")
+    by_file = np.empty_like(x)
+    by_file[np.asarray(mesh.geometry.input_global_indices, dtype=np.int64)] = x
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=target.parent, prefix=f".{target.stem}.") as tmp:
+        tmp_xdmf = Path(tmp) / target.name
+        shutil.copyfile(source.with_suffix(".h5"), tmp_xdmf.with_suffix(".h5"))
+        with h5py.File(tmp_xdmf.with_suffix(".h5"), "r+") as h5:
+            geometry = h5[GEOMETRY_DATASET]
+            if geometry.shape[0] != len(by_file):
+                raise MeshInputError(f"{source} holds {geometry.shape[0]} nodes, not the "
+                                     f"{len(by_file)} of the mesh read from it")
+            geometry[...] = by_file[:, : geometry.shape[1]]
+        text = source.read_text().replace(f"{source.stem}.h5:", f"{target.stem}.h5:")
+        tmp_xdmf.write_text(text)
+        for suffix in (".h5", ".xdmf"):  # the .xdmf last: it is what marks completion
+            shutil.move(str(tmp_xdmf.with_suffix(suffix)), str(target.with_suffix(suffix)))
+    return target
+
+
+def same_cells(a: str | Path, b: str | Path) -> bool:
+    """Whether two mesh files have the same cells on the same node numbering."""
+    import h5py
+
+    with h5py.File(Path(a).with_suffix(".h5"), "r") as fa, \
+            h5py.File(Path(b).with_suffix(".h5"), "r") as fb:
+        ta, tb = fa.get(TOPOLOGY_DATASET), fb.get(TOPOLOGY_DATASET)
+        return ta is not None and tb is not None and ta.shape == tb.shape \
+            and bool(np.array_equal(ta[...], tb[...]))
 
 
 def read_mesh(xdmf_path: str | Path, comm: Any = None) -> tuple[Any, Any, Any]:

@@ -112,11 +112,13 @@ def _encode_c1(C1: np.ndarray, encoding: str) -> np.ndarray:
     return C1
 
 
-def dirichlet_factor(X: np.ndarray, boundary: np.ndarray, length: float) -> np.ndarray:
+def dirichlet_factor(
+    X: np.ndarray, boundary: np.ndarray, length: float, at: np.ndarray | None = None
+) -> np.ndarray:
     """Smooth factor that vanishes exactly on the clamped points, φ = 1 − exp(−d / (length d_max)).
 
     ``d`` is each point's distance to the nearest clamped point and ``d_max`` its
-    largest value, so φ rises linearly off the rib (as the displacement does) and
+    largest value over ``X``, so φ rises linearly off the rib (as the displacement does) and
     levels off at 1 in the bulk of the breast. Multiplying a network's output by φ
     enforces the homogeneous Dirichlet condition exactly.
 
@@ -124,6 +126,8 @@ def dirichlet_factor(X: np.ndarray, boundary: np.ndarray, length: float) -> np.n
         X: material points (N, 3).
         boundary: clamped flags (N,); at least one must be set.
         length: length scale as a fraction of ``d_max``.
+        at: other points (M, 3) to evaluate φ at, with the same ``d_max`` (a model queried
+            between its material points); None for ``X`` itself.
 
     Raises:
         DatasetError: if no point is clamped.
@@ -132,10 +136,14 @@ def dirichlet_factor(X: np.ndarray, boundary: np.ndarray, length: float) -> np.n
 
     if not np.any(boundary):
         raise DatasetError("an exact Dirichlet condition needs clamped (boundary) points")
-    d, _ = cKDTree(X[boundary]).query(X)
+    tree = cKDTree(X[boundary])
+    d, _ = tree.query(X)
     d_max = float(d.max()) if d.max() > 0 else 1.0
+    if at is not None:
+        d, _ = tree.query(np.asarray(at, dtype=float))
     phi = 1.0 - np.exp(-d / (length * d_max))
-    phi[boundary] = 0.0
+    if at is None:
+        phi[boundary] = 0.0
     return phi
 
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -44,6 +45,7 @@ class Surrogate:
 
     def __init__(self, checkpoint: Checkpoint) -> None:
         c = checkpoint
+        self._checkpoint = c
         if c.config.boundary == "exact" and c.point_factor is None:
             raise ModelFileError("an exact-Dirichlet model needs its point factor (points_factor)")
         self.config = c.config
@@ -181,6 +183,36 @@ class Surrogate:
             ModelFileError: if files are missing or the weights do not fit the architecture.
         """
         return cls(load_checkpoint(folder))
+
+    def at(self, points: np.ndarray) -> Surrogate:
+        """The same model queried at other material points ``points`` (M, 3), in m.
+
+        The network is a function of the reference position, so it answers between the
+        material points it was trained on: a tumour's material position, found from the imaged
+        shape (:func:`fem.tracking.to_reference`), is predicted directly, without the mesh. Every
+        point goes through the domain network (points strictly inside the body); an
+        exact-Dirichlet model's factor is evaluated at them with the model's own length scale.
+        Each query of the returned model costs in proportion to M.
+
+        Raises:
+            ValueError: if ``points`` is not a finite (M, 3) array.
+        """
+        points = np.asarray(points, dtype=float)
+        if points.ndim != 2 or points.shape[1] != 3 or not points.size:
+            raise ValueError(f"points must be an (M, 3) array, got shape {points.shape}")
+        if not np.all(np.isfinite(points)):
+            raise ValueError("points must be finite")
+        c = self._checkpoint
+        factor = None
+        if c.config.boundary == "exact":
+            from surrogate.data import dirichlet_factor
+
+            factor = dirichlet_factor(self.X, self.boundary, c.config.bc_length, at=points)
+        return Surrogate(replace(
+            c, X=points, boundary=np.zeros(len(points), dtype=bool),
+            point_factor=None if factor is None else factor.astype(np.float32),
+            node_index=None,
+        ))
 
     # -- queries ----------------------------------------------------------------------
     def predict(self, C1: float, phi: float, theta: float = 0.0) -> np.ndarray:

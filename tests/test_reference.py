@@ -16,7 +16,7 @@ import pytest
 from fem.case import CaseRunner
 from fem.reference import estimate_reference, node_dofs, write_reference_mesh
 from fem.sweep import Case
-from meshes.io import read_mesh
+from meshes.io import nodes_in_file_order, read_mesh, same_cells
 
 pytestmark = pytest.mark.solve
 
@@ -64,9 +64,12 @@ def test_the_reference_of_a_loaded_shape_is_found_and_predicts_supine(
 
         # the estimate as a mesh with the same tags, read back as any mesh is
         path = write_reference_mesh(runner, estimate.X, tmp_path / "reference.xdmf")
+        # ... on the observed file's node numbering: node k of each is the same material point
         mesh, _, facets = read_mesh(path)
-        written = np.asarray(mesh.geometry.input_global_indices)
-        assert np.allclose(mesh.geometry.x, estimate.X[written], atol=1e-12)
+        expected = np.empty_like(estimate.X)
+        expected[np.asarray(runner.mesh.geometry.input_global_indices)] = estimate.X
+        assert np.allclose(nodes_in_file_order(mesh), expected, atol=1e-12)
+        assert same_cells(path, runner.mesh_path)
         assert np.array_equal(np.sort(facets.values), np.sort(runner.facet_tags.values))
     finally:
         runner.problem.set_geometry(X_true)
@@ -150,3 +153,59 @@ def test_points_seen_prone_are_tracked_to_supine_through_the_reference(runner: C
             track(runner, estimate.X, ["far"], far, supine.material(), supine.gravity())
     finally:
         runner.problem.set_geometry(X_true)
+
+
+@pytest.mark.workflow
+def test_the_tracking_command_carries_points_by_fe_and_by_the_surrogate(
+    small_run: Path, tmp_path: Path
+) -> None:
+    """Points seen prone go supine by both paths, from the imaged mesh and its reference.
+
+    The small run's mesh is the true reference (its surrogate was trained on the sweep from
+    it); the imaged shape is its prone solve. The FE path lands where the truth puts the
+    points; the toy surrogate (two C1 values, three angles) lands near them; a model of
+    another mesh and a point outside the body are refused by name.
+    """
+    import csv
+
+    from fem.interpolation import evaluate
+    from studies.tracking import TrackingResult, main
+
+    reference = small_run / "results/mesh/mesh.xdmf"
+    model = small_run / "results/surrogate/model"
+    runner = CaseRunner(reference)
+    X_true = runner.mesh.geometry.x.copy()
+    prone, supine = Case(1.0, 180.0), Case(1.0, 0.0)
+    nodes = runner.mesh.geometry.dofmap.array.reshape(-1, 4)
+    cells = np.random.default_rng(1).choice(len(nodes), 12, replace=False)
+    material = X_true[nodes[cells]].mean(axis=1)
+    assert runner.solve(supine)[0].converged
+    truth = material + evaluate(runner.problem.displacement(), material)[0]
+    x_prone = _deformed(runner, prone, X_true)
+    imaged = write_reference_mesh(runner, x_prone, tmp_path / "imaged.xdmf")
+    points = tmp_path / "points.csv"
+    seen = x_prone[nodes[cells]].mean(axis=1)
+    points.write_text("name,x,y,z\n" + "".join(
+        f"p{i},{x!r},{y!r},{z!r}\n" for i, (x, y, z) in enumerate(seen)))
+
+    out = tmp_path / "tracking" / "points.csv"
+    args = [str(points), "--imaged", str(imaged), "--reference", str(reference), "--model",
+            str(model), "--c1", "1", "--phi", "0", "--out", str(out)]
+    assert main(args) == 0
+    rows = list(csv.DictReader(out.open()))
+    assert [r["name"] for r in rows] == [f"p{i}" for i in range(len(seen))]
+    fe = np.array([[float(r[f"fe_{a}_m"]) for a in "xyz"] for r in rows])
+    by_surrogate = np.array([[float(r[f"surrogate_{a}_m"]) for a in "xyz"] for r in rows])
+    sag = np.linalg.norm(truth - material, axis=1).max()
+    assert np.linalg.norm(fe - truth, axis=1).max() <= 1e-3 * sag + 1e-6
+    assert np.linalg.norm(by_surrogate - truth, axis=1).max() <= 0.25 * sag
+    result = TrackingResult.read(out.with_suffix(".json"))
+    assert result.surrogate_ms["points"] == len(seen) and result.surrogate_ms["median_ms"] > 0
+    gaps = np.array([float(r["difference_mm"]) for r in rows])
+    assert np.allclose(gaps, 1e3 * np.linalg.norm(fe - by_surrogate, axis=1), atol=1e-3)
+
+    # the imaged mesh is not the surrogate's mesh: refused, nothing written
+    other = tmp_path / "other.csv"
+    assert main([*args[:4], str(imaged), *args[5:-1], str(other)]) == 2 and not other.exists()
+    points.write_text("name,x,y,z\nfar,1.0,1.0,1.0\n")
+    assert main([*args[:-1], str(other)]) == 2 and not other.exists()

@@ -335,3 +335,10 @@ def test_fast_prediction_is_the_plain_network(
         np.testing.assert_allclose(fast, plain, rtol=0, atol=1e-5 * np.abs(plain).max())
         if boundary == "exact":
             assert np.all(fast[model.boundary] == 0.0)
+        # between the material points: the same network, queried at the domain points alone
+        inside = ~model.boundary
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ExtrapolationWarning)
+            at_points = model.at(model.X[inside]).predict(C1, phi, theta)
+        np.testing.assert_allclose(at_points, fast[inside], rtol=0,
+                                   atol=1e-5 * np.abs(plain).max())
