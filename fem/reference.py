@@ -33,7 +33,6 @@ import numpy as np
 
 from fem.case import CaseRunner
 from fem.exceptions import InvalidParameterError
-from fem.loading import solve_incrementally
 from fem.parameters import Gravity, Material
 from meshes.io import geometry_nodes
 
@@ -99,23 +98,6 @@ def node_dofs(mesh: Any, V: Any) -> np.ndarray:
     return out
 
 
-def _forward(runner: CaseRunner, material: Material, gravity: Gravity, warm: np.ndarray | None
-             ) -> tuple[bool, int, bool]:
-    """One forward solve on the problem's current geometry; returns (converged, its, warm)."""
-    problem, solver = runner.problem, runner.solver
-    if warm is not None:
-        problem.w.x.array[:] = warm
-        problem.set_load_fraction(1.0)
-        outcome = solver.solve()
-        if outcome.converged and problem.min_detF() > 0:
-            return True, outcome.iterations, True
-        log.info("warm start failed (%s): the load path from rest", outcome.reason)
-    problem.set_case(material, gravity)
-    problem.w.x.array[:] = 0.0
-    result = solve_incrementally(problem, solver, runner.settings.loading)
-    return result.converged, result.total_iterations, False
-
-
 def estimate_reference(
     runner: CaseRunner,
     material: Material,
@@ -158,7 +140,7 @@ def estimate_reference(
     try:
         for _ in range(max_iterations):
             problem.set_geometry(X)
-            ok, its, was_warm = _forward(runner, material, gravity, warm)
+            ok, its, was_warm = runner.solve_from(material, gravity, warm)
             iterations.append(its)
             warm_starts += was_warm
             if not ok:

@@ -209,3 +209,46 @@ def test_the_tracking_command_carries_points_by_fe_and_by_the_surrogate(
     assert main([*args[:4], str(imaged), *args[5:-1], str(other)]) == 2 and not other.exists()
     points.write_text("name,x,y,z\nfar,1.0,1.0,1.0\n")
     assert main([*args[:-1], str(other)]) == 2 and not other.exists()
+
+
+@pytest.mark.workflow
+def test_the_stiffness_is_found_from_a_noisy_second_observation(
+    small_run: Path, tmp_path: Path
+) -> None:
+    """C1 from the skin of a supine FE solve with 0.5 mm noise: within 5 %, in its interval.
+
+    The small run's toy surrogate (two C1 values) searches; FE confirms, so the estimate does
+    not rest on the surrogate's accuracy. An observation in other units, or in other axes, is
+    refused by name.
+    """
+    from studies.stiffness import Estimator, main
+    from studies.tracking import TrackingInputError
+    from surrogate.stiffness import StiffnessError
+
+    reference = small_run / "results/mesh/mesh.xdmf"
+    model = small_run / "results/surrogate/model"
+    estimator = Estimator(reference, model, CaseRunner(reference).settings)
+    skin = estimator.skin_of_solve(2.5, 0.0, 0.0)
+    observed = skin + np.random.default_rng(3).normal(scale=5e-4, size=skin.shape)
+    result = estimator.estimate(observed, 0.0, 0.0, "test", truth=2.5)
+    assert abs(result.C1_kPa / 2.5 - 1) <= 0.05 and result.converged
+    lo, hi = result.interval_kPa
+    assert lo <= 2.5 <= hi and hi / lo < 1.2
+    assert 0.3 < result.rms_mm < 0.7  # the noise's normal component, 0.5 mm
+
+    points = tmp_path / "scan.csv"
+    points.write_text("name,x,y,z\n" + "".join(
+        f"s{i},{x!r},{y!r},{z!r}\n" for i, (x, y, z) in enumerate(observed)))
+    out = tmp_path / "stiffness"
+    args = [str(points), "--reference", str(reference), "--model", str(model), "--phi", "0",
+            "--out", str(out)]
+    assert main(args) == 0
+    assert (out / "misfit.png").stat().st_size > 0 and (out / "stiffness.json").is_file()
+
+    with pytest.raises(StiffnessError, match="units"):
+        estimator.estimate(1e3 * observed, 0.0, 0.0, "in mm, read as m", fe=False)
+    with pytest.raises(StiffnessError, match="axes"):
+        estimator.estimate(observed[:, [1, 0, 2]], 0.0, 0.0, "x and y swapped", fe=False)
+    with pytest.raises(TrackingInputError, match="another mesh"):
+        Estimator(small_run / "results/fe_study/meshes/g=0.0400_m=0.0300_o=1/mesh.xdmf", model,
+                  CaseRunner(reference).settings)

@@ -190,3 +190,25 @@ def plot_point_fields(
 
 
 __all__ = ["plot_extrapolation", "plot_history", "plot_point_fields", "plot_speed_accuracy"]
+
+
+def plot_stiffness_misfit(
+    curve_c1: Sequence[float], curve_rms_mm: Sequence[float], fe_c1: Sequence[float],
+    fe_rms_mm: Sequence[float], estimate: float, interval: Sequence[float],
+    truth: float | None, path: str | Path,
+) -> None:
+    """The misfit over C1: the surrogate's curve, the FE solves, the estimate and its interval."""
+    fig, ax = plt.subplots(figsize=(6.0, 3.8), layout="constrained")
+    ax.plot(curve_c1, curve_rms_mm, color="tab:blue", label="surrogate search")
+    ax.plot(fe_c1, fe_rms_mm, "o", color="tab:orange", label="FE confirmation")
+    ax.axvspan(interval[0], interval[1], color="tab:orange", alpha=0.2,
+               label=f"interval [{interval[0]:.3g}, {interval[1]:.3g}] kPa")
+    ax.axvline(estimate, color="tab:orange", lw=1.2, label=f"estimate {estimate:.3g} kPa")
+    if truth is not None:
+        ax.axvline(truth, color="black", ls="--", lw=1.0, label=f"truth {truth:.3g} kPa")
+    ax.set_xscale("log")
+    plain_log_ticks(ax)
+    ax.set_xlabel("C1 (kPa)")
+    ax.set_ylabel("RMS distance to the observed skin (mm)")
+    ax.legend(fontsize=FONT_SIZE - 2)
+    save_figure(fig, path)
