@@ -28,6 +28,7 @@ from report.sections.corpus import corpus_section
 from report.sections.fe import fe_speed_accuracy_section
 from report.sections.mesh import mesh_section
 from report.sections.paper import paper_section
+from report.sections.reference import reference_section
 from report.sections.scene import scene_needs_section
 from report.sections.stability import stability_section
 from report.sections.surrogate import surrogate_speed_accuracy_section
@@ -53,6 +54,7 @@ SECTIONS: tuple[tuple[str, str, Callable[[Context], str]], ...] = (
     ("scene-needs", "Model no more than a scene needs", scene_needs_section),
     ("stability", "Stability", stability_section),
     ("corpus", "A corpus of anatomies", corpus_section),
+    ("reference", "From the imaged shape to the reference state", reference_section),
     ("paper", "The paper side by side", paper_section),
     ("sweep-cost", "Sweep cost", sweep_cost_section),
     ("training", "Surrogate training", training_section),

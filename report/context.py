@@ -18,6 +18,7 @@ from studies.corpus import CorpusTable
 from studies.fe_benchmark import ClinicalBenchmark
 from studies.fe_speed_accuracy import SpeedAccuracy
 from studies.mesh_quality import MeshQuality
+from studies.reference_roundtrip import RoundTripTable
 from studies.stability import StabilityMap
 from studies.surrogate_benchmark import SurrogateBenchmark
 from studies.surrogate_evaluation import ClinicalEvaluation, Extrapolation
@@ -29,7 +30,7 @@ log = logging.getLogger(__name__)
 INPUT_NAMES = (
     "dataset", "quality", "mesh_png", "model", "history", "table2", "variants", "clinical",
     "extrapolation", "benchmark", "clinical_fields", "fe_clinical", "fe_speed_accuracy",
-    "fe_stability", "corpus", "viewer",
+    "fe_stability", "corpus", "reference_roundtrip", "viewer",
 )
 
 
@@ -48,6 +49,7 @@ RESULT_TYPES: dict[str, Callable[[Path], Any]] = {
     "fe_speed_accuracy": SpeedAccuracy.read,
     "fe_stability": StabilityMap.read,
     "corpus": CorpusTable.read,
+    "reference_roundtrip": RoundTripTable.read,
 }
 
 

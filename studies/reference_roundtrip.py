@@ -1,7 +1,7 @@
-"""Benchmark: the reference state's round trip, beside the naive supine prediction.
+"""The reference state's round trip, beside the naive prediction: a benchmark and a report table.
 
 ``python -m studies.reference_roundtrip MESH [--config config.yaml] [--c1 1 2 5]
-[--observed 180 0 60]``
+[--observed 180 0 60] [--out roundtrip.json]``
 
 For each C1 and each posture Φ of the observation: solve from the mesh (the true reference)
 to get the observed shape; estimate the reference from it
@@ -10,7 +10,8 @@ report the largest node distance to the truth (mm and % of the observation's max
 supine (Φ = 0, or prone Φ = 180 for a supine observation) shape predicted from the estimate
 against the one from the truth, the same prediction made from the observed shape taken as
 stress-free (the naive way), and the estimate's wall time over one cold forward solve of the
-observed case measured in the same process just before it.
+observed case measured in the same process just before it. The workflow's rule
+``reference_roundtrip`` writes the table for the report.
 """
 
 from __future__ import annotations
@@ -18,7 +19,9 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import yaml
@@ -26,21 +29,83 @@ import yaml
 from fem.parameters import SolverSettings
 from fem.sweep import Case
 from studies.machine import machine_state
+from studies.results import Record, Result
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Run the round trips and print one row each."""
+@dataclass(frozen=True)
+class RoundTrip(Record):
+    """One round trip.
+
+    Attributes:
+        C1_kPa: the stiffness.
+        observed_phi: the observation's Φ.
+        target_phi: the predicted posture's Φ.
+        sag_mm: the observation's max |u| from the true reference.
+        reference_error_mm: the estimate's largest node distance to the true reference.
+        target_sag_mm: the target posture's max |u| from the true reference.
+        target_error_mm: the target shape from the estimate against the one from the truth.
+        naive_error_mm: the target shape from the observed shape taken as stress-free, against
+            the truth.
+        forward_solves: forward solves of the estimate.
+        newton_iterations: their Newton iterations in all.
+        cost: the estimate's wall time over one cold forward solve of the observed case.
+        estimate_s: the estimate's wall time.
+        converged: whether the estimate converged.
+        reason: why it stopped.
+    """
+
+    C1_kPa: float
+    observed_phi: float
+    target_phi: float
+    sag_mm: float
+    reference_error_mm: float
+    target_sag_mm: float
+    target_error_mm: float
+    naive_error_mm: float
+    forward_solves: int
+    newton_iterations: int
+    cost: float
+    estimate_s: float
+    converged: bool
+    reason: str
+
+
+@dataclass(frozen=True)
+class RoundTripTable(Result):
+    """``roundtrip.json``: the round trips and where they were measured."""
+
+    rows: list[RoundTrip]
+    tolerance_mm: float
+    machine: dict[str, Any]
+
+
+HEADER = ["C1 (kPa)", "observed Φ", "predicted Φ", "observed max |u| (mm)",
+          "reference error (mm)", "predicted error (mm)", "naive error (mm)", "forward solves",
+          "cost (cold solves)"]
+
+
+def table_rows(table: RoundTripTable) -> list[list[str]]:
+    """The report's rows: errors in mm and as % of the posture's max |u|."""
+    rows = []
+    for r in table.rows:
+        rows.append([
+            f"{r.C1_kPa:g}", f"{r.observed_phi:g}°", f"{r.target_phi:g}°", f"{r.sag_mm:.2f}",
+            f"{r.reference_error_mm:.4f} ({100 * r.reference_error_mm / r.sag_mm:.3f} %)",
+            f"{r.target_error_mm:.4f} ({100 * r.target_error_mm / r.target_sag_mm:.3f} %)",
+            f"{r.naive_error_mm:.2f} ({100 * r.naive_error_mm / r.target_sag_mm:.0f} %)",
+            f"{r.forward_solves}" + ("" if r.converged else f" (failed: {r.reason})"),
+            f"{r.cost:.2f}",
+        ])
+    return rows
+
+
+def round_trips(mesh: Path, settings: SolverSettings, c1s: list[float],
+                observed_phis: list[float], tolerance: float = 1e-5) -> RoundTripTable:
+    """Run every round trip on one runner (its geometry is moved and put back)."""
     from fem.case import CaseRunner
     from fem.reference import estimate_reference, node_dofs
 
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("mesh", type=Path)
-    parser.add_argument("--config", type=Path, help="solver settings (fe, material, mesh)")
-    parser.add_argument("--c1", type=float, nargs="+", default=[1.0, 2.0, 5.0])
-    parser.add_argument("--observed", type=float, nargs="+", default=[180.0, 0.0, 60.0])
-    args = parser.parse_args(argv)
-    config = yaml.safe_load(args.config.read_text()) if args.config else {}
-    runner = CaseRunner(args.mesh, SolverSettings.from_config(config or {}))
+    runner = CaseRunner(mesh, settings)
     X = runner.mesh.geometry.x.copy()
     dofs = None
 
@@ -57,31 +122,59 @@ def main(argv: list[str] | None = None) -> int:
             dofs = node_dofs(runner.mesh, u.function_space)
         return reference + u.x.array.reshape(-1, 3)[dofs], elapsed
 
-    print(f"machine: {machine_state().to_json()}")
-    print(f"{'C1':>4} {'obs Φ':>6} {'target Φ':>8} {'max|u| mm':>9} {'ref err mm':>10} {'%':>6} "
-          f"{'target err mm':>13} {'%':>6} {'naive err mm':>12} {'solves':>6} {'cost':>5}")
-    for c1 in args.c1:
-        for phi in args.observed:
-            observed_case = Case(c1, phi)
-            target = Case(c1, 180.0 if phi == 0.0 else 0.0)
-            x, cold = deformed(observed_case, X)
-            runner.problem.set_geometry(x)
-            estimate = estimate_reference(runner, observed_case.material(),
-                                          observed_case.gravity())
-            sag = float(np.linalg.norm(x - X, axis=1).max())
-            error = float(np.linalg.norm(estimate.X - X, axis=1).max())
-            truth, _ = deformed(target, X)
-            proper, _ = deformed(target, estimate.X)
-            naive, _ = deformed(target, x)
-            target_sag = float(np.linalg.norm(truth - X, axis=1).max())
-            e_proper = float(np.linalg.norm(proper - truth, axis=1).max())
-            e_naive = float(np.linalg.norm(naive - truth, axis=1).max())
-            print(f"{c1:>4g} {phi:>6g} {target.phi:>8g} {1e3 * sag:>9.2f} {1e3 * error:>10.4f} "
-                  f"{100 * error / sag:>6.3f} {1e3 * e_proper:>13.4f} "
-                  f"{100 * e_proper / target_sag:>6.3f} {1e3 * e_naive:>12.2f} "
-                  f"{estimate.forward_solves:>6d} {estimate.wall_s / cold:>5.2f}"
-                  + ("" if estimate.converged else f"  FAILED: {estimate.reason}"), flush=True)
-    runner.problem.set_geometry(X)
+    rows = []
+    try:
+        for c1 in c1s:
+            for phi in observed_phis:
+                observed_case = Case(c1, phi)
+                target = Case(c1, 180.0 if phi == 0.0 else 0.0)
+                x, cold = deformed(observed_case, X)
+                runner.problem.set_geometry(x)
+                estimate = estimate_reference(
+                    runner, observed_case.material(settings.density),
+                    observed_case.gravity(settings.gravity), tolerance=tolerance)
+                truth, _ = deformed(target, X)
+                proper, _ = deformed(target, estimate.X)
+                naive, _ = deformed(target, x)
+
+                def largest(a: np.ndarray, b: np.ndarray) -> float:
+                    return 1e3 * float(np.linalg.norm(a - b, axis=1).max())
+
+                rows.append(RoundTrip(
+                    C1_kPa=c1, observed_phi=phi, target_phi=target.phi, sag_mm=largest(x, X),
+                    reference_error_mm=largest(estimate.X, X),
+                    target_sag_mm=largest(truth, X), target_error_mm=largest(proper, truth),
+                    naive_error_mm=largest(naive, truth),
+                    forward_solves=estimate.forward_solves,
+                    newton_iterations=int(sum(estimate.newton_iterations)),
+                    cost=estimate.wall_s / cold, estimate_s=estimate.wall_s,
+                    converged=estimate.converged, reason=estimate.reason,
+                ))
+    finally:
+        runner.problem.set_geometry(X)
+    return RoundTripTable(rows=rows, tolerance_mm=1e3 * tolerance,
+                          machine=machine_state().to_json())
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the round trips, print one row each and write the table with ``--out``."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("mesh", type=Path)
+    parser.add_argument("--config", type=Path, help="solver settings (fe, material, mesh)")
+    parser.add_argument("--c1", type=float, nargs="+", default=[1.0, 2.0, 5.0])
+    parser.add_argument("--observed", type=float, nargs="+", default=[180.0, 0.0, 60.0])
+    parser.add_argument("--tolerance-mm", type=float, default=0.01)
+    parser.add_argument("--out", type=Path, help="roundtrip.json to write")
+    args = parser.parse_args(argv)
+    config = yaml.safe_load(args.config.read_text()) if args.config else {}
+    table = round_trips(args.mesh, SolverSettings.from_config(config or {}), args.c1,
+                        args.observed, 1e-3 * args.tolerance_mm)
+    print(f"machine: {table.machine}")
+    print(" | ".join(HEADER))
+    for row in table_rows(table):
+        print(" | ".join(row))
+    if args.out is not None:
+        table.write(args.out)
     return 0
 
 

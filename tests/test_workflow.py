@@ -116,6 +116,7 @@ REPORT_SECTIONS = (
     "The paper side by side",
     "Sweep cost",
     "Surrogate training",
+    "From the imaged shape to the reference state",
 )
 
 
@@ -167,6 +168,13 @@ def test_small_sweep_report(small_run: Path) -> None:
     table3 = html_table(page, "table3-by_sample")
     for row in clinical["by_sample"]["rows"]:
         assert f"{row['rmse_mm']:.3g} ± {row['sd_mm']:.3g}" in table3
+    # the reference state: the estimate's error beside the naive one, from the result file
+    trips = json.loads((results / "reference/roundtrip.json").read_text())["rows"]
+    roundtrip = html_table(page, "reference-roundtrip")
+    for trip in trips:
+        assert trip["converged"] and trip["target_error_mm"] < 0.01 * trip["target_sag_mm"]
+        assert trip["naive_error_mm"] > 10 * trip["target_error_mm"]
+        assert f"{trip['naive_error_mm']:.2f}" in roundtrip
     stability = json.loads((results / "fe_study/stability.json").read_text())
     sweep_lowest = html_table(page, "sweep-lowest-converging")
     assert "sweep: lowest converging C1" in sweep_lowest

@@ -76,6 +76,7 @@ FE_STUDY_RESULTS = [FE_CLINICAL_JSON, FE_SPEED_ACCURACY_JSON, FE_STABILITY_JSON]
 CORPUS_DIR = "results/corpus"
 CORPUS_JSON = f"{CORPUS_DIR}/corpus.json"
 CORPUS_ANATOMIES = CONFIG.section("corpus", "anatomies")
+REFERENCE_ROUNDTRIP_JSON = "results/reference/roundtrip.json"
 
 
 def fe_study_mesh(spec):

@@ -20,6 +20,7 @@ rule report:
         fe_speed_accuracy=FE_SPEED_ACCURACY_JSON,
         fe_stability=FE_STABILITY_JSON,
         corpus=CORPUS_JSON,
+        reference_roundtrip=REFERENCE_ROUNDTRIP_JSON,
         viewer=VIEWER,
     output:
         html=REPORT,
