@@ -36,3 +36,4 @@ rule all:
     input:
         REPORT,
         SURROGATE_RESULTS,
+        imaged_results(),

@@ -19,9 +19,12 @@ from studies.fe_benchmark import ClinicalBenchmark
 from studies.fe_speed_accuracy import SpeedAccuracy
 from studies.mesh_quality import MeshQuality
 from studies.reference_roundtrip import RoundTripTable
+from studies.reference_state import ReferenceRecord
 from studies.stability import StabilityMap
+from studies.stiffness import StiffnessResult
 from studies.surrogate_benchmark import SurrogateBenchmark
 from studies.surrogate_evaluation import ClinicalEvaluation, Extrapolation
+from studies.tracking import TrackingResult
 from surrogate.checkpoint import read_history, read_model_card
 
 log = logging.getLogger(__name__)
@@ -30,7 +33,8 @@ log = logging.getLogger(__name__)
 INPUT_NAMES = (
     "dataset", "quality", "mesh_png", "model", "history", "table2", "variants", "clinical",
     "extrapolation", "benchmark", "clinical_fields", "fe_clinical", "fe_speed_accuracy",
-    "fe_stability", "corpus", "reference_roundtrip", "viewer",
+    "fe_stability", "corpus", "reference_roundtrip", "reference_record", "tracking", "stiffness",
+    "viewer",
 )
 
 
@@ -50,6 +54,8 @@ RESULT_TYPES: dict[str, Callable[[Path], Any]] = {
     "fe_stability": StabilityMap.read,
     "corpus": CorpusTable.read,
     "reference_roundtrip": RoundTripTable.read,
+    "reference_record": ReferenceRecord.read,
+    "stiffness": StiffnessResult.read,
 }
 
 
@@ -85,6 +91,7 @@ class Context:
     paths: dict[str, Path | None]
     clinical_fields: list[Path]
     results: dict[str, Any] = field(default_factory=dict)
+    tracking: list[tuple[str, TrackingResult]] = field(default_factory=list)
     _dataset: Any = None
     _cases: dict[str, np.ndarray] | None = None
 
@@ -132,8 +139,13 @@ class Context:
             out_dir=out_dir,
             clinical=[dict(c) for c in clinical],
             paths={name: as_path(inputs.get(name)) for name in INPUT_NAMES
-                   if name != "clinical_fields"},
+                   if name not in ("clinical_fields", "tracking")},
             clinical_fields=[Path(str(p)) for p in fields],
         )
         ctx.results = {name: _read_result(name, ctx.paths.get(name)) for name in RESULT_TYPES}
+        tracked = inputs.get("tracking") or []
+        if isinstance(tracked, str | Path):
+            tracked = [tracked]
+        ctx.tracking = [(Path(str(p)).stem, TrackingResult.read(Path(str(p))))
+                        for p in tracked if Path(str(p)).is_file()]
         return ctx

@@ -322,6 +322,58 @@ class SurrogateStudyConfig:
 
 
 @dataclass(frozen=True, slots=True)
+class ImagedConfig:
+    """The mesh as an image of the loaded breast (``reference_state.imaged``) and what follows.
+
+    Attributes:
+        case: the imaged posture and the stiffness assumed for it.
+        points: named points files and the case (C1 of ``case``) each is tracked to.
+        point_files: the points files by name.
+        observation: a second observation's file, or None.
+        observed_in: its posture (C1 of ``case``), or None.
+    """
+
+    case: Case
+    points: dict[str, Case]
+    point_files: dict[str, str]
+    observation: str | None
+    observed_in: Case | None
+
+    @classmethod
+    def from_section(cls, section: Mapping[str, Any]) -> ImagedConfig | None:
+        """Parse ``reference_state``; None when ``imaged`` is unset.
+
+        Raises:
+            ConfigError: for points or an observation without ``imaged``.
+        """
+        imaged = section.get("imaged")
+        if imaged is None:
+            extra = [k for k in ("points", "observation") if section.get(k)]
+            if extra:
+                raise ConfigError(
+                    f"reference_state.{extra[0]} needs reference_state.imaged (the stiffness "
+                    "and posture of the imaged mesh)"
+                )
+            return None
+        c1 = float(imaged["C1_kPa"])
+        case = Case(c1, imaged["phi"], imaged.get("theta", 0.0))
+        points = {name: Case(c1, p["phi"], p.get("theta", 0.0))
+                  for name, p in section.get("points", {}).items()}
+        files = {name: str(p["file"]) for name, p in section.get("points", {}).items()}
+        observation = section.get("observation")
+        return cls(
+            case, points, files,
+            None if observation is None else str(observation["file"]),
+            None if observation is None else Case(c1, observation["phi"],
+                                                  observation.get("theta", 0.0)),
+        )
+
+    def input_files(self) -> list[str]:
+        """The points and observation files (inputs of the workflow)."""
+        return [*self.point_files.values(), *([self.observation] if self.observation else [])]
+
+
+@dataclass(frozen=True, slots=True)
 class WorkflowConfig:
     """The whole configuration of the workflow, validated and parsed.
 
@@ -336,6 +388,7 @@ class WorkflowConfig:
         fe_study: the FE study.
         surrogate: the surrogate settings.
         surrogate_study: the surrogate's study.
+        imaged: the mesh as an image of the loaded breast, or None (stress-free).
         sections: the validated mapping (defaults filled, keys sorted), the source of the
             rules' params; read it through :meth:`section`.
     """
@@ -348,6 +401,7 @@ class WorkflowConfig:
     fe_study: FEStudyConfig
     surrogate: SurrogateConfig
     surrogate_study: SurrogateStudyConfig
+    imaged: ImagedConfig | None
     sections: dict[str, Any]
 
     @classmethod
@@ -382,8 +436,10 @@ class WorkflowConfig:
             surrogate = SurrogateConfig.from_mapping(sections["surrogate"])
         surrogate_study = SurrogateStudyConfig.from_sections(
             sections["surrogate_study"], surrogate, cases)
+        with _section("reference_state"):
+            imaged = ImagedConfig.from_section(sections["reference_state"])
         return cls(mesh, solver, solve_fe, cases, clinical, fe_study, surrogate, surrogate_study,
-                   sections)
+                   imaged, sections)
 
     def section(self, *keys: str) -> Any:
         """A copy of the validated value at ``keys``, e.g. ``section("mesh", "fixed")``."""

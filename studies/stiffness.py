@@ -163,15 +163,43 @@ def benchmark(estimator: Estimator, c1s: list[float], noise_mm: float, phi: floa
     return results
 
 
+def estimate_file(observation: Path, reference: Path, model_folder: Path, phi: float,
+                  theta: float, settings: Any, mesh_section: dict[str, Any] | None, out: Path,
+                  fe: bool = True) -> StiffnessResult:
+    """Estimate C1 from an observation file; write ``stiffness.json`` and ``misfit.png``.
+
+    Args:
+        observation: ``name,x,y,z`` of skin points in the posture (Φ, θ), in the file's frame
+            and units for an import (``mesh_section``'s ``file``), else the project's frame, m.
+        reference: the reference mesh.
+        model_folder: a surrogate trained on the sweep from it.
+        phi: Φ of the observation.
+        theta: θ of the observation.
+        settings: the solver settings.
+        mesh_section: the config's ``mesh`` section, or None.
+        out: the folder to write.
+        fe: confirm with FE (else the surrogate's estimate alone).
+    """
+    from meshes.config import MeshConfig
+    from meshes.frame import read_points
+
+    spec = MeshConfig.from_mapping(dict(mesh_section or {})).file
+    _, points = read_points(observation)
+    if spec is not None:
+        points = spec.to_project_frame(points)
+    result = Estimator(reference, model_folder, settings).estimate(
+        points, phi, theta, str(observation), fe=fe)
+    write_outputs(result, out)
+    return result
+
+
 def main(argv: list[str] | None = None) -> int:
     """The estimate from a points file, or the benchmark."""
     import yaml
 
     from fem.exceptions import FEError
     from fem.parameters import SolverSettings
-    from meshes.config import MeshConfig
     from meshes.exceptions import GeometryError, MeshInputError
-    from meshes.frame import read_points
     from studies.tracking import TrackingInputError
     from surrogate.exceptions import SurrogateError
     from surrogate.stiffness import StiffnessError
@@ -203,22 +231,16 @@ def main(argv: list[str] | None = None) -> int:
     try:
         values = (yaml.safe_load(args.config.read_text()) or {}) if args.config else {}
         settings = SolverSettings.from_config(values)
-        estimator = Estimator(reference, args.model, settings)
         if args.benchmark is not None:
-            benchmark(estimator, args.c1, args.noise_mm, args.phi, args.theta, args.seed,
-                      args.out)
+            benchmark(Estimator(reference, args.model, settings), args.c1, args.noise_mm,
+                      args.phi, args.theta, args.seed, args.out)
             return 0
-        spec = MeshConfig.from_mapping(dict(values.get("mesh") or {})).file
-        _, points = read_points(args.observation)
-        if spec is not None:
-            points = spec.to_project_frame(points)
-        result = estimator.estimate(points, args.phi, args.theta, str(args.observation),
-                                    fe=not args.no_fe)
+        result = estimate_file(args.observation, reference, args.model, args.phi, args.theta,
+                               settings, values.get("mesh"), args.out, fe=not args.no_fe)
     except (FEError, GeometryError, MeshInputError, SurrogateError, StiffnessError,
             TrackingInputError, OSError, yaml.YAMLError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
-    write_outputs(result, args.out)
     lo, hi = result.interval_kPa
     print(f"C1 = {result.C1_kPa:.4g} kPa ({100 * result.confidence:g} % interval "
           f"[{lo:.4g}, {hi:.4g}]), RMS misfit {result.rms_mm:.3f} mm over {result.points} "

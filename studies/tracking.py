@@ -202,20 +202,69 @@ def write_tracking_csv(path: Path, result: TrackingResult,
     tmp.replace(path)
 
 
+def track_file(points_csv: Path, imaged: Path, reference: Path, model_folder: Path, c1: float,
+               phi: float, theta: float, settings: Any, mesh_section: dict[str, Any] | None,
+               out: Path) -> TrackingResult:
+    """Track a points file to (Φ, θ) at C1 both ways; write the CSV and its JSON beside it.
+
+    Args:
+        points_csv: ``name,x,y,z`` in the imaged shape, in the file's frame and units for an
+            import (``mesh_section``'s ``file``), else in the project's frame, m.
+        imaged: the imaged mesh.
+        reference: its reference (:mod:`fem.reference`).
+        model_folder: a surrogate trained on the sweep from ``reference``.
+        c1: C1 (kPa).
+        phi: Φ of the target posture.
+        theta: θ of the target posture.
+        settings: the solver settings (:class:`fem.parameters.SolverSettings`).
+        mesh_section: the config's ``mesh`` section (its ``file`` frame), or None.
+        out: the CSV to write.
+
+    Raises:
+        TrackingInputError: for meshes or a model that do not belong together, an FE solve
+            that does not converge, or a surrogate query outside its training range.
+    """
+    from fem.case import CaseRunner
+    from fem.sweep import Case
+    from meshes.config import MeshConfig
+    from meshes.frame import read_points
+    from meshes.io import read_mesh
+    from surrogate.exceptions import ExtrapolationWarning
+    from surrogate.predict import Surrogate
+
+    spec = MeshConfig.from_mapping(dict(mesh_section or {})).file
+    names, points = read_points(points_csv)
+    if spec is not None:
+        points = spec.to_project_frame(points)
+    runner = CaseRunner(imaged, settings)
+    reference_mesh, _, _ = read_mesh(reference)
+    X = reference_positions(imaged, runner.mesh, reference, reference_mesh)
+    model = Surrogate.load(model_folder)
+    check_model_on(model, reference_mesh)
+    try:
+        result = track_both(runner, X, model, names, points, Case(c1, phi, theta),
+                            settings.density, settings.gravity)
+    except ExtrapolationWarning as err:
+        raise TrackingInputError(f"the surrogate would extrapolate: {err}") from None
+    if not result.fe_converged:
+        raise TrackingInputError(f"the FE solve of the target posture (C1 = {c1:g} kPa, "
+                                 f"Φ = {phi:g}°, θ = {theta:g}°) did not converge")
+    if spec is None:
+        write_tracking_csv(out, result)
+    else:
+        write_tracking_csv(out, result, spec.to_file_frame, spec.units)
+    result.write(out.with_suffix(".json"))
+    return result
+
+
 def main(argv: list[str] | None = None) -> int:
     """Track the points by both paths, write the CSV (and a JSON beside it), print a summary."""
     import yaml
 
-    from fem.case import CaseRunner
     from fem.exceptions import FEError
     from fem.parameters import SolverSettings
-    from fem.sweep import Case
-    from meshes.config import MeshConfig
     from meshes.exceptions import GeometryError, MeshInputError
-    from meshes.frame import read_points
-    from meshes.io import read_mesh
-    from surrogate.exceptions import ExtrapolationWarning, SurrogateError
-    from surrogate.predict import Surrogate
+    from surrogate.exceptions import SurrogateError
 
     parser = argparse.ArgumentParser(prog="python -m studies.tracking",
                                      description=__doc__.split("\n\n")[0])
@@ -234,37 +283,18 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.WARNING, format="%(message)s")
     try:
         values = (yaml.safe_load(args.config.read_text()) or {}) if args.config else {}
-        settings = SolverSettings.from_config(values)
-        spec = MeshConfig.from_mapping(dict(values.get("mesh") or {})).file
-        names, points = read_points(args.points)
-        if spec is not None:
-            points = spec.to_project_frame(points)
-        runner = CaseRunner(args.imaged, settings)
-        reference, _, _ = read_mesh(args.reference)
-        X = reference_positions(args.imaged, runner.mesh, args.reference, reference)
-        model = Surrogate.load(args.model)
-        check_model_on(model, reference)
-        result = track_both(runner, X, model, names, points, Case(args.c1, args.phi, args.theta),
-                            settings.density, settings.gravity)
+        result = track_file(args.points, args.imaged, args.reference, args.model, args.c1,
+                            args.phi, args.theta, SolverSettings.from_config(values),
+                            values.get("mesh"), args.out)
     except (FEError, GeometryError, MeshInputError, SurrogateError, TrackingInputError,
             OSError, yaml.YAMLError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
-    except ExtrapolationWarning as err:
-        print(f"error: the surrogate would extrapolate: {err}", file=sys.stderr)
-        return 2
-    if not result.fe_converged:
-        print("error: the FE solve of the target posture did not converge", file=sys.stderr)
-        return 1
-    if spec is None:
-        write_tracking_csv(args.out, result)
-    else:
-        write_tracking_csv(args.out, result, spec.to_file_frame, spec.units)
-    result.write(args.out.with_suffix(".json"))
     t = result.surrogate_ms
-    print(f"{len(names)} points to Φ = {args.phi:g}°, θ = {args.theta:g}° at C1 = {args.c1:g} kPa: "
-          f"FE against surrogate max {result.max_difference_mm:.3f} mm; FE {result.fe_s:.2f} s, "
-          f"surrogate median {t['median_ms']:.4f} ms on one core; wrote {args.out}")
+    print(f"{len(result.names)} points to Φ = {args.phi:g}°, θ = {args.theta:g}° at C1 = "
+          f"{args.c1:g} kPa: FE against surrogate max {result.max_difference_mm:.3f} mm; FE "
+          f"{result.fe_s:.2f} s, surrogate median {t['median_ms']:.4f} ms on one core; wrote "
+          f"{args.out}")
     return 0
 
 

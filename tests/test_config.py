@@ -476,3 +476,19 @@ def test_the_conda_route_pins_the_versions_of_make_setup() -> None:
     assert conda["mpi4py"] == mpi4py.__version__
     assert petsc4py.__version__.startswith(conda["petsc4py"] + ".")
     assert conda["python"] == "{}.{}".format(*sys.version_info[:2])
+
+
+def test_the_imaged_chain_parses_and_needs_its_imaged_posture() -> None:
+    raw = read("tests/config.yaml")
+    assert WorkflowConfig.from_mapping(raw).imaged is None  # the mesh is stress-free
+    raw["reference_state"] = {
+        "imaged": {"C1_kPa": 1.5, "phi": 180.0},
+        "points": {"tumour": {"file": "tumour.csv", "phi": 0.0, "theta": 30.0}},
+        "observation": {"file": "scan.csv", "phi": 0.0},
+    }
+    imaged = WorkflowConfig.from_mapping(raw).imaged
+    assert imaged.case == Case(1.5, 180.0) and imaged.points["tumour"] == Case(1.5, 0.0, 30.0)
+    assert imaged.input_files() == ["tumour.csv", "scan.csv"]
+    del raw["reference_state"]["imaged"]
+    with pytest.raises(ConfigError, match=r"reference_state.points needs reference_state.imaged"):
+        WorkflowConfig.from_mapping(raw)

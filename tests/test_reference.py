@@ -252,3 +252,84 @@ def test_the_stiffness_is_found_from_a_noisy_second_observation(
     with pytest.raises(TrackingInputError, match="another mesh"):
         Estimator(small_run / "results/fe_study/meshes/g=0.0400_m=0.0300_o=1/mesh.xdmf", model,
                   CaseRunner(reference).settings)
+
+
+@pytest.mark.workflow
+def test_the_workflow_runs_from_an_imaged_mesh_to_tracked_points_and_the_stiffness(
+    tmp_path: Path,
+) -> None:
+    """With reference_state.imaged the chain runs from the imaged shape to points and C1.
+
+    The mesh rule writes the imaged shape, rule reference_state its reference (the sweep's
+    mesh), then tracking and the stiffness run on the surrogate trained on that sweep.
+
+    The coarse test breast is taken as imaged prone at C1 = 1 kPa (a C1 of the toy sweep, so
+    that its surrogate answers within its validation error). Points are cell centroids of the
+    imaged mesh; the second observation is the skin of an FE solve on the reference at
+    C1 = 2.5 kPa, supine, with 0.5 mm of noise.
+    """
+    import yaml
+
+    from studies.reference_state import ReferenceRecord
+    from studies.stiffness import Estimator, StiffnessResult
+    from studies.tracking import TrackingResult
+    from tests.conftest import REPO, snakemake
+
+    config = yaml.safe_load((REPO / "tests" / "config.yaml").read_text())
+    config["reference_state"].update({
+        "imaged": {"C1_kPa": 1.0, "phi": 180.0},
+        "points": {"tumour": {"file": "tumour.csv", "phi": 0.0}},
+        "observation": {"file": "scan.csv", "phi": 0.0},
+    })
+    path = tmp_path / "imaged.yaml"
+    path.write_text(yaml.safe_dump(config))
+
+    run = snakemake(tmp_path, "-j2", "results/mesh/imaged.xdmf", config=path)
+    assert run.returncode == 0, run.stderr[-3000:]
+    mesh, _, _ = read_mesh(tmp_path / "results/mesh/imaged.xdmf")
+    nodes = mesh.geometry.x[mesh.geometry.dofmap.array.reshape(-1, 4)]
+    centroids = nodes[::max(1, len(nodes) // 5)].mean(axis=1)[:5]
+    (tmp_path / "tumour.csv").write_text("name,x,y,z\n" + "".join(
+        f"t{i},{x!r},{y!r},{z!r}\n" for i, (x, y, z) in enumerate(centroids)))
+    run = snakemake(tmp_path, "-j2", "results/tracking/tumour.csv", config=path)
+    assert run.returncode == 0, run.stderr[-3000:]
+
+    record = ReferenceRecord.read(tmp_path / "results/mesh/reference.json")
+    assert record.converged and record.misfit_mm[-1] <= 0.01 and record.cost > 1
+    assert same_cells(tmp_path / "results/mesh/imaged.xdmf", tmp_path / "results/mesh/mesh.xdmf")
+    tracked = TrackingResult.read(tmp_path / "results/tracking/tumour.json")
+    moved = np.linalg.norm(np.subtract(tracked.fe, tracked.observed), axis=1)
+    assert tracked.names == [f"t{i}" for i in range(5)] and moved.max() > 1e-3
+    # the toy surrogate answers within a few times its validation error (a frame, unit or
+    # pairing error would be tens of millimetres off)
+    from surrogate.predict import Surrogate
+
+    model = Surrogate.load(tmp_path / "results/surrogate/model")
+    assert max(tracked.difference_mm) <= 3 * model.metrics["validation_error_mm"]
+
+    estimator = Estimator(tmp_path / "results/mesh/mesh.xdmf",
+                          tmp_path / "results/surrogate/model", CaseRunner(
+                              tmp_path / "results/mesh/mesh.xdmf").settings)
+    skin = estimator.skin_of_solve(2.5, 0.0, 0.0)
+    skin += np.random.default_rng(0).normal(scale=5e-4, size=skin.shape)
+    (tmp_path / "scan.csv").write_text("name,x,y,z\n" + "".join(
+        f"s{i},{x!r},{y!r},{z!r}\n" for i, (x, y, z) in enumerate(skin)))
+    run = snakemake(tmp_path, "-j2", "results/stiffness/stiffness.json", config=path)
+    assert run.returncode == 0, run.stderr[-3000:]
+    found = StiffnessResult.read(tmp_path / "results/stiffness/stiffness.json")
+    assert abs(found.C1_kPa / 2.5 - 1) <= 0.05
+    assert (tmp_path / "results/stiffness/misfit.png").stat().st_size > 0
+
+    # the report's section shows the chain's results
+    from report.context import Context
+    from report.sections.reference import _imaged
+
+    ctx = Context.load({
+        "reference_record": str(tmp_path / "results/mesh/reference.json"),
+        "tracking": [str(tmp_path / "results/tracking/tumour.json")],
+        "stiffness": str(tmp_path / "results/stiffness/stiffness.json"),
+    }, tmp_path / "report", [])
+    (tmp_path / "report").mkdir()
+    html = "".join(_imaged(ctx))
+    assert f"{record.forward_solves} forward solves" in html
+    assert 'id="tracking-tumour"' in html and "stiffness_misfit.png" in html

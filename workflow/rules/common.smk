@@ -77,6 +77,22 @@ CORPUS_DIR = "results/corpus"
 CORPUS_JSON = f"{CORPUS_DIR}/corpus.json"
 CORPUS_ANATOMIES = CONFIG.section("corpus", "anatomies")
 REFERENCE_ROUNDTRIP_JSON = "results/reference/roundtrip.json"
+# With reference_state.imaged the mesh rule writes the imaged (loaded) shape, and the reference
+# estimated from it is MESH, the geometry every later rule takes.
+IMAGED = CONFIG.imaged
+IMAGED_MESH = "results/mesh/imaged.xdmf"
+BUILT_MESH = IMAGED_MESH if IMAGED is not None else MESH
+REFERENCE_RECORD = "results/mesh/reference.json"
+STIFFNESS_JSON = "results/stiffness/stiffness.json"
+TRACKING = [f"results/tracking/{name}.csv" for name in (IMAGED.points if IMAGED else {})]
+
+
+def imaged_results():
+    """What the imaged chain adds to `all` and the report: the reference's record, the
+    tracked points, the stiffness (each where configured)."""
+    if IMAGED is None:
+        return []
+    return [REFERENCE_RECORD, *TRACKING, *([STIFFNESS_JSON] if IMAGED.observation else [])]
 
 
 def fe_study_mesh(spec):

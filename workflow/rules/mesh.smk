@@ -7,8 +7,9 @@ rule mesh:
         # so that editing the file rebuilds the mesh; the parametric source has none
         sources=CONFIG.mesh.input_files(),
     output:
-        xdmf=MESH,
-        h5=MESH.replace(".xdmf", ".h5"),
+        # the imaged shape when reference_state.imaged is set (rule reference_state makes MESH)
+        xdmf=BUILT_MESH,
+        h5=BUILT_MESH.replace(".xdmf", ".h5"),
         quality="results/mesh/quality.json",
         png="results/mesh/mesh.png",
     params:

@@ -21,6 +21,10 @@ rule report:
         fe_stability=FE_STABILITY_JSON,
         corpus=CORPUS_JSON,
         reference_roundtrip=REFERENCE_ROUNDTRIP_JSON,
+        # the imaged chain's results where reference_state.imaged is set (else empty)
+        reference_record=[REFERENCE_RECORD] if IMAGED else [],
+        tracking=[path.replace(".csv", ".json") for path in TRACKING],
+        stiffness=[STIFFNESS_JSON] if IMAGED and IMAGED.observation else [],
         viewer=VIEWER,
     output:
         html=REPORT,

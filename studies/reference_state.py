@@ -1,0 +1,101 @@
+"""The reference state of the workflow's imaged mesh, with its cost in forward solves.
+
+The rule ``reference_state`` (with ``reference_state.imaged`` set) calls
+:func:`reference_of_imaged`: one cold forward solve of the imaged case on the imaged shape (the
+unit of cost), then :func:`fem.reference.estimate_reference`, then the reference mesh (the
+imaged file's cells, tags and numbering) and ``reference.json``. An estimate that does not
+converge writes neither: the job fails with the reason.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from studies.machine import machine_state
+from studies.results import Result
+
+
+class NoReferenceError(RuntimeError):
+    """No reference state reproduces the imaged shape within the iteration budget."""
+
+
+@dataclass(frozen=True)
+class ReferenceRecord(Result):
+    """``results/mesh/reference.json``: how the reference of the imaged mesh was found.
+
+    Attributes:
+        imaged: the imaged mesh.
+        case: the imaged case (the stiffness assumed and the posture).
+        converged: the estimate converged.
+        reason: why it stopped.
+        forward_solves: forward solves of the estimate.
+        misfit_mm: the largest node misfit after each.
+        newton_iterations: Newton iterations of each.
+        warm_starts: solves that converged from the previous iterate's state.
+        relaxation: Aitken's ω at each update.
+        wall_s: the estimate's wall time.
+        cold_forward_s: one cold forward solve of the imaged case on the imaged shape.
+        cost: ``wall_s`` over ``cold_forward_s``.
+        largest_shift_mm: the largest node distance between the imaged shape and the reference.
+        machine: where it ran.
+    """
+
+    imaged: str
+    case: str
+    converged: bool
+    reason: str
+    forward_solves: int
+    misfit_mm: list[float]
+    newton_iterations: list[int]
+    warm_starts: int
+    relaxation: list[float]
+    wall_s: float
+    cold_forward_s: float
+    cost: float
+    largest_shift_mm: float
+    machine: dict[str, Any]
+
+
+def reference_of_imaged(imaged: str | Path, settings: Any, c1: float, phi: float, theta: float,
+                        tolerance: float, xdmf_out: str | Path, record_out: str | Path
+                        ) -> ReferenceRecord:
+    """Estimate the imaged mesh's reference; write the mesh and the record.
+
+    Raises:
+        NoReferenceError: with the estimate's reason, before anything is written.
+    """
+    import numpy as np
+
+    from fem.case import CaseRunner
+    from fem.reference import estimate_reference, write_reference_mesh
+    from fem.sweep import Case
+
+    case = Case(c1, phi, theta)
+    runner = CaseRunner(imaged, settings)
+    start = time.perf_counter()
+    runner.solve(case)  # the unit of cost: a cold forward solve on the imaged shape
+    cold = time.perf_counter() - start
+    estimate = estimate_reference(runner, case.material(settings.density),
+                                  case.gravity(settings.gravity), tolerance=tolerance)
+    if not estimate.converged:
+        raise NoReferenceError(f"no reference state for {imaged} as {case.id}: "
+                               f"{estimate.reason}")
+    shift = float(np.linalg.norm(estimate.X - runner.mesh.geometry.x, axis=1).max())
+    record = ReferenceRecord(
+        imaged=str(imaged), case=case.id, converged=True, reason=estimate.reason,
+        forward_solves=estimate.forward_solves,
+        misfit_mm=[1e3 * m for m in estimate.misfit_m],
+        newton_iterations=list(estimate.newton_iterations), warm_starts=estimate.warm_starts,
+        relaxation=list(estimate.relaxation), wall_s=estimate.wall_s, cold_forward_s=cold,
+        cost=estimate.wall_s / cold, largest_shift_mm=1e3 * shift,
+        machine=machine_state().to_json(),
+    )
+    write_reference_mesh(runner, estimate.X, xdmf_out)
+    record.write(record_out)
+    return record
+
+
+__all__ = ["NoReferenceError", "ReferenceRecord", "reference_of_imaged"]

@@ -1,0 +1,19 @@
+"""Snakemake adapter: C1 from the second observation of the skin."""
+
+from pathlib import Path
+
+from fem.parameters import SolverSettings
+from studies.joblog import job_log
+from studies.stiffness import estimate_file
+
+job_log(snakemake.log[0])
+
+p = snakemake.params
+settings = SolverSettings.from_config(
+    {"fe": p.fe, "material": p.material, "mesh": {"fixed": p.fixed}}
+)
+estimate_file(
+    Path(snakemake.input.observation), Path(snakemake.input.reference),
+    Path(snakemake.input.model).parent, p.observation["phi"], p.observation.get("theta", 0.0),
+    settings, p.mesh, Path(snakemake.output.json).parent,
+)

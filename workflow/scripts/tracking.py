@@ -1,0 +1,19 @@
+"""Snakemake adapter: a points file tracked from the imaged shape by FE and by the surrogate."""
+
+from pathlib import Path
+
+from fem.parameters import SolverSettings
+from studies.joblog import job_log
+from studies.tracking import track_file
+
+job_log(snakemake.log[0])
+
+p = snakemake.params
+settings = SolverSettings.from_config(
+    {"fe": p.fe, "material": p.material, "mesh": {"fixed": p.fixed}}
+)
+track_file(
+    Path(snakemake.input.points), Path(snakemake.input.imaged), Path(snakemake.input.reference),
+    Path(snakemake.input.model).parent, p.target["C1"], p.target["phi"], p.target["theta"],
+    settings, p.mesh, Path(snakemake.output.csv),
+)
