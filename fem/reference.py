@@ -8,10 +8,14 @@ configuration X is the one whose forward solve under the imaged posture's gravit
 
 with u(X) the displacement of the forward problem on the reference X (same C1, boundary
 conditions and contact). This module finds X by the fixed-point iteration of Sellier (2011),
-accelerated by Aitken's dynamic relaxation:
 
-    r_k = X_k + u(X_k) − x,    X_{k+1} = X_k − ω_k r_k,
-    ω_{k+1} = −ω_k (r_k · (r_{k+1} − r_k)) / |r_{k+1} − r_k|²,
+    r_k = X_k + u(X_k) − x,    X_{k+1} = X_k − r_k   (the plain step),
+
+accelerated by Anderson's mixing of the last five iterates (the step that the history's
+residual differences say cancels the residual best), or, as a check, by Aitken's dynamic
+relaxation of the plain step:
+
+    X_{k+1} = X_k − ω_k r_k,   ω_{k+1} = −ω_k (r_k · (r_{k+1} − r_k)) / |r_{k+1} − r_k|²,
 
 starting from X_0 = x (the first iterate is the naive "reverse the sag" guess). Each forward
 solve starts from the previous iterate's converged state at the full load (a warm start: the
@@ -50,9 +54,11 @@ class ReferenceEstimate:
         misfit_m: after each forward solve, the largest distance |X + u(X) − x| over the nodes.
         newton_iterations: Newton iterations of each forward solve.
         warm_starts: forward solves that converged from the previous iterate's state.
-        relaxation: Aitken's ω at each update.
+        relaxation: Aitken's ω at each update (the ``aitken`` method).
         wall_s: wall time of the whole estimate.
         forward_solves: forward solves done.
+        method: the acceleration (:data:`METHODS`).
+        restarts: Anderson histories dropped after a mixed iterate's solve failed.
     """
 
     converged: bool
@@ -64,6 +70,8 @@ class ReferenceEstimate:
     relaxation: list[float] = field(default_factory=list)
     wall_s: float = 0.0
     forward_solves: int = 0
+    method: str = "anderson"
+    restarts: int = 0
 
     def record(self) -> dict[str, Any]:
         """JSON-able summary (without the positions)."""
@@ -71,7 +79,8 @@ class ReferenceEstimate:
             "converged": self.converged, "reason": self.reason,
             "iterations": self.forward_solves, "misfit_mm": [1e3 * m for m in self.misfit_m],
             "newton_iterations": self.newton_iterations, "warm_starts": self.warm_starts,
-            "relaxation": self.relaxation, "wall_s": self.wall_s,
+            "relaxation": self.relaxation, "wall_s": self.wall_s, "method": self.method,
+            "restarts": self.restarts,
         }
 
 
@@ -98,12 +107,34 @@ def node_dofs(mesh: Any, V: Any) -> np.ndarray:
     return out
 
 
+#: The fixed point's accelerations: Anderson's mixing of the last iterates, Aitken's relaxation.
+METHODS = ("anderson", "aitken")
+#: Iterates Anderson's mixing combines.
+ANDERSON_DEPTH = 5
+
+
+def _anderson_step(Xs: list[np.ndarray], Rs: list[np.ndarray]) -> np.ndarray:
+    """Anderson's mixing (type II, full step) of the fixed point X ← X − r over the history.
+
+    With f = −r and G(X) = X − r(X): minimise |f_k − ΔF γ| and step to G(X_k) − ΔG γ, where
+    ΔF and ΔG hold the differences of successive f and G. One iterate gives the plain step.
+    """
+    G = [X - R for X, R in zip(Xs, Rs, strict=True)]
+    if len(Xs) == 1:
+        return G[-1]
+    dF = np.stack([(Rs[i] - Rs[i + 1]).ravel() for i in range(len(Rs) - 1)], axis=1)
+    dG = np.stack([(G[i + 1] - G[i]).ravel() for i in range(len(G) - 1)], axis=1)
+    gamma, *_ = np.linalg.lstsq(dF, -Rs[-1].ravel(), rcond=None)
+    return G[-1] - (dG @ gamma).reshape(G[-1].shape)
+
+
 def estimate_reference(
     runner: CaseRunner,
     material: Material,
     gravity: Gravity,
     tolerance: float = 1e-5,
     max_iterations: int = 30,
+    method: str = "anderson",
 ) -> ReferenceEstimate:
     """Find the reference geometry whose forward solve reproduces the runner's mesh.
 
@@ -114,11 +145,19 @@ def estimate_reference(
         gravity: the gravity the observation was under (its posture).
         tolerance: stop when every node's misfit |X + u(X) − x| is below this (m).
         max_iterations: forward solves allowed.
+        method: ``anderson`` (the last :data:`ANDERSON_DEPTH` iterates mixed; where a mixed
+            iterate's forward solve fails, the history is dropped and the plain step from the
+            best iterate taken) or ``aitken`` (Aitken's relaxation of the plain step).
 
     Returns:
         The estimate; ``converged`` False (with the reason) when a forward solve fails or the
         budget runs out, with the best iterate found.
+
+    Raises:
+        InvalidParameterError: for an unknown method or a mesh split over processes.
     """
+    if method not in METHODS:
+        raise InvalidParameterError(f"method must be one of {METHODS}, not {method!r}")
     problem = runner.problem
     mesh = problem.mesh
     if mesh.comm.size != 1:
@@ -128,9 +167,10 @@ def estimate_reference(
     problem.set_case(material, gravity)
     runner.solver.scale_to_load()
     X = observed.copy()
-    best = (np.inf, X.copy())
+    best: tuple[float, np.ndarray, np.ndarray | None] = (np.inf, X.copy(), None)
     misfits, iterations, relaxations = [], [], []
-    warm_starts = 0
+    history: list[tuple[np.ndarray, np.ndarray]] = []
+    warm_starts = restarts = 0
     warm: np.ndarray | None = None
     previous: np.ndarray | None = None
     omega = 1.0
@@ -143,6 +183,14 @@ def estimate_reference(
             ok, its, was_warm = runner.solve_from(material, gravity, warm)
             iterations.append(its)
             warm_starts += was_warm
+            if not ok and method == "anderson" and len(history) > 1 and best[2] is not None:
+                # a mixed iterate out of reach: drop the history, plain step from the best
+                log.info("forward solve failed on a mixed iterate: plain step from the best")
+                restarts += 1
+                history.clear()
+                X = best[1] - best[2]
+                warm = None
+                continue
             if not ok:
                 reason = (f"the forward solve on iterate {len(iterations)} failed: no reference "
                           "found (the shape may be out of reach for this C1 and posture)")
@@ -155,12 +203,16 @@ def estimate_reference(
             misfit = float(np.linalg.norm(residual, axis=1).max())
             misfits.append(misfit)
             if misfit < best[0]:
-                best = (misfit, X.copy())
+                best = (misfit, X.copy(), residual.copy())
             log.info("reference iterate %d: misfit %.3g mm, %d Newton its%s", len(misfits),
                      1e3 * misfit, its, " (warm)" if was_warm else "")
             if misfit <= tolerance:
                 converged, reason = True, "converged"
                 break
+            if method == "anderson":
+                history = [*history, (X.copy(), residual)][-ANDERSON_DEPTH - 1:]
+                X = _anderson_step([h[0] for h in history], [h[1] for h in history])
+                continue
             if previous is not None:
                 change = (residual - previous).ravel()
                 denominator = float(change @ change)
@@ -174,7 +226,8 @@ def estimate_reference(
     return ReferenceEstimate(
         converged=converged, reason=reason, X=best[1], misfit_m=misfits,
         newton_iterations=iterations, warm_starts=int(warm_starts), relaxation=relaxations,
-        wall_s=time.perf_counter() - start, forward_solves=len(iterations),
+        wall_s=time.perf_counter() - start, forward_solves=len(iterations), method=method,
+        restarts=restarts,
     )
 
 

@@ -35,7 +35,9 @@ class ReferenceRecord(Result):
         misfit_mm: the largest node misfit after each.
         newton_iterations: Newton iterations of each.
         warm_starts: solves that converged from the previous iterate's state.
-        relaxation: Aitken's ω at each update.
+        relaxation: Aitken's ω at each update (the ``aitken`` method).
+        method: the fixed point's acceleration (:data:`fem.reference.METHODS`).
+        restarts: Anderson histories dropped after a mixed iterate's solve failed.
         wall_s: the estimate's wall time.
         cold_forward_s: one cold forward solve of the imaged case on the imaged shape.
         cost: ``wall_s`` over ``cold_forward_s``.
@@ -52,6 +54,8 @@ class ReferenceRecord(Result):
     newton_iterations: list[int]
     warm_starts: int
     relaxation: list[float]
+    method: str
+    restarts: int
     wall_s: float
     cold_forward_s: float
     cost: float
@@ -89,7 +93,8 @@ def reference_of_imaged(imaged: str | Path, settings: Any, c1: float, phi: float
         forward_solves=estimate.forward_solves,
         misfit_mm=[1e3 * m for m in estimate.misfit_m],
         newton_iterations=list(estimate.newton_iterations), warm_starts=estimate.warm_starts,
-        relaxation=list(estimate.relaxation), wall_s=estimate.wall_s, cold_forward_s=cold,
+        relaxation=list(estimate.relaxation), method=estimate.method,
+        restarts=estimate.restarts, wall_s=estimate.wall_s, cold_forward_s=cold,
         cost=estimate.wall_s / cold, largest_shift_mm=1e3 * shift,
         machine=machine_state().to_json(),
     )

@@ -18,8 +18,8 @@ def reference_section(ctx: Context) -> str:
     out = [para(
         "An imaged breast is already loaded: its mesh is not stress-free. Each row solves the "
         "config's mesh (the true reference) in the observed posture, takes that shape as the "
-        "image, estimates its reference (fem.reference: Sellier's fixed point with Aitken's "
-        "relaxation, warm-started forward solves, tolerance "
+        "image, estimates its reference (fem.reference: Sellier's fixed point with Anderson's "
+        "mixing, warm-started forward solves, tolerance "
         f"{trips.tolerance_mm:g} mm), and predicts the other posture from the estimate. "
         "Beside it, the naive prediction that takes the imaged shape as stress-free. Errors "
         "are the largest over the mesh's nodes, against the prediction from the true "
