@@ -111,6 +111,11 @@ def node_dofs(mesh: Any, V: Any) -> np.ndarray:
 METHODS = ("anderson", "aitken")
 #: Iterates Anderson's mixing combines.
 ANDERSON_DEPTH = 5
+#: A forward solve starts from the previous iterate's state only where the geometry moved by
+#: less than this fraction of that state's largest displacement: after a larger step (the
+#: first ones, tens of millimetres on a soft breast) Newton from it takes longer than the load
+#: path from rest, or fails after its full iteration budget.
+WARM_STEP_FRACTION = 0.25
 
 
 def _anderson_step(Xs: list[np.ndarray], Rs: list[np.ndarray]) -> np.ndarray:
@@ -199,7 +204,9 @@ def estimate_reference(
             u = problem.displacement()
             if dofs is None:
                 dofs = node_dofs(mesh, u.function_space)
-            residual = X + u.x.array.reshape(-1, 3)[dofs] - observed
+            u_nodes = u.x.array.reshape(-1, 3)[dofs]
+            largest_u = float(np.linalg.norm(u_nodes, axis=1).max())
+            residual = X + u_nodes - observed
             misfit = float(np.linalg.norm(residual, axis=1).max())
             misfits.append(misfit)
             if misfit < best[0]:
@@ -211,16 +218,19 @@ def estimate_reference(
                 break
             if method == "anderson":
                 history = [*history, (X.copy(), residual)][-ANDERSON_DEPTH - 1:]
-                X = _anderson_step([h[0] for h in history], [h[1] for h in history])
-                continue
-            if previous is not None:
-                change = (residual - previous).ravel()
-                denominator = float(change @ change)
-                if denominator > 0:
-                    omega = -omega * float(previous.ravel() @ change) / denominator
-            relaxations.append(omega)
-            previous = residual
-            X = X - omega * residual
+                step = _anderson_step([h[0] for h in history], [h[1] for h in history]) - X
+            else:
+                if previous is not None:
+                    change = (residual - previous).ravel()
+                    denominator = float(change @ change)
+                    if denominator > 0:
+                        omega = -omega * float(previous.ravel() @ change) / denominator
+                relaxations.append(omega)
+                previous = residual
+                step = -omega * residual
+            if float(np.linalg.norm(step, axis=1).max()) > WARM_STEP_FRACTION * largest_u:
+                warm = None  # too far for the last state to be a guess: from rest
+            X = X + step
     finally:
         problem.set_geometry(observed)
     return ReferenceEstimate(

@@ -50,7 +50,9 @@ def test_the_reference_of_a_loaded_shape_is_found_and_predicts_supine(
         sag = np.linalg.norm(x_observed - X_true, axis=1).max()
         error = np.linalg.norm(estimate.X - X_true, axis=1).max()
         assert error <= min(0.01 * sag, 2e-4), (error, sag)
-        assert estimate.warm_starts == estimate.forward_solves - 1  # each later solve warm
+        # the later solves start from the previous iterate's state (the first steps, large,
+        # from rest)
+        assert estimate.warm_starts >= estimate.forward_solves - 3 and estimate.warm_starts
 
         supine = Case(2.0, 0.0)
         from_truth = _deformed(runner, supine, X_true)
