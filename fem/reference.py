@@ -20,7 +20,8 @@ relaxation of the plain step:
 starting from X_0 = x (the first iterate is the naive "reverse the sag" guess). Each forward
 solve starts from the previous iterate's converged state at the full load (a warm start: the
 fields of neighbouring iterates differ little), falling back to the adaptive load path from rest
-where the warm start fails. The clamped chest wall does not move (u = 0 there), so its nodes
+where the warm start fails, and from rest directly after a step large against the displacement
+(:data:`WARM_STEP_FRACTION`). The clamped chest wall does not move (u = 0 there), so its nodes
 keep their imaged positions. The estimate is returned as geometry-node positions and written
 as a tagged mesh (:func:`write_reference_mesh`) that every rule can take as its reference.
 """

@@ -314,9 +314,11 @@ def estimate_stiffness(
     if local is None:
         def local(t: float) -> float:
             return misfit(observed, search(t), triangles)
-    s_min = local(estimate)
-    threshold = _chi2_1(confidence) * s_min / (n - 1)
-    interval = _interval(local, estimate, s_min, threshold, estimate / 1.5, estimate * 1.5)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the surrogate's curve a little beyond its range
+        s_min = local(estimate)
+        threshold = _chi2_1(confidence) * s_min / (n - 1)
+        interval = _interval(local, estimate, s_min, threshold, estimate / 1.5, estimate * 1.5)
     return StiffnessEstimate(
         C1_kPa=estimate, interval_kPa=interval, confidence=confidence,
         surrogate_C1_kPa=c_surrogate, rms_mm=1e3 * math.sqrt(s_min / n), points=n,
