@@ -55,6 +55,21 @@ class CaseRunner:
         self.solver = NewtonSolver(self.problem, settings.petsc_options, settings.solver)
         self.setup_s = time.perf_counter() - start
 
+    def close(self) -> None:
+        """Free the solver's PETSc objects and its entries in PETSc's options database.
+
+        The database holds a few hundred entries in all, so a process that builds many
+        runners (a test session, a study) closes each when done; ``with CaseRunner(...) as
+        runner:`` does it.
+        """
+        self.solver.destroy()
+
+    def __enter__(self) -> CaseRunner:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
     def solve(self, case: Case) -> tuple[LoadingResult, dict[str, float]]:
         """Solve ``case`` from the unloaded state; returns the load path and timings."""
         s = self.settings

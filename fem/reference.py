@@ -297,10 +297,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {err}", file=sys.stderr)
         return 2
     if not estimate.converged:
+        runner.close()
         print(f"no reference: {estimate.reason}", file=sys.stderr)
         return 1
     args.out.mkdir(parents=True, exist_ok=True)
     write_reference_mesh(runner, estimate.X, args.out / "reference.xdmf")
+    runner.close()
     record = {"observed": str(args.observed), "case": case.id, **estimate.record()}
     tmp = args.out / ".reference.json.tmp"
     tmp.write_text(json.dumps(record, indent=2))

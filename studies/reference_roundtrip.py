@@ -152,6 +152,7 @@ def round_trips(mesh: Path, settings: SolverSettings, c1s: list[float],
                 ))
     finally:
         runner.problem.set_geometry(X)
+        runner.close()
     return RoundTripTable(rows=rows, tolerance_mm=1e3 * tolerance,
                           machine=machine_state().to_json())
 

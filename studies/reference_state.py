@@ -78,28 +78,28 @@ def reference_of_imaged(imaged: str | Path, settings: Any, c1: float, phi: float
     from fem.sweep import Case
 
     case = Case(c1, phi, theta)
-    runner = CaseRunner(imaged, settings)
-    start = time.perf_counter()
-    runner.solve(case)  # the unit of cost: a cold forward solve on the imaged shape
-    cold = time.perf_counter() - start
-    estimate = estimate_reference(runner, case.material(settings.density),
-                                  case.gravity(settings.gravity), tolerance=tolerance)
-    if not estimate.converged:
-        raise NoReferenceError(f"no reference state for {imaged} as {case.id}: "
-                               f"{estimate.reason}")
-    shift = float(np.linalg.norm(estimate.X - runner.mesh.geometry.x, axis=1).max())
-    record = ReferenceRecord(
-        imaged=str(imaged), case=case.id, converged=True, reason=estimate.reason,
-        forward_solves=estimate.forward_solves,
-        misfit_mm=[1e3 * m for m in estimate.misfit_m],
-        newton_iterations=list(estimate.newton_iterations), warm_starts=estimate.warm_starts,
-        relaxation=list(estimate.relaxation), method=estimate.method,
-        restarts=estimate.restarts, wall_s=estimate.wall_s, cold_forward_s=cold,
-        cost=estimate.wall_s / cold, largest_shift_mm=1e3 * shift,
-        machine=machine_state().to_json(),
-    )
-    write_reference_mesh(runner, estimate.X, xdmf_out)
-    record.write(record_out)
+    with CaseRunner(imaged, settings) as runner:
+        start = time.perf_counter()
+        runner.solve(case)  # the unit of cost: a cold forward solve on the imaged shape
+        cold = time.perf_counter() - start
+        estimate = estimate_reference(runner, case.material(settings.density),
+                                      case.gravity(settings.gravity), tolerance=tolerance)
+        if not estimate.converged:
+            raise NoReferenceError(f"no reference state for {imaged} as {case.id}: "
+                                   f"{estimate.reason}")
+        shift = float(np.linalg.norm(estimate.X - runner.mesh.geometry.x, axis=1).max())
+        record = ReferenceRecord(
+            imaged=str(imaged), case=case.id, converged=True, reason=estimate.reason,
+            forward_solves=estimate.forward_solves,
+            misfit_mm=[1e3 * m for m in estimate.misfit_m],
+            newton_iterations=list(estimate.newton_iterations), warm_starts=estimate.warm_starts,
+            relaxation=list(estimate.relaxation), method=estimate.method,
+            restarts=estimate.restarts, wall_s=estimate.wall_s, cold_forward_s=cold,
+            cost=estimate.wall_s / cold, largest_shift_mm=1e3 * shift,
+            machine=machine_state().to_json(),
+        )
+        write_reference_mesh(runner, estimate.X, xdmf_out)
+        record.write(record_out)
     return record
 
 

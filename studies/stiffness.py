@@ -88,11 +88,25 @@ class Estimator:
         from studies.tracking import check_model_on
         from surrogate.predict import Surrogate
 
-        self.runner = CaseRunner(reference, settings)
         self.model = Surrogate.load(model_folder)
-        check_model_on(self.model, self.runner.mesh)
+        self.runner = CaseRunner(reference, settings)
+        try:
+            check_model_on(self.model, self.runner.mesh)
+        except Exception:
+            self.runner.close()
+            raise
         self.X_file = nodes_in_file_order(self.runner.mesh)
         self.triangles = skin_triangles(self.runner.mesh, self.runner.facet_tags)
+
+    def close(self) -> None:
+        """Free the FE runner (:meth:`fem.case.CaseRunner.close`)."""
+        self.runner.close()
+
+    def __enter__(self) -> Estimator:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
     def estimate(self, observed: np.ndarray, phi: float, theta: float, name: str,
                  truth: float | None = None, fe: bool = True) -> StiffnessResult:
@@ -187,8 +201,8 @@ def estimate_file(observation: Path, reference: Path, model_folder: Path, phi: f
     _, points = read_points(observation)
     if spec is not None:
         points = spec.to_project_frame(points)
-    result = Estimator(reference, model_folder, settings).estimate(
-        points, phi, theta, str(observation), fe=fe)
+    with Estimator(reference, model_folder, settings) as estimator:
+        result = estimator.estimate(points, phi, theta, str(observation), fe=fe)
     write_outputs(result, out)
     return result
 
@@ -232,8 +246,9 @@ def main(argv: list[str] | None = None) -> int:
         values = (yaml.safe_load(args.config.read_text()) or {}) if args.config else {}
         settings = SolverSettings.from_config(values)
         if args.benchmark is not None:
-            benchmark(Estimator(reference, args.model, settings), args.c1, args.noise_mm,
-                      args.phi, args.theta, args.seed, args.out)
+            with Estimator(reference, args.model, settings) as estimator:
+                benchmark(estimator, args.c1, args.noise_mm, args.phi, args.theta, args.seed,
+                          args.out)
             return 0
         result = estimate_file(args.observation, reference, args.model, args.phi, args.theta,
                                settings, values.get("mesh"), args.out, fe=not args.no_fe)

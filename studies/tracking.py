@@ -236,16 +236,16 @@ def track_file(points_csv: Path, imaged: Path, reference: Path, model_folder: Pa
     names, points = read_points(points_csv)
     if spec is not None:
         points = spec.to_project_frame(points)
-    runner = CaseRunner(imaged, settings)
     reference_mesh, _, _ = read_mesh(reference)
-    X = reference_positions(imaged, runner.mesh, reference, reference_mesh)
     model = Surrogate.load(model_folder)
     check_model_on(model, reference_mesh)
-    try:
-        result = track_both(runner, X, model, names, points, Case(c1, phi, theta),
-                            settings.density, settings.gravity)
-    except ExtrapolationWarning as err:
-        raise TrackingInputError(f"the surrogate would extrapolate: {err}") from None
+    with CaseRunner(imaged, settings) as runner:
+        X = reference_positions(imaged, runner.mesh, reference, reference_mesh)
+        try:
+            result = track_both(runner, X, model, names, points, Case(c1, phi, theta),
+                                settings.density, settings.gravity)
+        except ExtrapolationWarning as err:
+            raise TrackingInputError(f"the surrogate would extrapolate: {err}") from None
     if not result.fe_converged:
         raise TrackingInputError(f"the FE solve of the target posture (C1 = {c1:g} kPa, "
                                  f"Φ = {phi:g}°, θ = {theta:g}°) did not converge")

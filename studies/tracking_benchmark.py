@@ -61,10 +61,11 @@ def main(argv: list[str] | None = None) -> int:
     names = [f"p{i}" for i in range(args.points)]
     with tempfile.TemporaryDirectory() as tmp:
         imaged = write_reference_mesh(truth, x, Path(tmp) / "imaged.xdmf")
-        runner = CaseRunner(imaged, settings)
-        X_imaged = _in_order(truth.mesh, runner.mesh, X)  # in the imaged runner's node order
-        tracked = track_both(runner, X_imaged, model, names, seen, Case(args.c1, args.target),
-                             settings.density, settings.gravity)
+        with CaseRunner(imaged, settings) as runner:
+            X_imaged = _in_order(truth.mesh, runner.mesh, X)  # in the imaged runner's order
+            tracked = track_both(runner, X_imaged, model, names, seen,
+                                 Case(args.c1, args.target), settings.density, settings.gravity)
+    truth.close()
     d = np.asarray(tracked.difference_mm)
     moved = 1e3 * np.linalg.norm(np.asarray(tracked.fe) - np.asarray(tracked.observed), axis=1)
     t = tracked.surrogate_ms

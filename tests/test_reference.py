@@ -8,12 +8,14 @@ mesh throughout (its geometry is moved), so every field is in the same node orde
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from fem.case import CaseRunner
+from fem.parameters import SolverSettings
 from fem.reference import estimate_reference, node_dofs, write_reference_mesh
 from fem.sweep import Case
 from meshes.io import nodes_in_file_order, read_mesh, same_cells
@@ -31,8 +33,9 @@ def _deformed(runner: CaseRunner, case: Case, X: np.ndarray) -> np.ndarray:
 
 
 @pytest.fixture(scope="module")
-def runner(coarse_mesh: Path) -> CaseRunner:
-    return CaseRunner(coarse_mesh)
+def runner(coarse_mesh: Path) -> Iterator[CaseRunner]:
+    with CaseRunner(coarse_mesh) as runner:
+        yield runner
 
 
 @pytest.mark.parametrize("observed_in", [Case(2.0, 180.0), Case(2.0, 60.0)],
@@ -207,6 +210,7 @@ def test_the_tracking_command_carries_points_by_fe_and_by_the_surrogate(
     truth = material + evaluate(runner.problem.displacement(), material)[0]
     x_prone = _deformed(runner, prone, X_true)
     imaged = write_reference_mesh(runner, x_prone, tmp_path / "imaged.xdmf")
+    runner.close()
     points = tmp_path / "points.csv"
     seen = x_prone[nodes[cells]].mean(axis=1)
     points.write_text("name,x,y,z\n" + "".join(
@@ -251,7 +255,7 @@ def test_the_stiffness_is_found_from_a_noisy_second_observation(
 
     reference = small_run / "results/mesh/mesh.xdmf"
     model = small_run / "results/surrogate/model"
-    estimator = Estimator(reference, model, CaseRunner(reference).settings)
+    estimator = Estimator(reference, model, SolverSettings())
     skin = estimator.skin_of_solve(2.5, 0.0, 0.0)
     observed = skin + np.random.default_rng(3).normal(scale=5e-4, size=skin.shape)
     result = estimator.estimate(observed, 0.0, 0.0, "test", truth=2.5)
@@ -275,7 +279,8 @@ def test_the_stiffness_is_found_from_a_noisy_second_observation(
         estimator.estimate(observed[:, [1, 0, 2]], 0.0, 0.0, "x and y swapped", fe=False)
     with pytest.raises(TrackingInputError, match="another mesh"):
         Estimator(small_run / "results/fe_study/meshes/g=0.0400_m=0.0300_o=1/mesh.xdmf", model,
-                  CaseRunner(reference).settings)
+                  SolverSettings())
+    estimator.close()
 
 
 @pytest.mark.workflow
@@ -331,10 +336,9 @@ def test_the_workflow_runs_from_an_imaged_mesh_to_tracked_points_and_the_stiffne
     model = Surrogate.load(tmp_path / "results/surrogate/model")
     assert max(tracked.difference_mm) <= 3 * model.metrics["validation_error_mm"]
 
-    estimator = Estimator(tmp_path / "results/mesh/mesh.xdmf",
-                          tmp_path / "results/surrogate/model", CaseRunner(
-                              tmp_path / "results/mesh/mesh.xdmf").settings)
-    skin = estimator.skin_of_solve(2.5, 0.0, 0.0)
+    with Estimator(tmp_path / "results/mesh/mesh.xdmf", tmp_path / "results/surrogate/model",
+                   SolverSettings()) as estimator:
+        skin = estimator.skin_of_solve(2.5, 0.0, 0.0)
     skin += np.random.default_rng(0).normal(scale=5e-4, size=skin.shape)
     (tmp_path / "scan.csv").write_text("name,x,y,z\n" + "".join(
         f"s{i},{x!r},{y!r},{z!r}\n" for i, (x, y, z) in enumerate(skin)))
