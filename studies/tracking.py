@@ -148,6 +148,7 @@ def track_both(runner: Any, X: np.ndarray, model: Any, names: list[str], points:
         repeats: timed surrogate queries.
     """
     from fem.tracking import track
+    from surrogate.exceptions import ExtrapolationWarning
 
     start = time.perf_counter()
     tracked = track(runner, X, names, points, case.material(density), case.gravity(gravity))
@@ -155,7 +156,7 @@ def track_both(runner: Any, X: np.ndarray, model: Any, names: list[str], points:
     at_points = model.at(tracked.reference)
     query = (case.C1, case.phi, case.theta)
     with warnings.catch_warnings():
-        warnings.simplefilter("error")  # an extrapolating query is refused, not timed
+        warnings.simplefilter("error", ExtrapolationWarning)  # refused, not timed
         u_mm = at_points.predict(*query)
     with warnings.catch_warnings(), one_core() as core:
         warnings.simplefilter("ignore")

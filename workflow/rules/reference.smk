@@ -97,7 +97,10 @@ if IMAGED is not None:
             material=CONFIG.section("material"),
             fixed=CONFIG.section("mesh", "fixed"),
             mesh=CONFIG.section("mesh"),
-            observation=CONFIG.section("reference_state", "observation"),
+            # the observation's posture (Phi, theta), degrees
+            posture=[IMAGED.observed_in.phi, IMAGED.observed_in.theta]
+            if IMAGED.observed_in
+            else [],
         log:
             "results/logs/reference/stiffness.log",
         benchmark:

@@ -14,6 +14,6 @@ settings = SolverSettings.from_config(
 )
 estimate_file(
     Path(snakemake.input.observation), Path(snakemake.input.reference),
-    Path(snakemake.input.model).parent, p.observation["phi"], p.observation.get("theta", 0.0),
+    Path(snakemake.input.model).parent, p.posture[0], p.posture[1],
     settings, p.mesh, Path(snakemake.output.json).parent,
 )
