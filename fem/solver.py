@@ -34,6 +34,8 @@ from fem.problem import GravityProblem
 
 log = logging.getLogger(__name__)
 
+#: Every solver's options live in PETSc's database under this prefix and a counter.
+SOLVER_PREFIX = "breast_"
 _prefix_counter = itertools.count()
 
 
@@ -143,7 +145,7 @@ class NewtonSolver:
             self._split[0].compose("nearnullspace", self._near_nullspace)
 
         self.snes = PETSc.SNES().create(comm)
-        self.prefix = f"breast_{next(_prefix_counter)}_"
+        self.prefix = f"{SOLVER_PREFIX}{next(_prefix_counter)}_"
         self.snes.setOptionsPrefix(self.prefix)
         # The options stay in PETSc's database (under this solver's unique prefix) until
         # destroy(): fieldsplit creates its sub-solvers, and reads their options, only at

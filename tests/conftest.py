@@ -7,6 +7,7 @@ import os
 import re
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -16,6 +17,28 @@ os.environ.setdefault("JAX_PLATFORMS", "cpu")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 COARSE = {"global_size": 0.03, "mound_size": 0.02, "order": 1}
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _free_solver_options() -> Iterator[None]:
+    """After each test module, drop its solvers' entries from PETSc's options database.
+
+    Every :class:`fem.solver.NewtonSolver` keeps its options there under its own prefix
+    until it is destroyed, and the database holds 512 entries in all: a test session builds
+    more solvers than that allows, and not every test closes its runner. No solver outlives
+    its module (runner fixtures are module-scoped at most), so the prefix is cleared here.
+    """
+    yield
+    if "petsc4py" not in sys.modules:
+        return
+    from petsc4py import PETSc
+
+    from fem.solver import SOLVER_PREFIX
+
+    options = PETSc.Options()
+    for key in list(options.getAll()):
+        if key.startswith(SOLVER_PREFIX):
+            options.delValue(key)
 
 
 @pytest.fixture(scope="session")
