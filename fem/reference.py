@@ -108,6 +108,12 @@ def node_dofs(mesh: Any, V: Any) -> np.ndarray:
     return out
 
 
+def node_displacement(problem: Any) -> np.ndarray:
+    """The solved displacement at every geometry node (nodes, 3), in the mesh's node order."""
+    u = problem.displacement()
+    return u.x.array.reshape(-1, 3)[node_dofs(problem.mesh, u.function_space)]
+
+
 #: The fixed point's accelerations: Anderson's mixing of the last iterates, Aitken's relaxation.
 METHODS = ("anderson", "aitken")
 #: Iterates Anderson's mixing combines.
@@ -182,7 +188,6 @@ def estimate_reference(
     omega = 1.0
     reason = f"no reference within {max_iterations} forward solves"
     converged = False
-    dofs = None
     try:
         for _ in range(max_iterations):
             problem.set_geometry(X)
@@ -202,10 +207,7 @@ def estimate_reference(
                           "found (the shape may be out of reach for this C1 and posture)")
                 break
             warm = problem.w.x.array.copy()
-            u = problem.displacement()
-            if dofs is None:
-                dofs = node_dofs(mesh, u.function_space)
-            u_nodes = u.x.array.reshape(-1, 3)[dofs]
+            u_nodes = node_displacement(problem)
             largest_u = float(np.linalg.norm(u_nodes, axis=1).max())
             residual = X + u_nodes - observed
             misfit = float(np.linalg.norm(residual, axis=1).max())
@@ -317,4 +319,7 @@ if __name__ == "__main__":
     sys.exit(main())
 
 
-__all__ = ["ReferenceEstimate", "estimate_reference", "main", "node_dofs", "write_reference_mesh"]
+__all__ = [
+    "ReferenceEstimate", "estimate_reference", "main", "node_displacement", "node_dofs",
+    "write_reference_mesh",
+]

@@ -18,6 +18,7 @@ __all__ = [
     "add_tagged_mesh",
     "boundary_facets",
     "geometry_nodes",
+    "from_file_order",
     "moved_mesh",
     "nodes_in_file_order",
     "read_mesh",
@@ -100,12 +101,17 @@ GEOMETRY_DATASET = f"/Mesh/{MESH_NAME}/geometry"
 TOPOLOGY_DATASET = f"/Mesh/{MESH_NAME}/topology"
 
 
-def nodes_in_file_order(mesh: Any) -> np.ndarray:
-    """Geometry-node positions of a serial mesh, ordered by their index in its file."""
-    index = np.asarray(mesh.geometry.input_global_indices, dtype=np.int64)
-    out = np.empty_like(mesh.geometry.x)
-    out[index] = mesh.geometry.x
+def nodes_in_file_order(mesh: Any, values: np.ndarray | None = None) -> np.ndarray:
+    """Per-node ``values`` of a serial mesh (its node positions if None), in its file's order."""
+    values = mesh.geometry.x if values is None else np.asarray(values)
+    out = np.empty_like(values)
+    out[np.asarray(mesh.geometry.input_global_indices, dtype=np.int64)] = values
     return out
+
+
+def from_file_order(mesh: Any, by_file: np.ndarray) -> np.ndarray:
+    """Per-node values given in the file's order, in the serial ``mesh``'s node order."""
+    return np.asarray(by_file)[np.asarray(mesh.geometry.input_global_indices, dtype=np.int64)]
 
 
 def moved_mesh(source: str | Path, mesh: Any, x: np.ndarray, xdmf_path: str | Path) -> Path:
@@ -128,8 +134,7 @@ def moved_mesh(source: str | Path, mesh: Any, x: np.ndarray, xdmf_path: str | Pa
     if x.shape != mesh.geometry.x.shape:
         raise MeshInputError(f"{x.shape[0]} positions for a mesh of {mesh.geometry.x.shape[0]} "
                              "nodes")
-    by_file = np.empty_like(x)
-    by_file[np.asarray(mesh.geometry.input_global_indices, dtype=np.int64)] = x
+    by_file = nodes_in_file_order(mesh, x)
     target.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=target.parent, prefix=f".{target.stem}.") as tmp:
         tmp_xdmf = Path(tmp) / target.name

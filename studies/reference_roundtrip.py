@@ -103,24 +103,19 @@ def round_trips(mesh: Path, settings: SolverSettings, c1s: list[float],
                 observed_phis: list[float], tolerance: float = 1e-5) -> RoundTripTable:
     """Run every round trip on one runner (its geometry is moved and put back)."""
     from fem.case import CaseRunner
-    from fem.reference import estimate_reference, node_dofs
+    from fem.reference import estimate_reference, node_displacement
 
     runner = CaseRunner(mesh, settings)
     X = runner.mesh.geometry.x.copy()
-    dofs = None
 
     def deformed(case: Case, reference: np.ndarray) -> tuple[np.ndarray, float]:
-        nonlocal dofs
         runner.problem.set_geometry(reference)
         start = time.perf_counter()
         result, _ = runner.solve(case)
         elapsed = time.perf_counter() - start
         if not result.converged:
             raise RuntimeError(f"{case.id} from the reference did not converge: {result.reason}")
-        u = runner.problem.displacement()
-        if dofs is None:
-            dofs = node_dofs(runner.mesh, u.function_space)
-        return reference + u.x.array.reshape(-1, 3)[dofs], elapsed
+        return reference + node_displacement(runner.problem), elapsed
 
     rows = []
     try:

@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from meshes.io import nodes_in_file_order, same_cells
+from meshes.io import from_file_order, nodes_in_file_order, same_cells
 from studies.machine import machine_state, one_core
 from studies.results import Result
 from studies.timing import time_model
@@ -105,8 +105,7 @@ def reference_positions(imaged: Path, imaged_mesh: Any, reference: Path, referen
             f"{reference} is not the reference of {imaged} (their cells differ): write it "
             "with python -m fem.reference from that mesh"
         )
-    by_file = nodes_in_file_order(reference_mesh)
-    return by_file[np.asarray(imaged_mesh.geometry.input_global_indices, dtype=np.int64)]
+    return from_file_order(imaged_mesh, nodes_in_file_order(reference_mesh))
 
 
 def check_model_on(model: Any, reference: Any) -> None:

@@ -25,9 +25,9 @@ def main(argv: list[str] | None = None) -> int:
     """Run the benchmark and print its figures."""
     from fem.case import CaseRunner
     from fem.parameters import SolverSettings
-    from fem.reference import node_dofs, write_reference_mesh
+    from fem.reference import node_displacement, write_reference_mesh
     from fem.sweep import Case
-    from meshes.io import geometry_nodes
+    from meshes.io import from_file_order, geometry_nodes, nodes_in_file_order
     from studies.machine import machine_state
     from studies.tracking import check_model_on, track_both
     from surrogate.predict import Surrogate
@@ -53,8 +53,7 @@ def main(argv: list[str] | None = None) -> int:
     if not result.converged:
         print(f"error: the imaged posture did not converge: {result.reason}", file=sys.stderr)
         return 1
-    u = truth.problem.displacement()
-    x = X + u.x.array.reshape(-1, 3)[node_dofs(truth.mesh, u.function_space)]
+    x = X + node_displacement(truth.problem)
     nodes = geometry_nodes(truth.mesh)[:, :4]
     cells = np.random.default_rng(args.seed).choice(len(nodes), args.points, replace=False)
     seen = x[nodes[cells]].mean(axis=1)  # the cells' vertex centroids, as imaged
@@ -62,7 +61,8 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         imaged = write_reference_mesh(truth, x, Path(tmp) / "imaged.xdmf")
         with CaseRunner(imaged, settings) as runner:
-            X_imaged = _in_order(truth.mesh, runner.mesh, X)  # in the imaged runner's order
+            # the truth's nodes in the imaged runner's order (the files share their numbering)
+            X_imaged = from_file_order(runner.mesh, nodes_in_file_order(truth.mesh, X))
             tracked = track_both(runner, X_imaged, model, names, seen,
                                  Case(args.c1, args.target), settings.density, settings.gravity)
     truth.close()
@@ -78,13 +78,6 @@ def main(argv: list[str] | None = None) -> int:
           f"{args.points} points: median {t['median_ms']:.4f} ms, p95 {t['p95_ms']:.4f} ms on "
           f"one core (core {tracked.machine['pinned_core']})")
     return 0
-
-
-def _in_order(source: object, target: object, values: np.ndarray) -> np.ndarray:
-    """Node values of ``source`` in the node order of ``target`` (the same file numbering)."""
-    by_file = np.empty_like(values)
-    by_file[np.asarray(source.geometry.input_global_indices)] = values
-    return by_file[np.asarray(target.geometry.input_global_indices)]
 
 
 if __name__ == "__main__":

@@ -128,12 +128,12 @@ def fe_shape(runner: Any, phi: float, theta: float = 0.0) -> Shape:
     Raises:
         StiffnessError: if a solve does not converge.
     """
-    from fem.reference import node_dofs
+    from fem.reference import node_displacement
     from fem.sweep import Case
+    from meshes.io import nodes_in_file_order
 
     problem, settings = runner.problem, runner.settings
     X = runner.mesh.geometry.x.copy()
-    index = np.asarray(runner.mesh.geometry.input_global_indices, dtype=np.int64)
     last: dict[str, Any] = {}
 
     def shape(c1: float) -> np.ndarray:
@@ -147,10 +147,7 @@ def fe_shape(runner: Any, phi: float, theta: float = 0.0) -> Shape:
             raise StiffnessError(f"the FE solve at C1 = {c1:.4g} kPa, Φ = {phi:g}° did not "
                                  "converge")
         last.update(w=problem.w.x.array.copy(), c1=c1)
-        u = problem.displacement()
-        nodes = np.empty_like(X)
-        nodes[index] = X + u.x.array.reshape(-1, 3)[node_dofs(runner.mesh, u.function_space)]
-        return nodes
+        return nodes_in_file_order(runner.mesh, X + node_displacement(problem))
 
     return shape
 

@@ -16,7 +16,7 @@ import pytest
 
 from fem.case import CaseRunner
 from fem.parameters import SolverSettings
-from fem.reference import estimate_reference, node_dofs, write_reference_mesh
+from fem.reference import estimate_reference, node_displacement, write_reference_mesh
 from fem.sweep import Case
 from meshes.io import nodes_in_file_order, read_mesh, same_cells
 
@@ -28,8 +28,7 @@ def _deformed(runner: CaseRunner, case: Case, X: np.ndarray) -> np.ndarray:
     runner.problem.set_geometry(X)
     result, _ = runner.solve(case)
     assert result.converged, result.reason
-    u = runner.problem.displacement()
-    return X + u.x.array.reshape(-1, 3)[node_dofs(runner.mesh, u.function_space)]
+    return X + node_displacement(runner.problem)
 
 
 @pytest.fixture(scope="module")
