@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -70,17 +71,32 @@ class CaseRunner:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def solve(self, case: Case) -> tuple[LoadingResult, dict[str, float]]:
-        """Solve ``case`` from the unloaded state; returns the load path and timings."""
+    def solve(
+        self,
+        case: Case,
+        guess: np.ndarray | None = None,
+        path: Sequence[tuple[float, np.ndarray]] = (),
+    ) -> tuple[LoadingResult, dict[str, float]]:
+        """Solve ``case`` (see :meth:`solve_material`)."""
         s = self.settings
-        material = case.material(s.density)
-        gravity = case.gravity(s.gravity)
-        return self.solve_material(material, gravity)
+        return self.solve_material(case.material(s.density), case.gravity(s.gravity), guess,
+                                   path)
 
     def solve_material(
-        self, material: Material, gravity: Any
+        self,
+        material: Material,
+        gravity: Any,
+        guess: np.ndarray | None = None,
+        path: Sequence[tuple[float, np.ndarray]] = (),
     ) -> tuple[LoadingResult, dict[str, float]]:
-        """Solve for explicit :class:`Material` and :class:`Gravity` objects."""
+        """Solve for explicit :class:`Material` and :class:`Gravity` objects.
+
+        ``guess`` (mixed-field values near the answer, such as the previous iterate of a
+        reference estimate) is tried first at the whole load; where it fails, the adaptive
+        load path runs from rest. ``path`` (states of this case at load fractions below 1,
+        such as a stiffer neighbour's solution: :mod:`fem.chain`) starts the load path there
+        instead of at rest (:func:`fem.loading.solve_incrementally`).
+        """
         problem, solver = self.problem, self.solver
         problem.set_case(material, gravity)
         problem.w.x.array[:] = 0.0
@@ -88,7 +104,7 @@ class CaseRunner:
         before = replace(t)  # a snapshot: the counters accumulate over the runner's cases
         cpu_start = time.process_time()
         start = time.perf_counter()
-        result = solve_incrementally(problem, solver, self.settings.loading)
+        result = solve_incrementally(problem, solver, self.settings.loading, guess, path)
         solve_s = time.perf_counter() - start
         assembly = t.assembly - before.assembly
         timings = {
@@ -107,36 +123,33 @@ class CaseRunner:
     def solve_from(
         self, material: Material, gravity: Any, guess: np.ndarray | None
     ) -> tuple[bool, int, bool]:
-        """Solve at the full load from ``guess`` (mixed-field values), else from rest.
+        """:meth:`solve_material` for a loop that needs only the outcome.
 
-        A neighbouring solution (the previous iterate of a reference estimate, the same
-        posture at a nearby C1) usually converges in a few Newton iterations at the full
-        load; where it does not, or gives an inverted cell, the adaptive load path from rest
-        runs. Returns ``(converged, Newton iterations, whether the guess was used)``.
+        Returns ``(converged, Newton iterations, whether the guess gave the answer)``.
         """
-        problem, solver = self.problem, self.solver
-        problem.set_case(material, gravity)
-        if guess is not None:
-            problem.w.x.array[:] = guess
-            problem.set_load_fraction(1.0)
-            outcome = solver.solve()
-            if outcome.converged and problem.min_detF() > 0:
-                return True, outcome.iterations, True
-            log.info("the guess failed (%s): the load path from rest", outcome.reason)
-            problem.set_case(material, gravity)
-        problem.w.x.array[:] = 0.0
-        result = solve_incrementally(problem, solver, self.settings.loading)
-        return result.converged, result.total_iterations, False
+        result, _ = self.solve_material(material, gravity, guess)
+        return result.converged, result.total_iterations, result.warm_started
 
     def summary(
-        self, case: Case, result: LoadingResult, timings: dict[str, float]
+        self,
+        case: Case,
+        result: LoadingResult,
+        timings: dict[str, float],
+        measure_unit: bool = True,
+        start: dict[str, Any] | None = None,
     ) -> dict[str, Any]:
-        """Summary record of a solved case (call right after :meth:`solve`)."""
+        """Summary record of a solved case (call right after :meth:`solve`).
+
+        ``measure_unit`` adds the unit of cost (one more assembly, factorisation and solve,
+        ``linear_system_s``) and the solve's ``factorization_equivalents``: a third to a half of
+        a warm-started solve's time, so a sweep measures it on a sample of its cases only.
+        ``start`` says where the load path started (:class:`fem.chain.Start`'s record).
+        """
         problem = self.problem
-        # the unit of cost costs one more assembly and factorisation beside the solver's own:
-        # at image resolution as much memory and time as the solve, so it is measured only below
+        # at image resolution the unit costs as much memory and time as the solve: never there
         dofs = problem.num_dofs()
-        linear_s = self.solver.time_linear_system() if dofs <= MEASURE_UNIT_MAX_DOFS else None
+        measure = measure_unit and dofs <= MEASURE_UNIT_MAX_DOFS
+        linear_s = self.solver.time_linear_system() if measure else None
         u = problem.displacement()
         norms = np.linalg.norm(u.x.array.reshape(-1, 3), axis=1)
         max_local = float(norms.max(initial=0.0))
@@ -158,6 +171,8 @@ class CaseRunner:
             "first_failure": result.first_failure,
             "failure_kinds": result.failure_kinds,
             "rescued": result.rescued,
+            "start": start if start is not None else {"from": "rest", "neighbours": [],
+                                                      "fraction": 0.0},
             "exact_retries": result.exact_retries,
             "newton_iterations": result.newton_iterations,
             "total_newton_iterations": result.total_iterations,

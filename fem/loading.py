@@ -14,10 +14,12 @@ benchmarked against (no last resort).
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from fem.exceptions import InvalidParameterError
 from fem.options import RESCUE_OPTIONS
 from fem.parameters import Loading
 from fem.problem import GravityProblem
@@ -42,6 +44,8 @@ class StepRecord:
     linear_iterations: int = 0
     rescue: bool = False
     exact_retry: bool = False
+    #: The whole load tried at once from a given guess (a neighbouring case's solution).
+    warm_start: bool = False
 
 
 @dataclass
@@ -52,6 +56,8 @@ class LoadingResult:
     fraction: float
     reason: str
     attempts: list[StepRecord] = field(default_factory=list)
+    #: The load fraction the path started from (0: rest; above: a known state, ``path``).
+    start_fraction: float = 0.0
     #: The attempts of the load path that the result holds (the last resort starts a
     #: second path from rest): ``attempts[path_start:path_end]``.
     path_start: int = 0
@@ -98,6 +104,11 @@ class LoadingResult:
         return any(a.rescue for a in self.attempts)
 
     @property
+    def warm_started(self) -> bool:
+        """Whether the result is the guess's Newton solve (no load path from rest)."""
+        return any(a.warm_start and a.converged for a in self.attempts)
+
+    @property
     def total_iterations(self) -> int:
         """Newton iterations of all attempts, failed ones included (each costs work)."""
         return sum(a.iterations for a in self.attempts)
@@ -137,12 +148,30 @@ def failure_kind(reason: str) -> str:
 
 
 def solve_incrementally(
-    problem: GravityProblem, solver: NewtonSolver, loading: Loading = Loading()
+    problem: GravityProblem,
+    solver: NewtonSolver,
+    loading: Loading = Loading(),
+    guess: np.ndarray | None = None,
+    path: Sequence[tuple[float, np.ndarray]] = (),
 ) -> LoadingResult:
     """Drive the problem from zero load to full gravity.
 
     The problem's state must hold the solution at λ = 0 (zero for a fresh case).
     On return the state holds the last converged load fraction.
+
+    With ``guess`` (mixed-field values, e.g. a neighbouring case's solution), Newton first
+    solves the whole load from it; where that fails or inverts an element, the load path
+    starts from rest as without it. Either way the answer satisfies the same stopping test,
+    so it does not depend on the guess beyond the solver's tolerance.
+
+    With ``path`` (equilibrium states of this very case at load fractions in (0, 1),
+    increasing, e.g. a stiffer neighbour's solution: see :mod:`fem.chain`), the load path
+    starts from the last of them instead of from rest, extrapolating from the last two as
+    after any two steps, and the first step keeps the last factorisation; the last resort
+    still starts from rest.
+
+    Raises:
+        InvalidParameterError: for a ``path`` whose fractions are not increasing in (0, 1).
     """
     solver.scale_to_load()
     state = problem.w.x.array
@@ -151,6 +180,24 @@ def solve_incrementally(
     fraction = 0.0
     step = 1.0 / loading.fixed_steps if loading.fixed_steps else loading.initial_step
     result = LoadingResult(converged=False, fraction=0.0, reason="")
+    reuse = False  # the first step from a known state keeps the last factorisation
+    if path:
+        fractions = [f for f, _ in path]
+        if (guess is not None or any(not 0.0 < f < 1.0 for f in fractions)
+                or any(b <= a for a, b in zip(fractions, fractions[1:], strict=False))):
+            raise InvalidParameterError(
+                f"a load path's known fractions must increase within (0, 1), without a guess; "
+                f"got {fractions}{' and a guess' if guess is not None else ''}")
+        history = [history[-1], *((f, w.copy()) for f, w in path)][-2:]
+        fraction = result.start_fraction = history[-1][0]
+        state[:] = history[-1][1]
+        reuse = True
+    if guess is not None and not loading.fixed_steps:
+        if _solve_from_guess(problem, solver, guess, result):
+            fraction = 1.0
+        else:
+            state[:] = rest[1]
+            result.path_start = len(result.attempts)
     newton: dict | None = None  # RESCUE_OPTIONS once the last resort has begun
     first_pass: tuple[float, np.ndarray] | None = None  # where the loading got without it
 
@@ -162,7 +209,8 @@ def solve_incrementally(
         target = fraction + step
         _predict(problem, history, step, loading.extrapolate)
         problem.set_load_fraction(target)
-        outcome = solver.solve(newton)
+        outcome = solver.solve(newton, reuse_factorisation=reuse)
+        reuse = False
         min_det = problem.min_detF() if outcome.converged else None
         inverted = min_det is not None and not min_det > 0
         ok = outcome.converged and not inverted
@@ -220,6 +268,33 @@ def solve_incrementally(
         result.fraction = 1.0
         result.reason = "converged"
     return result
+
+
+def _solve_from_guess(
+    problem: GravityProblem, solver: NewtonSolver, guess: np.ndarray, result: LoadingResult
+) -> bool:
+    """Newton on the whole load from ``guess``; records the attempt, returns whether it holds."""
+    problem.w.x.array[:] = guess
+    problem.set_load_fraction(1.0)
+    record = StepRecord(fraction=1.0, step=1.0, converged=False, iterations=0,
+                        reason="the guess inverts an element", final_residual=None,
+                        min_detF=None, warm_start=True)
+    if problem.min_detF() > 0:
+        outcome = solver.solve(reuse_factorisation=True)
+        min_det = problem.min_detF() if outcome.converged else None
+        inverted = min_det is not None and not min_det > 0
+        record.converged = outcome.converged and not inverted
+        record.iterations = outcome.iterations
+        record.reason = (f"inverted element (min det F = {min_det:.3g})" if inverted
+                         else outcome.reason)
+        record.final_residual = outcome.residuals[-1] if outcome.residuals else None
+        record.min_detF = min_det
+        record.linear_iterations = outcome.linear_iterations
+        record.exact_retry = outcome.exact_retry
+    result.attempts.append(record)
+    if not record.converged:
+        log.info("the guess failed (%s): the load path from rest", record.reason)
+    return record.converged
 
 
 def _predict(

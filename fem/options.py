@@ -70,7 +70,13 @@ LINE_SEARCHES = ("bt", "l2", "cp", "basic")
 #: (PETSc's ``snes_atol``, an absolute force, is applied as well where it is larger).
 #: ``blr_above_dofs``: above this many unknowns a kept factorisation is block low-rank
 #: (:data:`BLR_OPTIONS`); 0 always, a huge number never.
-SOLVER_KEYS = ("refactor_above_its", "refactor_above_ratio", "load_atol", "blr_above_dofs")
+#: ``lag_below_ratio``: in a solve from a guess near the last solve (the next case of a chain,
+#: :mod:`fem.chain`), keep the last tangent and its factorisation (a chord iteration) while
+#: each iteration leaves at most this fraction of the residual; after a slower iteration or
+#: Krylov solve, the tangent is assembled and factorised afresh and Newton goes on (0: never).
+SOLVER_KEYS = (
+    "refactor_above_its", "refactor_above_ratio", "load_atol", "blr_above_dofs", "lag_below_ratio"
+)
 
 #: Preconditioners whose set-up is a factorisation that a Krylov method can reuse.
 _FACTORISATIONS = ("lu", "cholesky")
@@ -127,6 +133,7 @@ _REUSE_FACTORISATION: dict[str, Any] = {
     # iterations on one factorisation, 10.4 s against 7.4 s.
     "refactor_above_its": 10,
     "refactor_above_ratio": 0.5,
+    "lag_below_ratio": 0.3,
     "ksp_pc_side": "right",
     # Below it the full-rank factorisation is as fast (measured on the default mesh's 50k
     # unknowns: 4 % apart); above it BLR saves most of the time and memory.
@@ -276,6 +283,11 @@ def solver_options(
     if isinstance(ratio, bool) or not isinstance(ratio, int | float) or not 0 < ratio <= 1:
         raise InvalidParameterError(
             f"refactor_above_ratio must be a number in (0, 1], got {ratio!r}"
+        )
+    chord = options.get("lag_below_ratio", 0.0)
+    if isinstance(chord, bool) or not isinstance(chord, int | float) or not 0 <= chord < 1:
+        raise InvalidParameterError(
+            f"lag_below_ratio must be a number in [0, 1), got {chord!r}"
         )
     load_atol = options.get("load_atol", 0.0)
     if (isinstance(load_atol, bool) or not isinstance(load_atol, int | float)

@@ -131,11 +131,14 @@ class GravityProblem:
             self.w = fem.Function(self.W, name="state")
             u, p = ufl.split(self.w)
             self.V, _ = self.W.sub(0).collapse()
+            #: The pressure's entries in the state's array (the others: the displacement's).
+            self.pressure_dofs = np.asarray(self.W.sub(1).collapse()[1], dtype=np.int64)
         else:
             self.W = fem.VectorFunctionSpace(mesh, ("Lagrange", 1))
             self.w = fem.Function(self.W, name="state")
             u, p = self.w, None
             self.V = self.W
+            self.pressure_dofs = np.zeros(0, dtype=np.int64)
         self._u_expr = u
 
         F = deformation_gradient(u)

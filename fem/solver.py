@@ -117,6 +117,13 @@ class NewtonSolver:
         self._atol: float | None = None
         #: Factorise at every iteration (the retry of a failed inexact increment).
         self._exact = False
+        #: Keep the last factorisation at the first iteration too (a solve from a nearby guess).
+        self._reuse_first = False
+        #: From a nearby guess, keep the last tangent as well while the iteration contracts by
+        #: at most this ratio (0: never).
+        self.lag_below_ratio = float(self.options.get("lag_below_ratio", 0.0))
+        #: The running solve keeps the last tangent and factorisation (a chord iteration).
+        self._lagging = False
         #: Residual norms of the running Newton solve (its monitor).
         self._norms: list[float] = []
         comm = problem.mesh.comm
@@ -287,11 +294,17 @@ class NewtonSolver:
             P.assemble()
 
     def _jacobian(self, snes: PETSc.SNES, x: PETSc.Vec, A: PETSc.Mat, P: PETSc.Mat) -> None:
+        refresh = False
+        if self._lagging and snes.getIterationNumber() > 0:
+            if not self._chord_slow(snes):
+                return  # this solve's first tangent and the kept factors serve again
+            self._lagging = False  # too slow: Newton from here, on a fresh factorisation
+            refresh = True
         start = time.perf_counter()
         self._assemble_operators(A, P)
         if not self.refactor_above_its:
             self.timings.preconditioner_builds += 1
-        elif self._factorisation_stale(snes):
+        elif refresh or self._factorisation_stale(snes):
             self._keep_for_factorisation(A)
             self.timings.preconditioner_builds += 1
         self.timings.jacobian += time.perf_counter() - start
@@ -305,16 +318,32 @@ class NewtonSolver:
     def _factorisation_stale(self, snes: PETSc.SNES) -> bool:
         """Whether the next Krylov solve needs a fresh factorisation.
 
-        At a load step's first iteration, after a slow or failed Krylov solve, after a Newton
-        iteration that stalled close to the solution, and always in the exact retry.
+        At a load step's first iteration (unless the solve reuses the last factorisation and
+        there is one), after a slow or failed Krylov solve, after a Newton iteration that
+        stalled close to the solution, and always in the exact retry.
         """
         ksp = snes.getKSP()
+        first = snes.getIterationNumber() == 0
         return (
             self._exact
-            or snes.getIterationNumber() == 0
+            or (first and not self._reuse_first)
             or ksp.getIterationNumber() > self.refactor_above_its
             or ksp.getConvergedReason() < 0
             or _stalled_near_solution(self._norms, self.refactor_above_ratio)
+        )
+
+    def _chord_slow(self, snes: PETSc.SNES) -> bool:
+        """Whether the chord iteration must end.
+
+        After a slow or failed Krylov solve, or an iteration that left more than
+        ``lag_below_ratio`` of the residual.
+        """
+        ksp = snes.getKSP()
+        norms = self._norms
+        return (
+            ksp.getIterationNumber() > self.refactor_above_its
+            or ksp.getConvergedReason() < 0
+            or (len(norms) >= 2 and norms[-1] > self.lag_below_ratio * norms[-2])
         )
 
     # -- tolerances -------------------------------------------------------------------------------
@@ -363,17 +392,33 @@ class NewtonSolver:
             self.P.assemble()
 
     # -- driver ---------------------------------------------------------------------------------
-    def solve(self, newton: dict[str, Any] | None = None) -> SolveResult:
+    def solve(
+        self, newton: dict[str, Any] | None = None, reuse_factorisation: bool = False
+    ) -> SolveResult:
         """Run Newton from the problem's current state; on success the state holds the solution.
 
         Args:
             newton: for this solve only, another line search (``snes_linesearch_type``)
                 and iteration limit (``snes_max_it``), e.g.
                 :data:`fem.options.RESCUE_OPTIONS`; the solver's own are restored after.
+            reuse_factorisation: with a kept factorisation, precondition the first iteration
+                with the last one instead of factorising afresh: for a guess near the last
+                solve (a neighbouring case), whose tangent is near the kept one. A slow
+                Krylov solve re-factorises as always, so this changes the cost, not the
+                answer's stopping test.
 
         Raises:
             InvalidParameterError: if ``newton`` has another key or an unknown line search.
         """
+        kept = self.P is not None and self.P.isAssembled()
+        self._reuse_first = reuse_factorisation and kept
+        self._lagging = self._reuse_first and self.lag_below_ratio > 0
+        try:
+            return self._solve_with(newton)
+        finally:
+            self._reuse_first = self._lagging = False
+
+    def _solve_with(self, newton: dict[str, Any] | None) -> SolveResult:
         if not newton:
             return self._solve()
         unknown = sorted(set(newton) - {"snes_linesearch_type", "snes_max_it"})
@@ -419,7 +464,7 @@ class NewtonSolver:
                  "factorisation at every iteration", first.reason, first.iterations,
                  f"{first.residuals[-1]:.3g}" if first.residuals else "?")
         self.problem.w.x.array[:] = guess  # the residual callbacks moved the state
-        self._exact = True
+        self._exact, self._lagging = True, False
         try:
             second = self._newton()
         finally:

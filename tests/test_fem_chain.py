@@ -1,0 +1,113 @@
+"""Chains of cases (fem.chain): each case from its neighbours' solutions, the same answers."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fem.exceptions import InvalidParameterError
+from fem.sweep import Case
+
+pytestmark = pytest.mark.solve
+
+
+def test_chains_group_directions_stiffest_first() -> None:
+    from fem.chain import direction_chains
+
+    cases = [Case(1.0, 0.0), Case(5.0, 90.0), Case(3.0, 0.0), Case(1.0, 90.0), Case(2.0, 0.0, 30.0)]
+    chains = direction_chains(cases)
+    assert chains == [
+        [Case(3.0, 0.0), Case(1.0, 0.0)],
+        [Case(2.0, 0.0, 30.0)],
+        [Case(5.0, 90.0), Case(1.0, 90.0)],
+    ]
+    with pytest.raises(InvalidParameterError, match="twice"):
+        direction_chains([Case(1.0, 0.0), Case(1.0, 0.0)])
+
+
+def test_neighbours_are_states_of_the_softer_case_at_lower_load() -> None:
+    """Case C1 at load fraction C1/C1k is case C1k at the full load, the pressure scaled."""
+    from fem.chain import Neighbours
+
+    neighbours = Neighbours(np.array([2]))  # entries 0 and 1 displacement, entry 2 pressure
+    assert neighbours.path(Case(4.0, 0.0)) == ([], neighbours.path(Case(4.0, 0.0))[1])
+    assert neighbours.path(Case(4.0, 0.0))[1].kind == "rest"
+    neighbours.add(Case(4.0, 0.0), np.array([1.0, 2.0, 8.0]))
+    neighbours.add(Case(2.0, 0.0), np.array([2.0, 4.0, 8.0]))
+    path, start = neighbours.path(Case(1.0, 0.0))
+    assert start.kind == "neighbours" and start.fraction == 0.5
+    assert start.neighbours == ("c1=4.00_phi=0.0_theta=0.0", "c1=2.00_phi=0.0_theta=0.0")
+    assert [f for f, _ in path] == [0.25, 0.5]
+    np.testing.assert_allclose(path[0][1], [1.0, 2.0, 2.0])
+    np.testing.assert_allclose(path[1][1], [2.0, 4.0, 4.0])
+    # only stiffer cases of the same direction lie on a case's path; two are kept
+    assert neighbours.path(Case(5.0, 0.0))[1].kind == "rest"
+    assert neighbours.path(Case(1.0, 90.0))[1].kind == "rest"
+    neighbours.add(Case(5.0, 90.0), np.zeros(3))
+    neighbours.add(Case(1.5, 0.0), np.zeros(3))
+    assert neighbours.path(Case(1.0, 0.0))[1].neighbours == (
+        "c1=2.00_phi=0.0_theta=0.0", "c1=1.50_phi=0.0_theta=0.0")
+
+
+def test_the_answer_does_not_depend_on_where_the_path_starts(coarse_mesh: Path) -> None:
+    """A path from the stiffer neighbour gives the answer from rest.
+
+    Both meet the same stopping test, so they agree to far below the FE error.
+    """
+    from fem.case import CaseRunner
+    from fem.chain import Neighbours
+
+    with CaseRunner(coarse_mesh) as runner:
+        problem = runner.problem
+        cold, _ = runner.solve(Case(1.2, 0.0))
+        from_rest = problem.w.x.array.copy()
+        runner.solve(Case(1.5, 0.0))
+        neighbours = Neighbours(problem.pressure_dofs)
+        neighbours.add(Case(1.5, 0.0), problem.w.x.array)
+        path, start = neighbours.path(Case(1.2, 0.0))
+        # the neighbour is an equilibrium of this case at λ = 0.8: its residual vanishes there
+        problem.set_case(Case(1.2, 0.0).material(), Case(1.2, 0.0).gravity())
+        problem.set_load_fraction(start.fraction)
+        problem.w.x.array[:] = path[-1][1]
+        runner.solver._residual(runner.solver.snes, problem.w.vector, runner.solver.b)
+        at_rest = runner.solver.b.duplicate()
+        problem.w.x.array[:] = 0.0
+        runner.solver._residual(runner.solver.snes, problem.w.vector, at_rest)
+        assert runner.solver.b.norm() < 1e-6 * at_rest.norm()
+        warm, _ = runner.solve(Case(1.2, 0.0), path=path)
+        assert cold.converged and warm.converged and warm.start_fraction == start.fraction
+        scale = np.abs(from_rest).max()
+        assert np.abs(problem.w.x.array - from_rest).max() < 1e-6 * scale
+        with pytest.raises(InvalidParameterError, match="increase within"):
+            runner.solve(Case(1.2, 0.0), path=[(0.9, path[0][1]), (0.8, path[0][1])])
+
+
+def test_a_chain_writes_every_case_as_run_case_does(coarse_mesh: Path, tmp_path: Path) -> None:
+    from fem.chain import solve_chain
+    from fem.dataset import read_points
+
+    cases = [Case(1.0, 180.0), Case(5.0, 180.0), Case(2.0, 180.0), Case(5.0, 0.0)]
+    solved = solve_chain(coarse_mesh, cases, lambda case: tmp_path / case.id)
+    assert [s.case for s in solved] == [Case(5.0, 0.0), Case(5.0, 180.0), Case(2.0, 180.0),
+                                        Case(1.0, 180.0)]
+    assert all(s.converged for s in solved)
+    starts = [len(s.summary["start"]["neighbours"]) for s in solved]
+    assert starts == [0, 0, 1, 2]
+    assert solved[-1].summary["start"]["fraction"] == pytest.approx(0.5)
+    # the unit of cost is measured once per process, the set-up counted once
+    measured = [s.summary["factorization_equivalents"] is not None for s in solved]
+    assert measured == [True, False, False, False]
+    assert [s.summary["wall_s"]["setup"] > 0 for s in solved] == measured
+    for s in solved:
+        folder = tmp_path / s.case.id
+        assert sorted(p.name for p in folder.iterdir()) == [
+            "fields.h5", "fields.xdmf", "points.h5", "summary.json"]
+        on_disk = json.loads((folder / "summary.json").read_text())
+        assert on_disk["case"] == s.case.id and on_disk["status"] == "converged"
+        assert on_disk["chain"]["first"] == ("c1=5.00_phi=180.0_theta=0.0"
+                                             if s.case.phi == 180 else s.case.id)
+    points = read_points(tmp_path / Case(1.0, 180.0).id / "points.h5")
+    assert points["case"] == Case(1.0, 180.0).id and np.abs(points["u"]).max() > 0
