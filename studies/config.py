@@ -453,6 +453,11 @@ class WorkflowConfig:
         return {name: self.section(name) for name in names}
 
     @property
+    def chains(self) -> bool:
+        """Whether the sweep's cases of one direction are solved as one chain (``fem.chain``)."""
+        return bool(self.sections["sweep"]["chains"])
+
+    @property
     def surrogate_by_case(self) -> SurrogateConfig:
         """The surrogate settings of the by-case model (whole cases held out)."""
         return self.surrogate.replace(split="by_case")

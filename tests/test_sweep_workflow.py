@@ -128,15 +128,16 @@ def test_nothing_to_do_when_nothing_changed(small_run: Path) -> None:
 def test_surrogate_change_reruns_training_only(small_run: Path) -> None:
     planned = _planned(small_run, {"surrogate.width": 16})
     assert {"train_study_run", "train_variant_run", "train_by_case", "select_model"} <= set(planned)
-    assert {"mesh", "solve", "aggregate"}.isdisjoint(planned)
+    assert {"mesh", "solve", "solve_chain", "aggregate"}.isdisjoint(planned)
 
 
-def test_new_stiffness_solves_only_the_new_cases(small_run: Path) -> None:
+def test_new_stiffness_solves_the_chains_it_joins(small_run: Path) -> None:
+    """A new C1 joins every direction's chain, and those chains re-solve."""
     planned = _planned(small_run, {"sweep.C1_kPa": [1.0, 5.0, 2.5]})
-    assert planned["solve"] == 3  # 1 new C1 x 3 angles
+    assert planned["solve_chain"] == 3 and "solve" not in planned  # 3 directions
     assert "mesh" not in planned and planned["aggregate"] == 1
 
 
 def test_solver_change_resolves_every_case_but_keeps_the_mesh(small_run: Path) -> None:
     planned = _planned(small_run, {"fe.loading.initial_step": 0.5})
-    assert planned["solve"] == 6 and "mesh" not in planned
+    assert planned["solve_chain"] == 3 and "mesh" not in planned

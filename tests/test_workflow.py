@@ -16,19 +16,34 @@ from tests.conftest import REPO, job_counts, snakemake
 pytestmark = pytest.mark.workflow
 
 
-def test_full_config_plans_688_solves(tmp_path: Path) -> None:
+def test_full_config_plans_688_solves_in_16_chains(tmp_path: Path) -> None:
     run = snakemake(tmp_path, "-n", "-j2", config=REPO / "config.yaml")
     assert run.returncode == 0, run.stderr
+    text = run.stdout + run.stderr
+    counts = job_counts(text)
+    assert counts["solve_chain"] == 16 and "solve" not in counts
+    summaries = set(re.findall(r"results/cases/[^,\s]+/summary\.json", text))
+    assert len(summaries) == 688
+    # chains off: one job per case
+    config = yaml.safe_load((REPO / "config.yaml").read_text())
+    config["sweep"]["chains"] = False
+    (tmp_path / "per_case.yaml").write_text(yaml.safe_dump(config))
+    run = snakemake(tmp_path, "-n", "-j2", config=tmp_path / "per_case.yaml")
+    assert run.returncode == 0, run.stderr
     counts = job_counts(run.stdout + run.stderr)
-    assert counts["solve"] == 688
+    assert counts["solve"] == 688 and "solve_chain" not in counts
     assert counts["mesh"] == counts["aggregate"] == counts["select_model"] == counts["report"] == 1
 
 
-def test_one_case_path_runs_only_that_case(tmp_path: Path) -> None:
-    target = "results/cases/c1=2.30_phi=-150.0_theta=0.0/summary.json"
-    run = snakemake(tmp_path, "-n", "-j2", target, config=REPO / "config.yaml")
-    assert run.returncode == 0, run.stderr
-    assert job_counts(run.stdout + run.stderr) == {"mesh": 1, "solve": 1, "total": 2}
+def test_one_case_path_runs_its_chain_or_itself(tmp_path: Path) -> None:
+    """A sweep case's path runs its direction's chain; any other case is solved alone."""
+    for target, job in (("c1=2.30_phi=-150.0_theta=0.0", "solve_chain"),
+                        ("c1=2.35_phi=-150.0_theta=0.0", "solve"),
+                        ("c1=2.30_phi=-140.0_theta=0.0", "solve")):
+        run = snakemake(tmp_path, "-n", "-j2", f"results/cases/{target}/summary.json",
+                        config=REPO / "config.yaml")
+        assert run.returncode == 0, run.stderr
+        assert job_counts(run.stdout + run.stderr) == {"mesh": 1, job: 1, "total": 2}
 
 
 @pytest.mark.parametrize(
@@ -249,6 +264,6 @@ def test_the_default_discretisation_does_not_rerun_the_study_variants(
     run = snakemake(small_run, "-n", "-j2", config=path)
     assert run.returncode == 0, run.stderr[-3000:]
     counts = job_counts(run.stdout + run.stderr)
-    n_cases = len(config["sweep"]["C1_kPa"]) * len(config["sweep"]["phi_deg"])
-    assert counts["solve"] == n_cases and counts["fe_clinical"] == counts["fe_stability"] == 1
+    assert counts["solve_chain"] == len(config["sweep"]["phi_deg"])
+    assert counts["fe_clinical"] == counts["fe_stability"] == 1
     assert "fe_variant" not in counts and "fe_reference" not in counts

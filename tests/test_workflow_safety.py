@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from fem.sweep import Case
 from tests.conftest import REPO, job_counts, snakemake, snakemake_command
 
 pytestmark = pytest.mark.workflow
@@ -39,7 +40,7 @@ def case_folders(workdir: Path) -> list[Path]:
 
 def solving(session: int) -> bool:
     """Whether a solve job runs in the process session ``session`` (a run started alone)."""
-    found = subprocess.run(["pgrep", "-s", str(session), "-f", "solve_case"],
+    found = subprocess.run(["pgrep", "-s", str(session), "-f", "solve_c(ase|hain)"],
                            capture_output=True, text=True)
     return found.returncode == 0
 
@@ -84,7 +85,8 @@ def test_runs_in_one_directory_cannot_overlap_and_a_killed_rerun_loses_nothing(
     values["fe"]["loading"] = {"fixed_steps": 40}
     slow.write_text(yaml.safe_dump(values))
     first = subprocess.Popen(
-        snakemake_command(workdir, "-j1", "--forcerun", "solve", "--", DATASET, config=slow),
+        snakemake_command(workdir, "-j1", "--forcerun", "solve_chain", "--", DATASET,
+                          config=slow),
         cwd=workdir, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
         start_new_session=True,
     )
@@ -120,7 +122,7 @@ def test_runs_in_one_directory_cannot_overlap_and_a_killed_rerun_loses_nothing(
     plan = snakemake(workdir, "-n", DATASET, config=config)
     assert plan.returncode == 0, plan.stderr[-3000:]
     counts = job_counts(plan.stdout + plan.stderr)
-    assert counts.get("aggregate") == 1 and counts.get("solve", 0) >= 1
+    assert counts.get("aggregate") == 1 and counts.get("solve_chain", 0) >= 1
     again = snakemake(workdir, "-j2", DATASET, config=config)
     assert again.returncode == 0, again.stderr[-3000:]
     assert "cannot be locked" not in again.stderr
@@ -137,10 +139,12 @@ def test_a_failed_rerun_of_a_case_restores_its_files(solved: tuple[Path, Path]) 
     mesh_h5 = workdir / "results/mesh/mesh.h5"
     mesh_h5.write_bytes(b"not an HDF5 file")
     target = f"results/cases/{folder.name}/summary.json"
-    run = snakemake(workdir, "-j1", "--forcerun", "solve", "--", target, config=config)
+    run = snakemake(workdir, "-j1", "--forcerun", "solve_chain", "--", target, config=config)
     assert run.returncode != 0 and "Restored previous version" in run.stdout + run.stderr
     assert {name: (folder / name).read_bytes() for name in CASE_FILES} == before
-    log = (workdir / "results/logs/solve" / f"{folder.name}.log").read_text()
+    case = Case.from_id(folder.name)
+    log = workdir / "results/logs/solve_chain" / f"phi={case.phi:.1f}_theta={case.theta:.1f}.log"
+    log = log.read_text()
     assert "the job failed" in log and "Traceback" in log
 
 

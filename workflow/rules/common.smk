@@ -1,5 +1,7 @@
 # The configuration, validated and parsed once (studies.config.WorkflowConfig), the wildcard
 # constraints, and the small helpers that derive targets, so that the rule files hold rules only.
+import re
+
 from snakemake.exceptions import WorkflowError
 from snakemake.logging import logger
 
@@ -54,6 +56,18 @@ wildcard_constraints:
 def case_files(name):
     """Path of file ``name`` in every case folder of the sweep."""
     return [f"results/cases/{case.id}/{name}" for case in CONFIG.cases]
+
+
+# A chain job's cases: every C1 of the sweep at one direction (solve.smk); its wildcards match
+# the sweep's angles only, so that a case at another direction is solved alone.
+CHAIN_C1 = sorted({f"{case.C1:.2f}" for case in CONFIG.cases}, key=float)
+CHAIN_PHI = "|".join(sorted({re.escape(f"{case.phi:.1f}") for case in CONFIG.cases}))
+CHAIN_THETA = "|".join(sorted({re.escape(f"{case.theta:.1f}") for case in CONFIG.cases}))
+
+
+def chain_files(name):
+    """File ``name`` of every case of one direction's chain ({phi} and {theta} left open)."""
+    return [f"results/cases/c1={c1}_phi={{phi}}_theta={{theta}}/{name}" for c1 in CHAIN_C1]
 
 
 def all_cores():

@@ -1,5 +1,10 @@
 # One FE case: the breast under gravity at one (C1, Phi, theta), in its own folder.
 #
+# With sweep.chains (the default), the sweep's cases of one gravity direction are one job,
+# `solve_chain`: the stiffest first, each case from its neighbours' solutions (fem.chain), every
+# case still written to its own folder. Asking for a sweep case's file runs its direction's
+# chain; `solve` runs any other case (and every case with chains off) alone, from rest.
+#
 # The case's files are update() outputs: Snakemake keeps a case's previous files while it is
 # solved again (fem.io.CaseWriter replaces them at the end, summary.json last) and restores them
 # if the solve fails. A rerun that is killed thus leaves the folder whole, as the dataset built
@@ -30,6 +35,38 @@ rule solve:
         ENV
     script:
         "../scripts/solve_case.py"
+
+
+if CONFIG.chains:
+
+    ruleorder: solve_chain > solve
+
+    rule solve_chain:
+        input:
+            mesh=MESH,
+        output:
+            summaries=update(chain_files("summary.json")),
+            points=update(chain_files("points.h5")),
+            fields=update(chain_files("fields.xdmf")),
+            fields_h5=update(chain_files("fields.h5")),
+        params:
+            fe=CONFIG.solve_fe,
+            material=CONFIG.section("material"),
+            fixed=CONFIG.section("mesh", "fixed"),
+        wildcard_constraints:
+            phi=CHAIN_PHI,
+            theta=CHAIN_THETA,
+        log:
+            "results/logs/solve_chain/phi={phi}_theta={theta}.log",
+        benchmark:
+            "results/benchmarks/solve_chain/phi={phi}_theta={theta}.tsv"
+        threads: 1
+        resources:
+            mem_mb=3000,
+        conda:
+            ENV
+        script:
+            "../scripts/solve_chain.py"
 
 
 # FE cases outside the sweep (the surrogate's extrapolation study): the same job, in their own
