@@ -21,6 +21,9 @@ Layout (units in attributes; M cases, N material points)::
                                           solved without contact
     /cases/load_steps, newton_iterations  (M,) int64
     /cases/wall_s        (M,)   float64   solve wall time
+    /cases/cpu_s         (M,)   float64   solve CPU time of the case's process
+    /cases/start_fraction (M,)  float64   where the load path started: 0 from rest, λ = C1/C1ₖ
+                                          from a stiffer neighbour's solution (fem.chain)
     /cases/max_disp_mm   (M,)   float64
     /displacement        (M, N, 3) float64  m; NaN for failed cases
     /splits/by_sample/{train,validation,test}   flat sample indices (case * N + point)
@@ -291,6 +294,9 @@ def build_dataset(
         )
 
     wall = np.array([s.get("wall_s", {}).get("solve", np.nan) for s in summaries], dtype=float)
+    cpu = np.array([(s.get("cpu_s") or {}).get("solve", np.nan) for s in summaries], dtype=float)
+    start = np.array([(s.get("start") or {}).get("fraction", 0.0) for s in summaries],
+                     dtype=float)
     iterations = np.array([sum(s.get("newton_iterations", [])) for s in summaries], dtype=np.int64)
     fields = {
         "id": np.array([s["case"] for s in summaries], dtype=object),
@@ -314,6 +320,8 @@ def build_dataset(
         "load_steps": column("load_steps", 0).astype(np.int64),
         "newton_iterations": iterations,
         "wall_s": wall,
+        "cpu_s": cpu,
+        "start_fraction": start,
         "max_disp_mm": column("max_disp_mm").astype(float),
     }
     units = {
@@ -322,6 +330,8 @@ def build_dataset(
         "theta": "deg",
         "gravity": "m/s^2",
         "wall_s": "s",
+        "cpu_s": "s",
+        "start_fraction": "1",
         "max_disp_mm": "mm",
         "load_fraction": "1",
         "contact_force_N": "N",

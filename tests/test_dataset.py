@@ -73,7 +73,9 @@ def test_dataset_schema_and_contents(tmp_path: Path) -> None:
             3: {"status": "failed"},
             1: {"contact": contact},
             2: {"self_overlap": {"overlapping_vertices": 13}},
-            4: {"self_overlap": None},
+            4: {"self_overlap": None, "cpu_s": {"solve": 0.5},
+                "start": {"from": "neighbours", "neighbours": ["c1=6.00_phi=120.0_theta=0.0"],
+                          "fraction": 5 / 6}},
         },
     )  # None: solved under MPI
     info = build_dataset(
@@ -94,6 +96,9 @@ def test_dataset_schema_and_contents(tmp_path: Path) -> None:
         assert list(h5["cases/first_failure"].asstr()[...]) == [""] * 3 + ["diverged_max_it", ""]
         assert list(h5["cases/min_detF"][...]) == [0.9] * 3 + [0.05, 0.9]
         assert list(h5["cases/self_overlap"][...]) == [0, 0, 13, 0, -1]
+        # the solve's CPU time and where its load path started (a summary may lack both)
+        assert np.isnan(h5["cases/cpu_s"][:4]).all() and h5["cases/cpu_s"][4] == 0.5
+        assert list(h5["cases/start_fraction"][...]) == [0.0] * 4 + [5 / 6]
         force = h5["cases/contact_force_N"]
         assert force.attrs["units"] == "N"
         assert force[1] == 0.25 and np.isnan(np.delete(force[...], 1)).all()

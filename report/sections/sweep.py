@@ -16,6 +16,8 @@ def sweep_cost_section(ctx: Context) -> str:
         return missing("results/dataset/dataset.h5")
     columns = ctx.case_columns()
     wall = columns.get("wall_s")
+    cpu = columns.get("cpu_s")
+    start = columns.get("start_fraction")
     steps = columns.get("load_steps")
     its = columns.get("newton_iterations")
     if wall is None:
@@ -36,6 +38,11 @@ def sweep_cost_section(ctx: Context) -> str:
         ["median per case", seconds(float(np.nanmedian(wall)))],
         ["slowest case", seconds(float(np.nanmax(wall)))],
     ]
+    if cpu is not None and np.isfinite(cpu).any():
+        rows.append(["solve CPU time, mean per case", seconds(float(np.nanmean(cpu)))])
+    if start is not None:
+        rows.append(["cases started from a stiffer neighbour (chains)",
+                     f"{int(np.sum(start > 0))} of {len(start)}"])
     if steps is not None:
         rows.append(["load steps (min–max)", f"{int(steps.min())}–{int(steps.max())}"])
     if its is not None:
