@@ -141,8 +141,8 @@ class CaseRunner:
         """Summary record of a solved case (call right after :meth:`solve`).
 
         ``measure_unit`` adds the unit of cost (one more assembly, factorisation and solve,
-        ``linear_system_s``) and the solve's ``factorization_equivalents``: a third to a half of
-        a warm-started solve's time, so a sweep measures it on a sample of its cases only.
+        ``linear_system_s``) and the solve's ``factorization_equivalents``: it costs as much as a
+        solve from a neighbour (:mod:`fem.chain`), so a chain measures it on its first case only.
         ``start`` says where the load path started (:class:`fem.chain.Start`'s record).
         """
         problem = self.problem
