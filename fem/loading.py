@@ -171,7 +171,8 @@ def solve_incrementally(
     still starts from rest.
 
     Raises:
-        InvalidParameterError: for a ``path`` whose fractions are not increasing in (0, 1).
+        InvalidParameterError: for a ``path`` whose fractions are not increasing in (0, 1),
+            or a ``path`` given with a ``guess``.
     """
     solver.scale_to_load()
     state = problem.w.x.array

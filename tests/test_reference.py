@@ -245,8 +245,11 @@ def test_the_stiffness_is_found_from_a_noisy_second_observation(
     """C1 from the skin of a supine FE solve with 0.5 mm noise: within 5 %, in its interval.
 
     The small run's toy surrogate (two C1 values) searches; FE confirms, so the estimate does
-    not rest on the surrogate's accuracy. An observation in other units, or in other axes, is
-    refused by name.
+    not rest on the surrogate's accuracy. A 95 % interval misses the truth in one draw of the
+    noise in twenty, so six draws are taken: every estimate within 5 %, and at least five of
+    the six intervals holding the truth (a 97 % event for a true 95 % interval; one draw, the
+    first, has the truth 0.5 % above its interval). An observation in other units, or in other
+    axes, is refused by name.
     """
     from studies.stiffness import Estimator, main
     from studies.tracking import TrackingInputError
@@ -256,12 +259,16 @@ def test_the_stiffness_is_found_from_a_noisy_second_observation(
     model = small_run / "results/surrogate/model"
     estimator = Estimator(reference, model, SolverSettings())
     skin = estimator.skin_of_solve(2.5, 0.0, 0.0)
-    observed = skin + np.random.default_rng(3).normal(scale=5e-4, size=skin.shape)
-    result = estimator.estimate(observed, 0.0, 0.0, "test", truth=2.5)
-    assert abs(result.C1_kPa / 2.5 - 1) <= 0.05 and result.converged
-    lo, hi = result.interval_kPa
-    assert lo <= 2.5 <= hi and hi / lo < 1.2
-    assert 0.3 < result.rms_mm < 0.7  # the noise's normal component, 0.5 mm
+    held = 0
+    for seed in range(3, 9):
+        observed = skin + np.random.default_rng(seed).normal(scale=5e-4, size=skin.shape)
+        result = estimator.estimate(observed, 0.0, 0.0, "test", truth=2.5)
+        assert abs(result.C1_kPa / 2.5 - 1) <= 0.05 and result.converged
+        lo, hi = result.interval_kPa
+        held += lo <= 2.5 <= hi
+        assert hi / lo < 1.2
+        assert 0.3 < result.rms_mm < 0.7  # the noise's normal component, 0.5 mm
+    assert held >= 5
 
     points = tmp_path / "scan.csv"
     points.write_text("name,x,y,z\n" + "".join(
