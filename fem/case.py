@@ -5,7 +5,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -13,6 +13,7 @@ import numpy as np
 from mpi4py import MPI
 
 from fem.dataset import write_points
+from fem.exceptions import InvalidParameterError
 from fem.io import (
     CaseWriter,
     gather_boundary_vertices,
@@ -33,6 +34,39 @@ log = logging.getLogger(__name__)
 #: Above this many unknowns a case's summary does not measure the factorisation unit
 #: (``linear_system_s``, ``factorization_equivalents``: None); the FE study measures it.
 MEASURE_UNIT_MAX_DOFS = 150_000
+
+
+#: How a case's load path started: from rest, or from its stiffer neighbours' solutions
+#: (:mod:`fem.chain`).
+START_KINDS = ("rest", "neighbours")
+
+
+@dataclass(frozen=True, slots=True)
+class Start:
+    """Where a case's load path started.
+
+    Attributes:
+        kind: one of :data:`START_KINDS`.
+        neighbours: the cases whose solutions started it, nearest last (none from rest).
+        fraction: the load fraction of the nearest one in this case (C1 / its C1).
+    """
+
+    kind: str = "rest"
+    neighbours: tuple[str, ...] = ()
+    fraction: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.kind not in START_KINDS:
+            raise InvalidParameterError(
+                f"unknown start {self.kind!r}; one of {', '.join(START_KINDS)}"
+            )
+        if (self.kind == "rest") != (not self.neighbours):
+            raise InvalidParameterError("a start from neighbours names them, from rest none")
+
+    def as_dict(self) -> dict[str, Any]:
+        """The summary's ``start`` record."""
+        return {"from": self.kind, "neighbours": list(self.neighbours), "fraction": self.fraction}
+
 
 
 class CaseRunner:
@@ -136,14 +170,14 @@ class CaseRunner:
         result: LoadingResult,
         timings: dict[str, float],
         measure_unit: bool = True,
-        start: dict[str, Any] | None = None,
+        start: Start = Start(),
     ) -> dict[str, Any]:
         """Summary record of a solved case (call right after :meth:`solve`).
 
         ``measure_unit`` adds the unit of cost (one more assembly, factorisation and solve,
         ``linear_system_s``) and the solve's ``factorization_equivalents``: it costs as much as a
         solve from a neighbour (:mod:`fem.chain`), so a chain measures it on its first case only.
-        ``start`` says where the load path started (:class:`fem.chain.Start`'s record).
+        ``start`` says where the load path started.
         """
         problem = self.problem
         # at image resolution the unit costs as much memory and time as the solve: never there
@@ -171,8 +205,7 @@ class CaseRunner:
             "first_failure": result.first_failure,
             "failure_kinds": result.failure_kinds,
             "rescued": result.rescued,
-            "start": start if start is not None else {"from": "rest", "neighbours": [],
-                                                      "fraction": 0.0},
+            "start": start.as_dict(),
             "exact_retries": result.exact_retries,
             "newton_iterations": result.newton_iterations,
             "total_newton_iterations": result.total_iterations,

@@ -27,43 +27,12 @@ from typing import Any
 
 import numpy as np
 
-from fem.case import CaseRunner
+from fem.case import CaseRunner, Start
 from fem.exceptions import InvalidParameterError
 from fem.parameters import SolverSettings
 from fem.sweep import Case
 
 log = logging.getLogger(__name__)
-
-#: How a chain's case was started: from rest, or from its stiffer neighbours' solutions.
-START_KINDS = ("rest", "neighbours")
-
-
-@dataclass(frozen=True, slots=True)
-class Start:
-    """Where a case's load path started.
-
-    Attributes:
-        kind: one of :data:`START_KINDS`.
-        neighbours: the cases whose solutions started it, nearest last (none from rest).
-        fraction: the load fraction of the nearest one in this case (C1 / its C1).
-    """
-
-    kind: str = "rest"
-    neighbours: tuple[str, ...] = ()
-    fraction: float = 0.0
-
-    def __post_init__(self) -> None:
-        if self.kind not in START_KINDS:
-            raise InvalidParameterError(
-                f"unknown start {self.kind!r}; one of {', '.join(START_KINDS)}"
-            )
-        if (self.kind == "rest") != (not self.neighbours):
-            raise InvalidParameterError("a start from neighbours names them, from rest none")
-
-    def as_dict(self) -> dict[str, Any]:
-        """The summary's ``start`` record."""
-        return {"from": self.kind, "neighbours": list(self.neighbours), "fraction": self.fraction}
-
 
 def direction_chains(cases: Iterable[Case]) -> list[list[Case]]:
     """The cases grouped by gravity direction (Φ, θ), each group stiffest first.
@@ -163,7 +132,7 @@ def solve_chain(
                 path, start = neighbours.path(case) if warm_start else ([], Start())
                 result, timings = runner.solve(case, path=path)
                 summary = runner.summary(
-                    case, result, timings, measure_unit=not solved, start=start.as_dict()
+                    case, result, timings, measure_unit=not solved, start=start
                 )
                 # the runner's set-up is paid once: by the first case of the process
                 summary["wall_s"]["setup"] = runner.setup_s if not solved else 0.0
