@@ -28,6 +28,9 @@ Layout (units in attributes; M cases, N material points)::
     /displacement        (M, N, 3) float64  m; NaN for failed cases
     /splits/by_sample/{train,validation,test}   flat sample indices (case * N + point)
     /splits/by_case/{train,validation,test}     case indices (test includes the clinical cases)
+    /splits/by_direction/{train,validation,test} case indices: whole gravity directions held out
+    /splits/by_c1/{train,validation,test}       case indices: whole C1 values held out (the
+                                                 softest and stiffest always train)
 
 Root attributes hold a description, the creation time, the provenance (config
 sections, package versions, git commit) as JSON strings. This module imports
@@ -57,6 +60,11 @@ log = logging.getLogger(__name__)
 FORMAT_VERSION = 1
 DOMAIN, BOUNDARY = 0, 1
 SPLITS = ("train", "validation", "test")
+SPLIT_KINDS = ("by_sample", "by_case", "by_direction", "by_c1")
+"""The dataset's splits: ``by_sample`` holds flat sample indices, the others case indices."""
+GROUP_SPLITS = {"by_direction": 1, "by_c1": 2}
+"""Splits that hold out whole groups of cases, with the stream of the seed each draws from
+(the by-sample and by-case splits draw from stream 0, as before these were added)."""
 REQUIRED_SUMMARY_KEYS = ("status", "case", "C1", "phi", "theta", "gravity_vector", "load_fraction")
 REQUIRED_POINT_FIELDS = ("node_index", "X", "u", "fixed")
 STATUSES = ("converged", "failed")
@@ -224,6 +232,43 @@ class SplitFractions:
         return {name: np.sort(p).astype(np.int64) for name, p in zip(SPLITS, parts, strict=True)}
 
 
+def direction_keys(phi_deg: np.ndarray, theta_deg: np.ndarray) -> np.ndarray:
+    """One hashable key per gravity direction (its unit vector rounded), shape (M,).
+
+    Cases at Φ = 0 or 180° share a direction whatever their θ, so the key is the vector,
+    not the angles.
+    """
+    g = np.round(gravity_direction(phi_deg, theta_deg), 9) + 0.0  # -0.0 -> 0.0
+    return np.array([f"{x:.9f},{y:.9f},{z:.9f}" for x, y, z in g])
+
+
+def group_partition(
+    cases: np.ndarray,
+    key: np.ndarray,
+    keep_in_training: Sequence[Any],
+    split: SplitFractions,
+    rng: np.random.Generator,
+) -> dict[str, np.ndarray]:
+    """Partition ``cases`` by whole groups (cases with equal ``key``) into sorted index arrays.
+
+    Groups whose key is in ``keep_in_training`` always train (the ends of a range, so that
+    held-out groups are interpolated, not extrapolated); the others are partitioned by
+    ``split``'s fractions of the number of groups. With fewer than three free groups there is
+    nothing to hold out: every case trains and the other parts are empty.
+    """
+    unique = np.unique(key)
+    kept = np.isin(unique, np.asarray(keep_in_training, dtype=unique.dtype))
+    free = unique[~kept]
+    if free.size < 3:
+        parts = {"train": unique, "validation": unique[:0], "test": unique[:0]}
+    else:
+        drawn = split.partition(free.size, rng)
+        parts = {name: free[idx] for name, idx in drawn.items()}
+        parts["train"] = np.concatenate([parts["train"], unique[kept]])
+    return {name: np.sort(cases[np.isin(key, groups)]).astype(np.int64)
+            for name, groups in parts.items()}
+
+
 def build_dataset(
     summary_paths: Sequence[str | Path],
     point_paths: Sequence[str | Path],
@@ -244,7 +289,9 @@ def build_dataset(
         config: the config sections to record as provenance.
         test_cases: (C1, Φ, θ) of setups the by-case split always holds out as test
             (the clinical cases: a by-case model is then judged on setups it never saw);
-            the other converged cases are partitioned by ``split``.
+            the other converged cases are partitioned by ``split``. The by-direction and
+            by-C1 splits partition whole directions and whole C1 values by the same
+            fractions (:func:`group_partition`).
 
     Raises:
         DatasetError: naming the case whose files are missing, truncated or whose
@@ -287,6 +334,20 @@ def build_dataset(
     free = good_cases[~forced]
     by_case = {k: free[v] for k, v in split.partition(len(free), rng).items()}
     by_case["test"] = np.sort(np.concatenate([by_case["test"], good_cases[forced]]))
+    c1_all = np.array([k[0] for k in keys])
+    phi_all, theta_all = np.array([k[1] for k in keys]), np.array([k[2] for k in keys])
+    c1_good = np.round(c1_all[good_cases], 9)
+    c1_ends = (c1_good.min(), c1_good.max()) if c1_good.size else ()
+    groups = {
+        "by_direction": (direction_keys(phi_all, theta_all)[good_cases], ()),
+        "by_c1": (c1_good, c1_ends),
+    }
+    held_out = {
+        name: group_partition(
+            good_cases, key, keep, split, np.random.default_rng([seed, GROUP_SPLITS[name]])
+        )
+        for name, (key, keep) in groups.items()
+    }
 
     def column(key: str, default: Any = np.nan) -> np.ndarray:
         return np.array(
@@ -344,7 +405,7 @@ def build_dataset(
         fields,
         units,
         displacement,
-        {"by_sample": by_sample, "by_case": by_case},
+        {"by_sample": by_sample, "by_case": by_case, **held_out},
         {"seed": seed, "fractions": [split.train, split.validation, split.test]},
         provenance(config),
     )
@@ -418,6 +479,10 @@ def _write_atomically(
                     g.create_dataset(name, data=idx)
             sp["by_sample"].attrs["description"] = "flat sample index = case * n_points + point"
             sp["by_case"].attrs["description"] = "case indices (whole setups held out)"
+            sp["by_direction"].attrs["description"] = "case indices (whole directions held out)"
+            sp["by_c1"].attrs["description"] = (
+                "case indices (whole C1 values held out; the softest and stiffest train)"
+            )
         os.replace(tmp, output)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
@@ -438,7 +503,8 @@ class Dataset:
         direction: unit gravity direction per case (M, 3).
         displacement: (M, N, 3) in mm; NaN rows for failed cases.
         converged: (M,) bool.
-        splits: ``{"by_sample": {...}, "by_case": {...}}`` index arrays.
+        splits: ``{kind: {"train": ..., "validation": ..., "test": ...}}`` index arrays of
+            every kind of :data:`SPLIT_KINDS`.
         ids: case identifiers (M,).
         node_index: index of each point in the mesh file (N,), for writing fields.
     """
@@ -476,7 +542,7 @@ class Dataset:
     def sample_indices(self, split: str, part: str) -> np.ndarray:
         """Flat sample indices (case * N + point) of a split part."""
         indices = self.splits[split][part]
-        if split == "by_case":
+        if split != "by_sample":
             return (indices[:, None] * self.n_points + np.arange(self.n_points)[None, :]).ravel()
         return indices
 
@@ -507,11 +573,14 @@ def read_dataset(path: str | Path) -> Dataset:
                 if key not in h5:
                     raise DatasetError(f"dataset {path} lacks /{key}")
             splits: dict[str, dict[str, np.ndarray]] = {}
-            for kind in ("by_sample", "by_case"):
+            for kind in SPLIT_KINDS:
                 for part in SPLITS:
                     key = f"splits/{kind}/{part}"
                     if key not in h5:
-                        raise DatasetError(f"dataset {path} lacks the split /{key}")
+                        raise DatasetError(
+                            f"dataset {path} lacks the split /{key} (written by an older "
+                            "version: rebuild it, e.g. snakemake --forcerun aggregate)"
+                        )
                     splits.setdefault(kind, {})[part] = h5[key][...]
             ds = Dataset(
                 X=h5["points/X"][...],
@@ -539,9 +608,11 @@ def read_dataset(path: str | Path) -> Dataset:
         raise DatasetError(f"dataset {path} has no converged case")
     if not np.all(np.isfinite(ds.displacement[ds.converged])):
         raise DatasetError(f"dataset {path} has NaN or inf displacements in converged cases")
-    n_samples = {"by_sample": ds.C1.shape[0] * ds.X.shape[0], "by_case": ds.C1.shape[0]}
+    n_samples = {kind: ds.C1.shape[0] for kind in SPLIT_KINDS}
+    n_samples["by_sample"] = ds.C1.shape[0] * ds.X.shape[0]
     for kind, parts in splits.items():
-        if parts["train"].size == 0 or parts["validation"].size == 0:
+        # a sweep with too few directions or C1 values has nothing to hold out by group
+        if kind not in GROUP_SPLITS and (parts["train"].size == 0 or parts["validation"].size == 0):
             raise DatasetError(
                 f"dataset {path}: split {kind} has an empty train or validation part"
             )

@@ -26,6 +26,7 @@ from report.context import INPUT_NAMES, Context
 from report.html import para
 from report.sections.corpus import corpus_section
 from report.sections.fe import fe_speed_accuracy_section
+from report.sections.generalisation import generalisation_section
 from report.sections.mesh import mesh_section
 from report.sections.paper import paper_section
 from report.sections.reference import reference_section
@@ -51,6 +52,8 @@ SECTIONS: tuple[tuple[str, str, Callable[[Context], str]], ...] = (
     ("fe-speed-accuracy", "FE speed against accuracy", fe_speed_accuracy_section),
     ("surrogate-speed-accuracy", "Surrogate speed against accuracy",
      surrogate_speed_accuracy_section),
+    ("generalisation", "The surrogate between its cases and in every posture",
+     generalisation_section),
     ("scene-needs", "Model no more than a scene needs", scene_needs_section),
     ("stability", "Stability", stability_section),
     ("corpus", "A corpus of anatomies", corpus_section),

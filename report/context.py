@@ -17,7 +17,9 @@ from studies.architecture import ArchitectureTable, VariantComparison
 from studies.corpus import CorpusTable
 from studies.fe_benchmark import ClinicalBenchmark
 from studies.fe_speed_accuracy import SpeedAccuracy
+from studies.held_out import HeldOutEvaluation
 from studies.mesh_quality import MeshQuality
+from studies.postures import PostureEvaluation
 from studies.reference_roundtrip import RoundTripTable
 from studies.reference_state import ReferenceRecord
 from studies.stability import StabilityMap
@@ -34,7 +36,7 @@ INPUT_NAMES = (
     "dataset", "quality", "mesh_png", "model", "history", "table2", "variants", "clinical",
     "extrapolation", "benchmark", "clinical_fields", "fe_clinical", "fe_speed_accuracy",
     "fe_stability", "corpus", "reference_roundtrip", "reference_record", "tracking", "stiffness",
-    "viewer",
+    "viewer", "held_out", "postures",
 )
 
 
@@ -56,6 +58,8 @@ RESULT_TYPES: dict[str, Callable[[Path], Any]] = {
     "reference_roundtrip": RoundTripTable.read,
     "reference_record": ReferenceRecord.read,
     "stiffness": StiffnessResult.read,
+    "held_out": HeldOutEvaluation.read,
+    "postures": PostureEvaluation.read,
 }
 
 

@@ -25,11 +25,12 @@ from pathlib import Path
 from typing import Any
 
 import jsonschema
+import numpy as np
 import yaml
 from jsonschema import validators
 
 from fem.contact import resolve_obstacle
-from fem.dataset import SplitFractions
+from fem.dataset import SplitFractions, direction_keys
 from fem.exceptions import FEError
 from fem.parameters import SolverSettings
 from fem.sweep import Case, clinical_cases, sweep_cases
@@ -263,6 +264,48 @@ class SurrogateVariant:
 
 
 @dataclass(frozen=True, slots=True)
+class Posture:
+    """A posture a patient takes, at one stiffness (``surrogate_study.postures``).
+
+    Attributes:
+        name: as the config names it (``prone``, ``standing``, ...).
+        note: what it is, in words (the 3D view's tooltip).
+        case: its FE case (C1, and gravity's direction relative to the body).
+        in_sweep: whether the sweep solves that case (else it is solved outside it).
+    """
+
+    name: str
+    note: str
+    case: Case
+    in_sweep: bool
+
+    @property
+    def folder(self) -> str:
+        """The case's folder under ``results/``: ``cases/<id>`` or ``outside/<id>``."""
+        return f"{'cases' if self.in_sweep else 'outside'}/{self.case.id}"
+
+
+def postures_of(section: Mapping[str, Any], sweep: tuple[Case, ...]) -> tuple[Posture, ...]:
+    """Every (posture, C1) of the ``postures`` section, postures in its order, C1 within each.
+
+    Raises:
+        ConfigError: if two postures share a name.
+    """
+    directions = section.get("directions", ())
+    names = [item["name"] for item in directions]
+    twice = sorted({name for name in names if names.count(name) > 1})
+    if twice:
+        raise ConfigError(f"surrogate_study.postures names {', '.join(map(repr, twice))} twice")
+    in_sweep = set(sweep)
+    out = []
+    for item in directions:
+        for C1 in section["C1_kPa"]:
+            case = Case(float(C1), float(item["phi"]), float(item.get("theta", 0.0)))
+            out.append(Posture(item["name"], item.get("note", ""), case, case in in_sweep))
+    return tuple(out)
+
+
+@dataclass(frozen=True, slots=True)
 class SurrogateStudyConfig:
     """The surrogate's study (``surrogate_study``).
 
@@ -273,6 +316,7 @@ class SurrogateStudyConfig:
         extrapolation: the FE cases of its extrapolation blocks that the sweep lacks, sorted.
         timing_repeats: timed predictions per model.
         prediction_budget_ms: the selection's time budget (None: by accuracy alone).
+        postures: the clinical postures at each of their C1 values.
     """
 
     architectures: tuple[str, ...]
@@ -281,6 +325,13 @@ class SurrogateStudyConfig:
     extrapolation: tuple[Case, ...]
     timing_repeats: int
     prediction_budget_ms: float | None
+    postures: tuple[Posture, ...] = ()
+
+    @property
+    def outside_cases(self) -> tuple[Case, ...]:
+        """Every FE case the study solves outside the sweep (extrapolation and postures)."""
+        extra = {p.case for p in self.postures if not p.in_sweep}
+        return tuple(sorted(set(self.extrapolation) | extra))
 
     @classmethod
     def from_sections(
@@ -311,6 +362,7 @@ class SurrogateStudyConfig:
             extrapolation=tuple(sorted(extra - set(sweep))),
             timing_repeats=study["timing_repeats"],
             prediction_budget_ms=study["prediction_budget_ms"],
+            postures=postures_of(study.get("postures") or {}, sweep),
         )
 
     def variant(self, name: str) -> SurrogateVariant:
@@ -457,10 +509,35 @@ class WorkflowConfig:
         """Whether the sweep's cases of one direction are solved as one chain (``fem.chain``)."""
         return bool(self.sections["sweep"]["chains"])
 
+    def surrogate_held_out(self, split: str) -> SurrogateConfig:
+        """The surrogate settings of the model trained on ``split`` (a held-out split).
+
+        Raises:
+            KeyError: if the sweep cannot form that split (:attr:`held_out_splits`).
+        """
+        if split not in self.held_out_splits:
+            raise KeyError(f"the sweep forms no {split!r} split (it has {self.held_out_splits})")
+        return self.surrogate.replace(split=split)
+
     @property
-    def surrogate_by_case(self) -> SurrogateConfig:
-        """The surrogate settings of the by-case model (whole cases held out)."""
-        return self.surrogate.replace(split="by_case")
+    def held_out_splits(self) -> tuple[str, ...]:
+        """The splits that hold out whole groups of the sweep and can be formed from it.
+
+        ``by_case`` always; ``by_direction`` with at least three directions; ``by_c1`` with
+        at least three C1 values besides the softest and the stiffest, which always train
+        (:func:`fem.dataset.group_partition`).
+        """
+        phi = np.array([case.phi for case in self.cases], dtype=float)
+        theta = np.array([case.theta for case in self.cases], dtype=float)
+        directions = len(set(direction_keys(phi, theta))) if self.cases else 0
+        c1_values = len({round(case.C1, 9) for case in self.cases})
+        return tuple(
+            split
+            for split, enough in (
+                ("by_case", True), ("by_direction", directions >= 3), ("by_c1", c1_values >= 5)
+            )
+            if enough
+        )
 
 
 def main(argv: list[str] | None = None) -> int:

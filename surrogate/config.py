@@ -6,10 +6,10 @@ import math
 from dataclasses import asdict, dataclass, fields, replace
 from typing import Any
 
+from fem.dataset import SPLIT_KINDS
 from surrogate.exceptions import SurrogateConfigError
 
 ACTIVATIONS = ("tanh", "relu", "gelu", "silu")
-SPLIT_KINDS = ("by_sample", "by_case")
 BOUNDARY_MODES = ("network", "shared", "exact")
 LR_SCHEDULES = ("constant", "cosine", "exponential")
 C1_ENCODINGS = ("linear", "log", "inverse")
@@ -49,8 +49,9 @@ class SurrogateConfig:
             end point, geometric per epoch, as the authors' public code).
         lr_final: final learning rate as a fraction of ``learning_rate``.
         seed: the one seed of all randomness.
-        split: ``by_sample`` (the paper's random 80/10/10 of points) or ``by_case``
-            (whole setups held out).
+        split: ``by_sample`` (the paper's random 80/10/10 of points), ``by_case`` (whole
+            setups held out), ``by_direction`` (whole gravity directions) or ``by_c1``
+            (whole C1 values); see :data:`fem.dataset.SPLIT_KINDS`.
     """
 
     hidden_layers: int = 3

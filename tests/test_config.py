@@ -95,10 +95,35 @@ def test_variants_override_the_surrogate_settings() -> None:
     assert protocol.settings.replace(activation="silu", c1_encoding="inverse",
                                      output_scaling="compliance", lr_schedule="cosine",
                                      max_epochs=100) == config.surrogate
-    assert config.surrogate_by_case.split == "by_case"
-    assert config.surrogate_by_case.replace(split="by_sample") == config.surrogate
+    assert config.held_out_splits == ("by_case", "by_direction", "by_c1")
+    for split in config.held_out_splits:
+        held_out = config.surrogate_held_out(split)
+        assert held_out.split == split and held_out.replace(split="by_sample") == config.surrogate
+    # tests/config.yaml: two C1 values cannot hold one out between the softest and stiffest
+    small = WorkflowConfig.from_mapping(read("tests/config.yaml"))
+    assert small.held_out_splits == ("by_case", "by_direction")
+    with pytest.raises(KeyError, match="forms no 'by_c1' split"):
+        small.surrogate_held_out("by_c1")
     with pytest.raises(KeyError, match="no 'nope'"):
         config.surrogate_study.variant("nope")
+
+
+def test_postures_come_from_the_sweep_where_it_has_them() -> None:
+    config = WorkflowConfig.from_mapping(read("config.yaml"))
+    postures = config.surrogate_study.postures
+    directions = config.section("surrogate_study", "postures", "directions")
+    assert len(postures) == 2 * len(directions)  # every posture at C1 = 1 and 5 kPa
+    by_name = {(p.name, p.case.C1): p for p in postures}
+    assert by_name[("prone", 1.0)].in_sweep and by_name[("prone", 1.0)].folder.startswith("cases/")
+    standing = by_name[("standing", 5.0)]
+    assert standing.case == Case(5.0, 90.0, -90.0) and not standing.in_sweep
+    assert standing.folder == f"outside/{standing.case.id}" and "mammogram" in standing.note
+    assert set(config.surrogate_study.outside_cases) >= {p.case for p in postures
+                                                         if not p.in_sweep}
+    raw = read("config.yaml")
+    raw["surrogate_study"]["postures"]["directions"].append({"name": "prone", "phi": 170.0})
+    with pytest.raises(ConfigError, match="postures names 'prone' twice"):
+        WorkflowConfig.from_mapping(raw)
 
 
 def test_the_solve_jobs_get_the_chest_obstacle_written_out() -> None:

@@ -274,3 +274,57 @@ def test_case_files_outside_a_case_folder_are_refused(tmp_path: Path) -> None:
         (odd / path.name).write_bytes(path.read_bytes())
     with pytest.raises(DatasetError, match="not_a_case: not a case folder"):
         build_dataset([odd / "summary.json"], [odd / "points.h5"], tmp_path / "ds.h5")
+
+
+def test_group_splits_hold_out_whole_directions_and_whole_c1_values(tmp_path: Path) -> None:
+    """by_direction and by_c1 partition whole groups; the softest and stiffest C1 train.
+
+    Adding them left the by-sample split as it was (it draws from the seed's first stream).
+    """
+    c1s, phis = (1.0, 1.5, 2.0, 2.5, 3.0, 3.5), (0.0, 45.0, 90.0, 135.0, 180.0)
+    paths = [_write_case(tmp_path, c1, phi) for c1 in c1s for phi in phis]
+    paths.append(_write_case(tmp_path, 4.0, 45.0, status="failed"))
+    summaries, points = [p[0] for p in paths], [p[1] for p in paths]
+    build_dataset(summaries, points, tmp_path / "ds.h5", seed=3)
+    from fem.dataset import read_dataset
+
+    ds = read_dataset(tmp_path / "ds.h5")
+    converged = np.flatnonzero(ds.converged)
+    for split, key in (("by_direction", ds.phi), ("by_c1", ds.C1)):
+        parts = ds.splits[split]
+        assert sorted(np.concatenate(list(parts.values()))) == list(converged)
+        groups = [set(key[parts[p]]) for p in ("train", "validation", "test")]
+        assert all(groups[1:]) and not (groups[0] & groups[1] or groups[0] & groups[2]
+                                        or groups[1] & groups[2])
+        held = np.concatenate([parts["validation"], parts["test"]])
+        assert len(ds.sample_indices(split, "test")) == len(parts["test"]) * N
+    assert {1.0, 3.5} <= set(ds.C1[ds.splits["by_c1"]["train"]])
+    # the older splits draw from the seed's first stream, as before the group splits existed
+    rng = np.random.default_rng(3)
+    samples = (converged[:, None] * N + np.arange(N)[None, :]).ravel()
+    expected = SplitFractions().partition(len(samples), rng)
+    assert np.array_equal(ds.splits["by_sample"]["train"], samples[expected["train"]])
+    assert len(held) > 0
+
+
+def test_a_sweep_with_too_few_groups_holds_none_out(tmp_path: Path) -> None:
+    # one direction; three C1 values, of which the softest and stiffest always train
+    paths = [_write_case(tmp_path, c1, 0.0) for c1 in (1.0, 2.0, 3.0)]
+    build_dataset([p[0] for p in paths], [p[1] for p in paths], tmp_path / "three.h5")
+    from fem.dataset import read_dataset
+
+    ds = read_dataset(tmp_path / "three.h5")
+    for split in ("by_direction", "by_c1"):
+        assert list(ds.splits[split]["train"]) == [0, 1, 2]
+        assert ds.splits[split]["validation"].size == ds.splits[split]["test"].size == 0
+
+
+def test_a_dataset_without_the_group_splits_asks_for_a_rebuild(tmp_path: Path) -> None:
+    summaries, points = _cases(tmp_path)
+    build_dataset(summaries, points, tmp_path / "ds.h5")
+    with h5py.File(tmp_path / "ds.h5", "a") as h5:
+        del h5["splits/by_direction"]
+    from fem.dataset import read_dataset
+
+    with pytest.raises(DatasetError, match="lacks the split /splits/by_direction.*rebuild"):
+        read_dataset(tmp_path / "ds.h5")

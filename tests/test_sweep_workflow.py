@@ -127,7 +127,7 @@ def test_nothing_to_do_when_nothing_changed(small_run: Path) -> None:
 
 def test_surrogate_change_reruns_training_only(small_run: Path) -> None:
     planned = _planned(small_run, {"surrogate.width": 16})
-    assert {"train_study_run", "train_variant_run", "train_by_case", "select_model"} <= set(planned)
+    assert {"train_study_run", "train_variant_run", "train_held_out", "select_model"} <= set(planned)
     assert {"mesh", "solve", "solve_chain", "aggregate"}.isdisjoint(planned)
 
 

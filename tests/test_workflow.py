@@ -132,6 +132,7 @@ REPORT_SECTIONS = (
     "Sweep cost",
     "Surrogate training",
     "From the imaged shape to the reference state",
+    "The surrogate between its cases and in every posture",
 )
 
 
@@ -209,6 +210,48 @@ def test_small_sweep_report(small_run: Path) -> None:
         assert f"{scheme}: lowest converging C1" in lowest
         if per_phi["all_phi"] is not None:
             assert f"<td>{per_phi['all_phi']:g}</td>" in lowest
+
+
+def test_held_out_models_and_postures_are_judged_against_fe(small_run: Path) -> None:
+    """Held-out models are judged on exactly their held-out groups; postures against FE.
+
+    A posture's FE case comes from the sweep or from one solve outside it, as configured.
+    """
+    from fem.dataset import read_dataset
+    from studies.held_out import HeldOutEvaluation
+    from studies.postures import PostureEvaluation
+
+    results = small_run / "results"
+    ds = read_dataset(results / "dataset/dataset.h5")
+    held = HeldOutEvaluation.read(results / "surrogate/held_out.json")
+    # tests/config.yaml: three directions (one can be held out), two C1 values (none can)
+    assert [b.split for b in held.blocks] == ["by_case", "by_direction"]
+    for block in held.blocks:
+        model = json.loads((results / f"surrogate/model_{block.split}/model.json").read_text())
+        assert model["config"]["split"] == block.split
+        test = [str(ds.ids[i]) for i in ds.splits[block.split]["test"]]
+        assert [r.case for r in block.rows] == [r.case for r in block.inside_rows] == test
+        for row in block.rows:
+            assert 0 <= row.mean_mm <= row.p95_mm <= row.max_mm
+            assert row.relative_max == pytest.approx(row.max_mm / row.fe_max_mm)
+    direction = held.blocks[1]
+    assert len(direction.groups) == 1
+    assert set(ds.phi[ds.splits["by_direction"]["test"]]) == {float(direction.groups[0]
+                                                              .split("/")[0][4:])}
+    assert held.inside_all.cases == int(ds.converged.sum())
+
+    postures = PostureEvaluation.read(results / "surrogate/postures.json")
+    assert [(r.posture, r.in_sweep) for r in postures.rows] == [("prone", True),
+                                                               ("standing", False)]
+    standing = postures.rows[1]
+    assert (results / "outside" / standing.case / "summary.json").is_file()
+    assert standing.kind == "unseen theta" and standing.extrapolation_warnings
+    assert all(r.errors is not None and r.errors.max_mm > 0 for r in postures.rows)
+    page = (results / "report/index.html").read_text()
+    table = html_table(page, "postures")
+    assert f"{standing.errors.max_mm:.3g}" in table and "standing" in table
+    held_table = html_table(page, "held-out")
+    assert "by-direction" in held_table and f"{direction.held_out_model.max_mm:.3g}" in held_table
 
 
 def test_fe_study_rules_run_end_to_end(small_run: Path) -> None:

@@ -42,21 +42,6 @@ MAX_FE_CASES = 24
 """FE cases carried for comparison: the clinical cases and others spread over the sweep (each
 adds its surface field, about 1 % of the page per 1,000 surface vertices)."""
 
-PRESETS = (
-    {"name": "prone", "phi": 180, "theta": 0, "note": "face down (MRI): gravity anterior"},
-    {"name": "supine", "phi": 0, "theta": 0, "note": "face up (surgery): gravity posterior"},
-    {"name": "supine tilted 30° lateral", "phi": 30, "theta": 0,
-     "note": "rolled 30° towards this breast's side"},
-    {"name": "supine tilted 30° medial", "phi": -30, "theta": 0,
-     "note": "rolled 30° away from this breast's side"},
-    {"name": "lying on the side", "phi": 90, "theta": 0, "note": "gravity lateral"},
-    {"name": "standing", "phi": 90, "theta": -90, "note": "upright (mammogram): gravity caudal"},
-    {"name": "sitting reclined 45°", "phi": 45, "theta": -90,
-     "note": "gravity half posterior, half caudal"},
-)
-"""Clinical postures as gravity directions: g = [cos Φ, sin Φ cos θ, sin Φ sin θ] in the body's
-frame (x anterior to posterior, y medial to lateral, z caudal to cranial)."""
-
 
 class ViewerError(RuntimeError):
     """The viewer cannot be built (e.g. its JavaScript tools are not installed)."""
@@ -140,6 +125,7 @@ def build_viewer(
     dataset_path: str | Path,
     output: str | Path,
     clinical: Sequence[dict[str, Any]] = (),
+    postures: Sequence[dict[str, Any]] = (),
 ) -> dict[str, Any]:
     """Write the viewer page ``output`` (and three.js's licence beside it).
 
@@ -149,6 +135,9 @@ def build_viewer(
         dataset_path: the sweep's dataset (the FE cases to compare with).
         output: the page to write.
         clinical: the config's clinical cases (carried first, with their labels).
+        postures: the postures offered as buttons, ``{name, phi, theta, note}`` each
+            (``surrogate_study.postures.directions``): g = [cos Φ, sin Φ cos θ,
+            sin Φ sin θ] in the body's frame.
 
     Returns:
         What the page holds: points, surface vertices and triangles, FE cases, bytes.
@@ -173,7 +162,7 @@ def build_viewer(
         subtitle=f"{model.config.architecture} {model.config.activation} network, "
         f"{len(model.X)} material points, predicted in this page",
         initial={"C1": first["C1"], "phi": first["phi"], "theta": first["theta"]},
-        presets=PRESETS,
+        presets=[{"theta": 0.0, "note": "", **posture} for posture in postures],
         axes="x anterior→posterior · y medial→lateral · z caudal→cranial",
         provenance=f"model {Path(model_dir).name}, mesh {Path(mesh_xdmf).name}; three.js "
         "(MIT licence, THREE-LICENSE.txt beside this page)",

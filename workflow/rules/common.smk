@@ -137,6 +137,8 @@ CLINICAL_JSON = f"{SURROGATE_DIR}/clinical.json"
 EXTRAPOLATION_JSON = f"{SURROGATE_DIR}/extrapolation.json"
 VARIANTS_JSON = f"{SURROGATE_DIR}/variants.json"
 BENCHMARK_JSON = f"{SURROGATE_DIR}/benchmark.json"
+HELD_OUT_JSON = f"{SURROGATE_DIR}/held_out.json"
+POSTURES_JSON = f"{SURROGATE_DIR}/postures.json"
 
 
 def clinical_ids():
@@ -163,9 +165,19 @@ def variant_settings(wildcards):
     return CONFIG.surrogate_study.variant(wildcards.variant).settings.as_dict()
 
 
+def posture_files(name):
+    """File ``name`` of every posture's FE case: the sweep's where it has it, else outside."""
+    return [f"results/{posture.folder}/{name}" for posture in CONFIG.surrogate_study.postures]
+
+
 def extrapolation_files(name):
     """File ``name`` of every extrapolation case outside the sweep."""
     return [f"results/outside/{case.id}/{name}" for case in CONFIG.surrogate_study.extrapolation]
+
+
+def held_out_models(name="model.json"):
+    """File ``name`` of the model of every held-out split the sweep can form."""
+    return [f"{SURROGATE_DIR}/model_{split}/{name}" for split in CONFIG.held_out_splits]
 
 
 def clinical_fields():
@@ -174,4 +186,5 @@ def clinical_fields():
                   split=["by_sample", "by_case"], case=clinical_ids(), ext=["xdmf", "h5"])
 
 
-SURROGATE_RESULTS = [STUDY_TABLE, VARIANTS_JSON, CLINICAL_JSON, EXTRAPOLATION_JSON, BENCHMARK_JSON]
+SURROGATE_RESULTS = [STUDY_TABLE, VARIANTS_JSON, CLINICAL_JSON, EXTRAPOLATION_JSON, BENCHMARK_JSON,
+                     HELD_OUT_JSON, POSTURES_JSON]

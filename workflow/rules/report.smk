@@ -14,6 +14,8 @@ rule report:
         variants=VARIANTS_JSON,
         clinical=CLINICAL_JSON,
         extrapolation=EXTRAPOLATION_JSON,
+        held_out=HELD_OUT_JSON,
+        postures=POSTURES_JSON,
         benchmark=BENCHMARK_JSON,
         clinical_fields=clinical_fields(),
         fe_clinical=FE_CLINICAL_JSON,
@@ -53,6 +55,7 @@ rule viewer:
         licence="results/viewer/THREE-LICENSE.txt",
     params:
         clinical=CONFIG.section("clinical"),
+        postures=CONFIG.section("surrogate_study", "postures", "directions"),
     log:
         "results/logs/viewer.log",
     threads: 1

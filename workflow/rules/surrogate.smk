@@ -1,8 +1,9 @@
 # Surrogate: the architecture study (the paper's Table 2), the selected model, variants of the
-# settings (e.g. the exact Dirichlet condition), the by-case model, the clinical cases (Tables 3
-# and 4), extrapolation outside the sweep, and the benchmark of the goals.
+# settings (e.g. the exact Dirichlet condition), the held-out models, the clinical cases (Tables
+# 3 and 4), extrapolation outside the sweep, and the benchmark of the goals.
 wildcard_constraints:
     arch=r"[0-9]+x[0-9]+",
+    held_out="by_case|by_direction|by_c1",
     repeat=r"[0-9]+",
     variant=r"[A-Za-z][A-Za-z0-9_]*",
 
@@ -117,23 +118,25 @@ rule variants:
         "../scripts/variants.py"
 
 
-# The by-case model: the selected architecture trained on whole cases, the clinical cases
-# kept out of training and validation.
-rule train_by_case:
+# The held-out models: the selected architecture trained on the dataset's splits that hold out
+# whole groups: by_case (the clinical cases kept out of training and validation as well),
+# by_direction (whole gravity directions) and by_c1 (whole C1 values), each judged on its
+# held-out test cases by `held_out`.
+rule train_held_out:
     input:
         dataset=DATASET,
         table=STUDY_TABLE,
     output:
-        model=MODEL_BY_CASE,
-        params=f"{SURROGATE_DIR}/model_by_case/params.npz",
-        history=f"{SURROGATE_DIR}/model_by_case/history.json",
+        model=f"{SURROGATE_DIR}/model_{{held_out}}/model.json",
+        params=f"{SURROGATE_DIR}/model_{{held_out}}/params.npz",
+        history=f"{SURROGATE_DIR}/model_{{held_out}}/history.json",
     params:
-        surrogate=CONFIG.surrogate_by_case.as_dict(),
-        holdout=CONFIG.section("clinical"),
+        surrogate=lambda wildcards: CONFIG.surrogate_held_out(wildcards.held_out).as_dict(),
+        holdout=lambda wildcards: CONFIG.section("clinical") if wildcards.held_out == "by_case" else [],
     log:
-        "results/logs/surrogate/train_by_case.log",
+        "results/logs/surrogate/train_{held_out}.log",
     benchmark:
-        "results/benchmarks/surrogate/train_by_case.tsv"
+        "results/benchmarks/surrogate/train_{held_out}.tsv"
     threads: 1
     resources:
         mem_mb=4000,
@@ -141,6 +144,28 @@ rule train_by_case:
         ENV
     script:
         "../scripts/train_run.py"
+
+
+# Each held-out model's errors on its test cases (mean, 95th percentile and max per case, mm
+# and relative), beside the by-sample model's on the same cases.
+rule held_out:
+    input:
+        dataset=DATASET,
+        model=MODEL,
+        held_out=held_out_models(),
+    output:
+        HELD_OUT_JSON,
+    params:
+        splits=CONFIG.held_out_splits,
+    log:
+        "results/logs/surrogate/held_out.log",
+    threads: 1
+    resources:
+        mem_mb=2000,
+    conda:
+        ENV
+    script:
+        "../scripts/held_out.py"
 
 
 rule clinical:
@@ -186,6 +211,28 @@ rule extrapolation:
         ENV
     script:
         "../scripts/extrapolation.py"
+
+
+# The model in the postures a patient takes (surrogate_study.postures), against FE: the sweep's
+# cases where it has them, else extra solves by `solve_outside`.
+rule postures:
+    input:
+        model=MODEL,
+        summaries=posture_files("summary.json"),
+        points=posture_files("points.h5"),
+    output:
+        POSTURES_JSON,
+    params:
+        postures=[(p.name, p.in_sweep) for p in CONFIG.surrogate_study.postures],
+    log:
+        "results/logs/surrogate/postures.log",
+    threads: 1
+    resources:
+        mem_mb=2000,
+    conda:
+        ENV
+    script:
+        "../scripts/postures.py"
 
 
 # Both threads reserved: the job pins itself to one core and times the FE solver and the

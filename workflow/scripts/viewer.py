@@ -16,4 +16,5 @@ build_viewer(
     snakemake.input.dataset,
     snakemake.output.html,
     snakemake.params.clinical,
+    snakemake.params.postures,
 )

@@ -1,0 +1,94 @@
+"""The surrogate between its sweep's cases (whole groups held out) and in every posture."""
+
+from __future__ import annotations
+
+from report.context import Context
+from report.html import fmt, h3, missing, para, pct, table
+
+
+def held_out_part(ctx: Context) -> str:
+    """Each held-out model on its test cases, the by-sample model on the same cases beside."""
+    result = ctx.results.get("held_out")
+    if result is None:
+        return missing("results/surrogate/held_out.json")
+    out = [para(
+        "The paper's split draws material points at random, so each of its test cases has "
+        "most of its points in the training data. The models here were trained with whole "
+        "groups of the sweep held out: whole gravity directions, whole C1 values, whole "
+        "setups. Each is judged on its held-out cases; the by-sample model (the one used "
+        "downstream) on the same cases beside it. A held-out group's neighbours in the "
+        "training data are twice the sweep's spacing apart, so the held-out error bounds the "
+        "error midway between the full sweep's cases from above: where it is close to the "
+        "by-sample model's, the sweep is dense enough. Errors per case are the mean, the "
+        "95th percentile and the maximum over the material points; the table gives the "
+        "mean of the cases' means, the 95th percentile of their 95th percentiles, and the "
+        "largest point error of any case, in mm and relative to that case's largest FE "
+        "displacement.", "caption")]
+    rows = []
+    for block in result.blocks:
+        for who, spread in (("held out", block.held_out_model), ("by sample", block.inside_model)):
+            rows.append([
+                block.split.replace("_", "-") if who == "held out" else "",
+                block.held_out if who == "held out" else "",
+                ", ".join(block.groups) if who == "held out" and len(block.groups) <= 8
+                else (f"{len(block.groups)} groups" if who == "held out" else ""),
+                f"{who} model", spread.cases, fmt(spread.mean_mm, ".3g"),
+                fmt(spread.p95_mm, ".3g"), fmt(spread.max_mm, ".3g"),
+                pct(spread.relative_max), spread.worst_case,
+            ])
+    inside = result.inside_all
+    rows.append(["every converged case", "nothing (the by-sample model's own data)", "",
+                 "by sample model", inside.cases, fmt(inside.mean_mm, ".3g"),
+                 fmt(inside.p95_mm, ".3g"), fmt(inside.max_mm, ".3g"),
+                 pct(inside.relative_max), inside.worst_case])
+    out.append(table(
+        ["split", "holds out", "held-out groups", "model", "cases", "mean (mm)",
+         "p95 (mm)", "max (mm)", "max / case max |u|", "worst case"],
+        rows, table_id="held-out"))
+    return "".join(out)
+
+
+def postures_part(ctx: Context) -> str:
+    """The surrogate against FE in each posture of ``surrogate_study.postures``."""
+    result = ctx.results.get("postures")
+    if result is None:
+        return missing("results/surrogate/postures.json")
+    if not result.rows:
+        return para("No posture is configured (surrogate_study.postures).", "note")
+    out = [para(
+        f"The selected model ({result.architecture}) in the postures a patient takes, each a "
+        "direction of gravity relative to the body at a few stiffnesses, against FE: the "
+        "sweep's solution where the sweep has the case, else an extra solve outside it. The "
+        "last column says whether the posture lies among the directions and stiffnesses the "
+        "model was trained on; a posture outside them (standing and reclined are out of the "
+        "paper's plane) is an extrapolation, and its error says what a sweep over the whole "
+        "sphere of directions would buy.", "caption")]
+    rows = []
+    for row in result.rows:
+        e = row.errors
+        phi_theta = f"{row.phi:g}° / {row.theta:g}°"
+        if e is None:
+            rows.append([row.posture, fmt(row.C1, "g"), phi_theta, "FE failed", "", "", "", "",
+                         row.kind])
+            continue
+        rows.append([row.posture, fmt(row.C1, "g"), phi_theta, fmt(e.fe_max_mm, ".3g"),
+                     fmt(e.mean_mm, ".3g"), fmt(e.p95_mm, ".3g"), fmt(e.max_mm, ".3g"),
+                     pct(e.relative_max), row.kind])
+    out.append(table(
+        ["posture", "C1 (kPa)", "Φ / θ", "FE max |u| (mm)", "mean error (mm)",
+         "p95 (mm)", "max (mm)", "max / FE max", "relative to the training data"],
+        rows, table_id="postures"))
+    failed = [r for r in result.rows if r.errors is None]
+    if failed:
+        out.append(para("FE solves that failed (no comparison): " + "; ".join(
+            f"{r.posture} ({r.case}): {r.fe_reason}" for r in failed), "note"))
+    return "".join(out)
+
+
+def generalisation_section(ctx: Context) -> str:
+    """Held-out groups, then the clinical postures."""
+    return "".join([h3("Between the sweep's cases: whole groups held out"), held_out_part(ctx),
+                    h3("In every posture"), postures_part(ctx)])
+
+
+__all__ = ["generalisation_section", "held_out_part", "postures_part"]

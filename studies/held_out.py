@@ -1,0 +1,207 @@
+"""The surrogate on whole groups of cases it never saw: directions, C1 values, setups.
+
+The paper's split draws points at random, so every case of its test set has most of its
+points in the training set: its error says how well the network fits, not how well it
+answers between the sweep's cases, which is what a user asks of it. The dataset's group
+splits (:data:`fem.dataset.SPLIT_KINDS`) hold out whole gravity directions
+(``by_direction``), whole C1 values (``by_c1``) or whole setups (``by_case``). Each held-out
+model is judged here on its test cases, and the by-sample model, which trained on most of
+those cases' points, on the same cases beside it: the pair says how much a sweep's spacing
+costs, and so whether the sweep is dense enough ("as small an error at held-out directions
+as inside the data").
+
+A case's error is given as its mean, 95th percentile and maximum over the material points
+(a tumour is one point), in mm and relative to the case's largest FE displacement.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from fem.dataset import Dataset
+from studies.results import Record, Result
+from surrogate.exceptions import ExtrapolationWarning
+from surrogate.predict import Surrogate
+
+#: What each split holds out, in words for the report.
+HELD_OUT = {
+    "by_case": "whole setups (C1, direction); the clinical cases among them",
+    "by_direction": "whole gravity directions, every C1 at each",
+    "by_c1": "whole C1 values, every direction at each (the softest and stiffest train)",
+}
+
+
+@dataclass(frozen=True, slots=True)
+class CaseErrors(Record):
+    """One model against FE on one case: point errors (norm of the difference, mm)."""
+
+    case: str
+    C1: float
+    phi: float
+    theta: float
+    fe_max_mm: float
+    mean_mm: float
+    p95_mm: float
+    max_mm: float
+    relative_mean: float
+    relative_p95: float
+    relative_max: float
+
+    @classmethod
+    def between(
+        cls, pred: np.ndarray, fe: np.ndarray, case: str, C1: float, phi: float, theta: float
+    ) -> CaseErrors:
+        """Errors of ``pred`` against ``fe`` (both (N, 3), mm)."""
+        err = np.linalg.norm(pred - fe, axis=1)
+        fe_max = float(np.linalg.norm(fe, axis=1).max())
+        mean, p95, top = float(err.mean()), float(np.percentile(err, 95)), float(err.max())
+        scale = fe_max if fe_max > 0 else float("nan")
+        return cls(case, float(C1), float(phi), float(theta), fe_max, mean, p95, top,
+                   mean / scale, p95 / scale, top / scale)
+
+    @classmethod
+    def of(cls, model: Surrogate, ds: Dataset, case: int) -> CaseErrors:
+        """The model's errors on case ``case`` of the dataset."""
+        C1, phi, theta = float(ds.C1[case]), float(ds.phi[case]), float(ds.theta[case])
+        with warnings.catch_warnings():  # a sweep case lies in the range by construction;
+            warnings.simplefilter("ignore", ExtrapolationWarning)  # near a failed one it warns
+            pred = model.predict(C1, phi, theta)
+        return cls.between(pred, ds.displacement[case], str(ds.ids[case]), C1, phi, theta)
+
+
+@dataclass(frozen=True, slots=True)
+class ErrorSpread(Record):
+    """Per-case errors over a set of cases.
+
+    Attributes:
+        cases: how many.
+        mean_mm: the mean over the cases of their mean point error.
+        p95_mm: the 95th percentile over the cases of their 95th-percentile point error.
+        max_mm: the largest point error of any case.
+        relative_mean: ``mean_mm``'s relative counterpart (mean of the relative means).
+        relative_max: the largest relative point error of any case.
+        worst_case: the case with the largest point error.
+    """
+
+    cases: int
+    mean_mm: float
+    p95_mm: float
+    max_mm: float
+    relative_mean: float
+    relative_max: float
+    worst_case: str
+
+    @classmethod
+    def over(cls, rows: Sequence[CaseErrors]) -> ErrorSpread:
+        """The spread of ``rows`` (at least one).
+
+        Raises:
+            ValueError: if ``rows`` is empty.
+        """
+        if not rows:
+            raise ValueError("no cases to summarise")
+        worst = max(rows, key=lambda r: r.max_mm)
+        return cls(
+            cases=len(rows),
+            mean_mm=float(np.mean([r.mean_mm for r in rows])),
+            p95_mm=float(np.percentile([r.p95_mm for r in rows], 95)),
+            max_mm=worst.max_mm,
+            relative_mean=float(np.mean([r.relative_mean for r in rows])),
+            relative_max=float(max(r.relative_max for r in rows)),
+            worst_case=worst.case,
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class HeldOutBlock(Record):
+    """One held-out model on its test cases, the by-sample model on the same cases beside it.
+
+    Attributes:
+        split: the dataset split the model trained on.
+        held_out: what the split holds out, in words.
+        groups: the held-out groups of its test part (directions as ``phi/theta`` in degrees,
+            C1 values in kPa, or case ids).
+        held_out_model: the held-out model's errors over its test cases.
+        inside_model: the by-sample model's errors over the same cases.
+        rows: the held-out model's errors per test case.
+        inside_rows: the by-sample model's, in the same order.
+    """
+
+    split: str
+    held_out: str
+    groups: list[str]
+    held_out_model: ErrorSpread
+    inside_model: ErrorSpread
+    rows: list[CaseErrors]
+    inside_rows: list[CaseErrors]
+
+
+@dataclass(frozen=True, slots=True)
+class HeldOutEvaluation(Result):
+    """``results/surrogate/held_out.json``: every held-out model, and the by-sample model.
+
+    ``inside_all`` is the by-sample model over every converged case of the sweep: its error
+    inside the data.
+    """
+
+    blocks: list[HeldOutBlock]
+    inside_all: ErrorSpread
+
+
+def held_out_groups(ds: Dataset, split: str, cases: np.ndarray) -> list[str]:
+    """The groups of ``cases`` that ``split`` holds out, as labels."""
+    if split == "by_direction":
+        seen = {}
+        for i in cases:
+            key = tuple(np.round(ds.direction[i], 9) + 0.0)
+            seen.setdefault(key, f"phi={ds.phi[i]:g}/theta={ds.theta[i]:g}")
+        return sorted(seen.values())
+    if split == "by_c1":
+        return [f"{c:g}" for c in sorted({round(float(ds.C1[i]), 9) for i in cases})]
+    return [str(ds.ids[i]) for i in cases]
+
+
+def evaluate_held_out(
+    models: Mapping[str, Surrogate], inside: Surrogate, ds: Dataset
+) -> HeldOutEvaluation:
+    """Each held-out model on its split's test cases, ``inside`` (the by-sample model) beside.
+
+    Args:
+        models: the held-out models by the split each trained on (``by_case``,
+            ``by_direction``, ``by_c1``).
+        inside: the by-sample model.
+        ds: the dataset both trained on.
+
+    Raises:
+        ValueError: if a model trained on another split than its key, or a split has no
+            test cases.
+    """
+    blocks = []
+    for split, model in models.items():
+        if model.config.split != split:
+            raise ValueError(f"the {split} model was trained on the {model.config.split} split")
+        test = np.asarray(ds.splits[split]["test"], dtype=np.int64)
+        test = test[ds.converged[test]]
+        if test.size == 0:
+            raise ValueError(f"the dataset's {split} split has no test cases")
+        rows = [CaseErrors.of(model, ds, int(i)) for i in test]
+        inside_rows = [CaseErrors.of(inside, ds, int(i)) for i in test]
+        blocks.append(HeldOutBlock(
+            split=split,
+            held_out=HELD_OUT.get(split, split),
+            groups=held_out_groups(ds, split, test),
+            held_out_model=ErrorSpread.over(rows),
+            inside_model=ErrorSpread.over(inside_rows),
+            rows=rows,
+            inside_rows=inside_rows,
+        ))
+    everything = [CaseErrors.of(inside, ds, int(i)) for i in np.flatnonzero(ds.converged)]
+    return HeldOutEvaluation(blocks=blocks, inside_all=ErrorSpread.over(everything))
+
+
+__all__ = ["HELD_OUT", "CaseErrors", "ErrorSpread", "HeldOutBlock", "HeldOutEvaluation",
+           "evaluate_held_out", "held_out_groups"]

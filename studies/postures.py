@@ -1,0 +1,117 @@
+"""The surrogate in the postures a patient takes: its error against FE in each.
+
+The paper's sweep turns gravity in one plane, the patient rolling from prone through lying on
+the side to supine; the clinic adds postures outside it (standing for a mammogram, sitting
+reclined, supine tilted under ultrasound). Each posture of ``surrogate_study.postures`` is a
+direction of gravity relative to the body (:class:`studies.config.Posture`), evaluated at a
+few stiffnesses; its FE solution comes from the sweep where the sweep has it, else from an
+extra solve outside it. The table says, per posture, how far the model's worst point is from
+FE and whether the posture lies inside the directions it was trained on.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from studies.held_out import CaseErrors
+from studies.results import Record, Result
+from studies.surrogate_evaluation import extrapolation_kind, fe_in_model_order
+from surrogate.exceptions import ExtrapolationWarning
+from surrogate.predict import Surrogate
+
+
+@dataclass(frozen=True, slots=True)
+class PostureRow(Record):
+    """One posture at one stiffness.
+
+    Attributes:
+        posture: its name.
+        case: the FE case's id.
+        C1: its stiffness (kPa).
+        phi: gravity's Φ (degrees).
+        theta: gravity's θ (degrees).
+        in_sweep: whether the FE case is one of the sweep's (its points trained the model).
+        kind: how the case lies relative to the training data (``in range``, ``unseen
+            theta``, ...; :func:`studies.surrogate_evaluation.extrapolation_kind`).
+        fe_status: the FE solve's status; the errors are absent unless ``converged``.
+        fe_reason: why, where it failed.
+        fe_solve_s: the FE solve's wall time.
+        errors: the surrogate against FE (mean, 95th percentile and max point error).
+        extrapolation_warnings: what the model warned of when asked.
+    """
+
+    posture: str
+    case: str
+    C1: float
+    phi: float
+    theta: float
+    in_sweep: bool
+    kind: str
+    fe_status: str
+    fe_reason: str
+    fe_solve_s: float | None
+    errors: CaseErrors | None
+    extrapolation_warnings: list[str]
+
+
+@dataclass(frozen=True, slots=True)
+class PostureEvaluation(Result):
+    """``results/surrogate/postures.json``: the model's error in every posture."""
+
+    architecture: str
+    training_range: dict[str, Any]
+    rows: list[PostureRow]
+
+
+def evaluate_postures(
+    model: Surrogate,
+    postures: Sequence[tuple[str, bool, str | Path, str | Path]],
+) -> PostureEvaluation:
+    """The model against FE in each posture.
+
+    Args:
+        model: the surrogate.
+        postures: ``(name, in_sweep, summary.json, points.h5)`` of each posture's FE case.
+
+    Raises:
+        ValueError: if a case's material points are not the model's.
+    """
+    from fem.dataset import read_summary
+
+    rows = []
+    for name, in_sweep, summary_path, points_path in postures:
+        summary = read_summary(summary_path)
+        C1, phi, theta = float(summary["C1"]), float(summary["phi"]), float(summary["theta"])
+        errors = None
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", ExtrapolationWarning)
+            pred = model.predict(C1, phi, theta)
+        if summary["status"] == "converged":
+            fe, _ = fe_in_model_order(model, points_path)
+            errors = CaseErrors.between(pred, fe, summary["case"], C1, phi, theta)
+        rows.append(PostureRow(
+            posture=name,
+            case=str(summary["case"]),
+            C1=C1,
+            phi=phi,
+            theta=theta,
+            in_sweep=bool(in_sweep),
+            kind=extrapolation_kind(C1, phi, theta, model.training_range),
+            fe_status=str(summary["status"]),
+            fe_reason=str(summary.get("reason", "")),
+            fe_solve_s=(summary.get("wall_s") or {}).get("solve"),
+            errors=errors,
+            extrapolation_warnings=[str(w.message) for w in caught],
+        ))
+    return PostureEvaluation(
+        architecture=model.config.architecture,
+        training_range=dict(model.training_range or {}),
+        rows=rows,
+    )
+
+
+__all__ = ["PostureEvaluation", "PostureRow", "evaluate_postures"]

@@ -1,0 +1,19 @@
+"""Snakemake adapter: the surrogate against FE in every clinical posture."""
+
+from surrogate.runtime import configure_cpu
+
+configure_cpu()
+
+from studies.joblog import job_log  # noqa: E402
+from studies.postures import evaluate_postures  # noqa: E402
+from surrogate.predict import Surrogate  # noqa: E402
+
+job_log(snakemake.log[0])
+
+cases = [
+    (name, in_sweep, summary, points)
+    for (name, in_sweep), summary, points in zip(
+        snakemake.params.postures, snakemake.input.summaries, snakemake.input.points, strict=True
+    )
+]
+evaluate_postures(Surrogate.load(snakemake.input.model), cases).write(snakemake.output[0])
