@@ -124,19 +124,41 @@ def sample_phi(spec: Any) -> list[float]:
     return [float(v) for v in np.interp((np.arange(n) + 0.5) / n, cdf, fine)]
 
 
-def sphere_directions(n: int) -> list[tuple[float, float]]:
-    """``n`` gravity directions spread evenly over the whole sphere, as (Φ, θ) in degrees.
+SPHERE_PARTS = ("whole", "caudal")
+"""Which directions ``sweep.sphere`` covers: the whole sphere, or the caudal half (gravity's
+cranio-caudal component towards the feet or zero: every posture short of a head-down tilt)."""
+
+
+def sphere_directions(n: int, part: str = "whole") -> list[tuple[float, float]]:
+    """``n`` gravity directions spread evenly over the sphere or its caudal half, as (Φ, θ).
 
     A Fibonacci lattice (equal area per point, Deserno's 'equidistributed points'): the
-    paper's stated future work of leaving the θ = 0 plane.
+    paper's stated future work of leaving the θ = 0 plane. The whole sphere's lattice runs
+    along the x axis (Φ is its polar angle); the caudal half's along z, from the paper's plane
+    (z = 0, θ = 0 or 180°) to gravity towards the feet (Φ = 90°, θ = −90°), so that its rim
+    is the paper's plane.
+
+    Raises:
+        InvalidParameterError: if ``n`` < 1 or ``part`` is not one of :data:`SPHERE_PARTS`.
     """
     if n < 1:
         raise InvalidParameterError("sweep.sphere.n must be >= 1")
+    if part not in SPHERE_PARTS:
+        raise InvalidParameterError(
+            f"sweep.sphere.part must be one of {SPHERE_PARTS}, got {part!r}"
+        )
     i = np.arange(n)
-    gx = 1.0 - (2.0 * i + 1.0) / n  # cos Φ, uniform: equal area bands
     azimuth = i * np.pi * (3.0 - np.sqrt(5.0))  # golden angle
-    phi = np.degrees(np.arccos(gx))
-    theta = np.degrees(np.arctan2(np.sin(azimuth), np.cos(azimuth)))
+    if part == "whole":
+        gx = 1.0 - (2.0 * i + 1.0) / n  # cos Φ, uniform: equal area bands
+        phi = np.degrees(np.arccos(gx))
+        theta = np.degrees(np.arctan2(np.sin(azimuth), np.cos(azimuth)))
+    else:
+        gz = -(i + 0.5) / n  # uniform in [-1, 0]: equal area bands of the caudal half
+        ring = np.sqrt(1.0 - gz**2)
+        gx, gy = ring * np.cos(azimuth), ring * np.sin(azimuth)
+        phi = np.degrees(np.arccos(np.clip(gx, -1.0, 1.0)))
+        theta = np.degrees(np.arctan2(gz, gy))  # g = [cos Φ, sin Φ cos θ, sin Φ sin θ]
     return [(float(p), float(t)) for p, t in zip(phi, theta, strict=True)]
 
 
@@ -176,7 +198,8 @@ def sweep_cases(sweep: dict[str, Any]) -> list[Case]:
     Args:
         sweep: the ``sweep`` section: ``C1_kPa`` (list or range) and either ``phi_deg``
             (list or sampling rule, see :func:`sample_phi`) × ``theta_deg`` (list, default
-            ``[0]``), or ``sphere: {n}`` (directions over the whole sphere).
+            ``[0]``), or ``sphere: {n, part}`` (directions over the whole sphere or its
+            caudal half, :func:`sphere_directions`).
 
     Raises:
         InvalidParameterError: if the sweep has more than :data:`MAX_CASES` cases, or two of
@@ -184,7 +207,8 @@ def sweep_cases(sweep: dict[str, Any]) -> list[Case]:
     """
     c1s = grid(sweep["C1_kPa"], "sweep.C1_kPa")
     if sweep.get("sphere"):
-        directions = sphere_directions(int(sweep["sphere"]["n"]))
+        sphere = sweep["sphere"]
+        directions = sphere_directions(int(sphere["n"]), sphere.get("part", "whole"))
     else:
         thetas = grid(sweep.get("theta_deg", [0.0]), "sweep.theta_deg")
         directions = [(p, t) for p in sample_phi(sweep["phi_deg"]) for t in thetas]

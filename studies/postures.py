@@ -100,7 +100,7 @@ def evaluate_postures(
             phi=phi,
             theta=theta,
             in_sweep=bool(in_sweep),
-            kind=extrapolation_kind(C1, phi, theta, model.training_range),
+            kind=extrapolation_kind(model, C1, phi, theta),
             fe_status=str(summary["status"]),
             fe_reason=str(summary.get("reason", "")),
             fe_solve_s=(summary.get("wall_s") or {}).get("solve"),

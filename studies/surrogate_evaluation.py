@@ -226,14 +226,23 @@ def write_error_fields(
     )
 
 
-def extrapolation_kind(C1: float, phi: float, theta: float, training_range: dict[str, Any]) -> str:
-    """Which way a case leaves the training set: C1 below/above, unseen Φ, or θ off-plane."""
+def extrapolation_kind(model: Surrogate, C1: float, phi: float, theta: float) -> str:
+    """Which way a case leaves the model's training set, in words (``in range`` if it does not).
+
+    C1 below or above its range; for a model of the plane, an unseen Φ or θ off the plane; for
+    one trained off it, gravity away from every training direction.
+    """
+    training_range = model.training_range
     lo, hi = training_range["C1_kPa"]
     kinds = []
     if C1 < lo - 1e-9:
         kinds.append("C1 below range")
     elif C1 > hi + 1e-9:
         kinds.append("C1 above range")
+    if model.range_checks()["directions"] is not None:
+        if model.direction_outside(phi, theta) is not None:
+            kinds.append("unseen direction")
+        return ", ".join(kinds) or "in range"
     if not any(abs(((phi - p) + 180.0) % 360.0 - 180.0) < 1e-6 for p in training_range["phi_deg"]):
         kinds.append("unseen phi")
     if abs(np.sin(np.radians(phi))) > 1e-9 and not any(
@@ -260,7 +269,7 @@ def compare_extra_case(
         "C1": C1,
         "phi": phi,
         "theta": theta,
-        "kind": extrapolation_kind(C1, phi, theta, model.training_range),
+        "kind": extrapolation_kind(model, C1, phi, theta),
         **error_metrics(pred, fe_mm),
         "extrapolation_warnings": [str(w.message) for w in caught],
     }

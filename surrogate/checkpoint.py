@@ -44,7 +44,7 @@ def write_json(path: str | Path, payload: dict[str, Any]) -> None:
 
 
 def training_range(ds: Dataset, cases: np.ndarray) -> dict[str, Any]:
-    """The C1, Φ and θ values of the given (training) cases.
+    """The C1, Φ and θ values of the given (training) cases, and their (Φ, θ) directions.
 
     ``unconverged`` lists the (C1, Φ, θ) of the dataset's cases whose FE solve failed:
     holes in the range, where no FE solution backs a prediction.
@@ -53,6 +53,8 @@ def training_range(ds: Dataset, cases: np.ndarray) -> dict[str, Any]:
         "C1_kPa": [float(ds.C1[cases].min()), float(ds.C1[cases].max())],
         "phi_deg": sorted({float(v) for v in ds.phi[cases]}),
         "theta_deg": sorted({float(v) for v in ds.theta[cases]}),
+        "directions": sorted({(float(p), float(t)) for p, t in zip(ds.phi[cases], ds.theta[cases],
+                                                                    strict=True)}),
         "unconverged": unconverged_cases(ds),
     }
 

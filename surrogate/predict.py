@@ -26,10 +26,21 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from fem.dataset import gravity_direction
 from surrogate.checkpoint import Checkpoint, load_checkpoint
 from surrogate.exceptions import ExtrapolationWarning, ModelFileError
 from surrogate.model import ACTIVATIONS, boundary_network
 
+DIRECTION_REACH = 1.5
+"""A query off the plane whose direction is farther than this many of the training directions'
+typical spacing (the median angle to each one's nearest) from every one of them is an
+extrapolation."""
+
+
+def _unit_directions(pairs: Any) -> np.ndarray:
+    """Unit gravity directions of (Φ, θ) pairs in degrees, shape (n, 3)."""
+    angles = np.asarray(pairs, dtype=float).reshape(-1, 2)
+    return gravity_direction(angles[:, 0], angles[:, 1])
 
 class Surrogate:
     """A loaded surrogate that predicts the displacement of every material point.
@@ -128,6 +139,23 @@ class Surrogate:
         elif len(phis) == 1:
             self._phi_gap = (phis[0], 360.0)
         self._thetas = [float(t) for t in rng.get("theta_deg", [])]
+        # A sweep off the plane (several θ, e.g. sweep.sphere) is judged by direction: its Φ
+        # alone has gaps that other θ fill, so the arc test applies to a one-θ sweep only.
+        self._directions: np.ndarray | None = None
+        self._direction_reach = self._direction_spacing = math.inf
+        pairs = rng.get("directions") or []
+        if len(self._thetas) > 1 and len(pairs) > 1:
+            self._phi_gap = None
+            self._directions = _unit_directions(pairs)
+            cos = np.clip(self._directions @ self._directions.T, -1.0, 1.0)
+            np.fill_diagonal(cos, -1.0)
+            spacing = self._direction_spacing = float(
+                np.median(np.degrees(np.arccos(cos.max(axis=1))))
+            )
+            # a query midway between training directions is about 0.6 spacings from the
+            # nearest; beyond 1.5 it lies where the sweep has none (e.g. head-down for a
+            # sweep of the caudal half)
+            self._direction_reach = DIRECTION_REACH * spacing
         self._unconverged = [
             (float(c), float(p), float(t)) for c, p, t in rng.get("unconverged", [])
         ]
@@ -138,7 +166,10 @@ class Surrogate:
         """What decides that a query is an extrapolation (for :mod:`surrogate.export`).
 
         ``c1_kPa``: the trained C1 range; ``phi_gap``: ``[start, width]`` of the arc of Φ without
-        training angles (degrees), or None; ``theta_deg``: the trained θ; ``unconverged``: the
+        training angles (degrees), or None; ``theta_deg``: the trained θ; ``directions``: the
+        trained unit gravity directions of a sweep off the plane (else None),
+        ``direction_spacing_deg`` their typical spacing and ``direction_reach_deg`` the angle
+        from the nearest beyond which a query is outside them; ``unconverged``: the
         sweep's failed cases (C1, Φ, θ); ``sweep_phi_deg``: the angles (mod 360°) whose failures
         judge a query between them.
         """
@@ -146,6 +177,11 @@ class Surrogate:
             "c1_kPa": [v if math.isfinite(v) else None for v in self._c1_range],
             "phi_gap": None if self._phi_gap is None else list(self._phi_gap),
             "theta_deg": list(self._thetas),
+            "directions": None if self._directions is None else self._directions.tolist(),
+            "direction_spacing_deg": (self._direction_spacing
+                                      if math.isfinite(self._direction_spacing) else None),
+            "direction_reach_deg": (self._direction_reach
+                                    if math.isfinite(self._direction_reach) else None),
             "unconverged": [list(case) for case in self._unconverged],
             "sweep_phi_deg": list(self._sweep_angles),
         }
@@ -259,6 +295,18 @@ class Surrogate:
             [c, math.cos(p), math.sin(p) * math.cos(t), math.sin(p) * math.sin(t), gain], np.float32
         )
 
+    def direction_outside(self, phi: float, theta: float) -> float | None:
+        """The angle (degrees) from gravity at (Φ, θ) to the nearest training direction.
+
+        Only where it lies outside them (beyond :data:`DIRECTION_REACH` spacings), for a model
+        trained off the plane; None otherwise, and for a model of the plane (judged by Φ and θ).
+        """
+        if self._directions is None:
+            return None
+        cos = (self._directions @ _unit_directions([(phi, theta)])[0]).max()
+        nearest = float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+        return nearest if nearest > self._direction_reach else None
+
     def _warn_if_outside(self, C1: float, phi: float, theta: float) -> None:
         messages = []
         lo, hi = self._c1_range
@@ -269,6 +317,12 @@ class Surrogate:
             offset = (phi - start) % 360.0
             if 1e-6 < offset < width - 1e-6:
                 messages.append(f"Φ = {phi}° lies in a {width:.0f}° arc without training angles")
+        nearest = self.direction_outside(phi, theta)
+        if nearest is not None:
+            messages.append(
+                    f"gravity at Φ = {phi}°, θ = {theta}° is {nearest:.0f}° from the nearest "
+                    f"training direction (they are {self._direction_spacing:.0f}° apart)"
+                )
         if (
             self._thetas
             and abs(math.sin(math.radians(phi))) > 1e-6

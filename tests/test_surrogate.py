@@ -181,6 +181,56 @@ def test_prediction_warns_where_the_sweep_did_not_converge(
             model.predict(C1, phi)
 
 
+def test_a_model_of_the_caudal_half_warns_by_direction(tmp_path: Path) -> None:
+    """Trained off the plane, a model judges a query by its direction.
+
+    Between the sweep's directions it answers quietly whatever Φ's sign; head-down is outside.
+    """
+    import warnings
+
+    from fem.dataset import read_dataset
+    from fem.sweep import sphere_directions
+    from surrogate.checkpoint import save_model
+    from surrogate.exceptions import ExtrapolationWarning
+    from surrogate.predict import Surrogate
+    from surrogate.train import train_and_evaluate
+
+    rng = np.random.default_rng(0)
+    X = rng.uniform(0, 1, size=(N, 3))
+    X[:20, 0] = 0.0
+    summaries, points = [], []
+    for C1 in (1.0, 3.0):
+        for phi, theta in sphere_directions(32, "caudal"):
+            case = tmp_path / "cases" / Case(C1, phi, theta).id
+            case.mkdir(parents=True)
+            write_points(case / "points.h5", np.arange(N), X, _field(X, C1, phi), X[:, 0] == 0,
+                         case.name)
+            (case / "summary.json").write_text(json.dumps({
+                "status": "converged", "case": case.name, "C1": C1, "phi": phi, "theta": theta,
+                "gravity_vector": [0, 0, 0], "load_fraction": 1.0}))
+            summaries.append(case / "summary.json")
+            points.append(case / "points.h5")
+    build_dataset(summaries, points, tmp_path / "ds.h5")
+    ds = read_dataset(tmp_path / "ds.h5")
+    result = train_and_evaluate(
+        ds, SurrogateConfig(hidden_layers=1, width=4, max_epochs=1), progress=False
+    )
+    save_model(tmp_path / "model", result, ds)
+    model = Surrogate.load(tmp_path / "model")
+    checks = model.range_checks()
+    assert checks["phi_gap"] is None and len(checks["directions"]) == 32
+    assert 20 < checks["direction_spacing_deg"] < 30  # 32 directions over a half sphere
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        # supine, prone, tilted either way, standing, reclined: all in the caudal half
+        for phi, theta in ((0.0, 0.0), (180.0, 0.0), (-30.0, 0.0), (30.0, 0.0),
+                           (90.0, -90.0), (45.0, -90.0)):
+            model.predict(2.0, phi, theta)
+    with pytest.warns(ExtrapolationWarning, match=r"gravity at Φ = 90.0°, θ = 90.0° is \d+° from "
+                      r"the nearest training direction \(they are \d+° apart\)"):
+        model.predict(2.0, 90.0, 90.0)  # head down
+
+
 def test_selection_takes_the_most_accurate_architecture_within_the_prediction_budget() -> None:
     from studies.architecture import StudyError, architecture_table, select_architecture
 

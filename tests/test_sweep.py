@@ -114,6 +114,27 @@ def test_sphere_directions_are_unit_and_cover_the_sphere() -> None:
     assert dirs[:, 2].min() < -0.9 and dirs[:, 2].max() > 0.9  # theta != 0 reached
 
 
+def test_the_caudal_half_covers_every_posture_short_of_head_down_evenly() -> None:
+    from fem.sweep import sphere_directions
+
+    dirs = np.array([Gravity(p, t).vector for p, t in sphere_directions(400, "caudal")]) / 9.81
+    np.testing.assert_allclose(np.linalg.norm(dirs, axis=1), 1.0)
+    assert dirs[:, 2].max() <= 0.0 and dirs[:, 2].min() < -0.99  # standing is reached
+    # equal area: the band within 30 degrees of the paper's plane holds sin 30 of the points
+    assert np.mean(dirs[:, 2] > -0.5) == pytest.approx(0.5, abs=0.01)
+    # every caudal direction is near a lattice point; the rim is the paper's plane
+    rng = np.random.default_rng(0)
+    probe = rng.normal(size=(2000, 3))
+    probe /= np.linalg.norm(probe, axis=1, keepdims=True)
+    probe[:, 2] = -np.abs(probe[:, 2])
+    nearest = np.degrees(np.arccos(np.clip(probe @ dirs.T, -1, 1))).min(axis=1)
+    assert nearest.max() < 8.0
+    with pytest.raises(InvalidParameterError, match="sweep.sphere.part must be one of"):
+        sphere_directions(10, "cranial")
+    cases = sweep_cases({"C1_kPa": [1.0], "sphere": {"n": 64, "part": "caudal"}})
+    assert len(cases) == 64  # distinct folder names at the ids' 0.1 degree
+
+
 def test_sphere_sweep_replaces_the_angle_grid() -> None:
     cases = sweep_cases({"C1_kPa": [1.0, 2.0], "sphere": {"n": 10}})
     assert len(cases) == 20 and len({c.theta for c in cases}) > 5

@@ -46,6 +46,26 @@ def test_one_case_path_runs_its_chain_or_itself(tmp_path: Path) -> None:
         assert job_counts(run.stdout + run.stderr) == {"mesh": 1, job: 1, "total": 2}
 
 
+def test_a_sphere_sweep_chains_each_direction_and_only_its_directions(tmp_path: Path) -> None:
+    """The chain's wildcard matches the sweep's (Φ, θ) pairs, not their Φ × θ combinations."""
+    from fem.sweep import Case, sphere_directions
+
+    config = yaml.safe_load((REPO / "config.yaml").read_text())
+    config["sweep"] = {"C1_kPa": [1.0, 2.0, 5.0], "sphere": {"n": 8, "part": "caudal"}}
+    (tmp_path / "sphere.yaml").write_text(yaml.safe_dump(config))
+    run = snakemake(tmp_path, "-n", "-j2", "results/dataset/dataset.h5",
+                    config=tmp_path / "sphere.yaml")
+    assert run.returncode == 0, run.stderr
+    assert job_counts(run.stdout + run.stderr)["solve_chain"] == 8
+    first, second = (Case(1.0, p, t) for p, t in sphere_directions(8, "caudal")[:2])
+    mixed = Case(1.0, first.phi, second.theta)  # its angles are the sweep's, its direction not
+    for case, job in ((first, "solve_chain"), (mixed, "solve")):
+        run = snakemake(tmp_path, "-n", "-j2", f"results/cases/{case.id}/summary.json",
+                        config=tmp_path / "sphere.yaml")
+        assert run.returncode == 0, run.stderr
+        assert job_counts(run.stdout + run.stderr) == {"mesh": 1, job: 1, "total": 2}
+
+
 @pytest.mark.parametrize(
     "section, key, value, message",
     [

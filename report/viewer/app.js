@@ -196,6 +196,17 @@ class WebSurrogate {
         messages.push(`Φ = ${py(phi)}° lies in a ${width.toFixed(0)}° arc without training angles`);
       }
     }
+    if (r.directions) {
+      const [p, t] = [(phi * Math.PI) / 180, (theta * Math.PI) / 180];
+      const g = [Math.cos(p), Math.sin(p) * Math.cos(t), Math.sin(p) * Math.sin(t)];
+      const cos = Math.max(...r.directions.map((d) => d[0] * g[0] + d[1] * g[1] + d[2] * g[2]));
+      const nearest = (Math.acos(Math.min(Math.max(cos, -1), 1)) * 180) / Math.PI;
+      if (nearest > r.direction_reach_deg) {
+        messages.push(`gravity at Φ = ${py(phi)}°, θ = ${py(theta)}° is ${nearest.toFixed(0)}° from `
+          + 'the nearest training direction (they are '
+          + `${r.direction_spacing_deg.toFixed(0)}° apart)`);
+      }
+    }
     if (r.theta_deg.length === 1 && Math.abs(Math.sin((phi * Math.PI) / 180)) > 1e-6
         && Math.abs(theta - r.theta_deg[0]) > 1e-6) {
       messages.push(`θ = ${py(theta)}° but the surrogate was trained at θ = ${py(r.theta_deg[0])}° `

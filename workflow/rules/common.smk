@@ -58,16 +58,19 @@ def case_files(name):
     return [f"results/cases/{case.id}/{name}" for case in CONFIG.cases]
 
 
-# A chain job's cases: every C1 of the sweep at one direction (solve.smk); its wildcards match
-# the sweep's angles only, so that a case at another direction is solved alone.
+# A chain job's cases: every C1 of the sweep at one direction (solve.smk). Its one wildcard,
+# {direction} = "phi=<deg>_theta=<deg>", matches the sweep's directions only (as pairs: a sphere's
+# Phi and theta values combine into directions it lacks), so a case at another direction is
+# solved alone.
 CHAIN_C1 = sorted({f"{case.C1:.2f}" for case in CONFIG.cases}, key=float)
-CHAIN_PHI = "|".join(sorted({re.escape(f"{case.phi:.1f}") for case in CONFIG.cases}))
-CHAIN_THETA = "|".join(sorted({re.escape(f"{case.theta:.1f}") for case in CONFIG.cases}))
+CHAIN_DIRECTION = "|".join(
+    sorted({re.escape(f"phi={case.phi:.1f}_theta={case.theta:.1f}") for case in CONFIG.cases})
+)
 
 
 def chain_files(name):
-    """File ``name`` of every case of one direction's chain ({phi} and {theta} left open)."""
-    return [f"results/cases/c1={c1}_phi={{phi}}_theta={{theta}}/{name}" for c1 in CHAIN_C1]
+    """File ``name`` of every case of one direction's chain ({direction} left open)."""
+    return [f"results/cases/c1={c1}_{{direction}}/{name}" for c1 in CHAIN_C1]
 
 
 def all_cores():

@@ -54,12 +54,11 @@ if CONFIG.chains:
             material=CONFIG.section("material"),
             fixed=CONFIG.section("mesh", "fixed"),
         wildcard_constraints:
-            phi=CHAIN_PHI,
-            theta=CHAIN_THETA,
+            direction=CHAIN_DIRECTION,
         log:
-            "results/logs/solve_chain/phi={phi}_theta={theta}.log",
+            "results/logs/solve_chain/{direction}.log",
         benchmark:
-            "results/benchmarks/solve_chain/phi={phi}_theta={theta}.tsv"
+            "results/benchmarks/solve_chain/{direction}.tsv"
         threads: 1
         resources:
             mem_mb=3000,
