@@ -7,6 +7,9 @@ JOBS ?= 2
 CONFIG ?= config.yaml
 WORKDIR ?= .
 SNAKEMAKE_ARGS ?=
+# A named sweep replacing the config's cases (fem.sweep.SWEEP_PRESETS), e.g. PRESET=paper.
+PRESET ?=
+PRESET_ARGS := $(if $(PRESET),--config "sweep={preset: $(PRESET)}")
 SNAKEMAKE := $(VENV)/bin/snakemake --snakefile $(CURDIR)/Snakefile --directory $(abspath $(WORKDIR)) \
 	--configfile $(abspath $(CONFIG)) --workflow-profile $(CURDIR)/profiles/default
 
@@ -63,7 +66,7 @@ test: setup lint
 # finished cases are kept and interrupted ones are redone without --unlock.
 reproduce: setup
 	$(PY) -m studies.config $(abspath $(CONFIG))
-	$(SNAKEMAKE) -j$(JOBS) $(SNAKEMAKE_ARGS)
+	$(SNAKEMAKE) -j$(JOBS) $(SNAKEMAKE_ARGS) $(PRESET_ARGS)
 
 # ruff (with the docstring rules of pyproject.toml), the import-linter contracts (the layers
 # import downward only) and Snakemake's own lint of the workflow.

@@ -10,6 +10,7 @@ parameters are parsed back from it, so a rounded angle is the angle solved.
 
 from __future__ import annotations
 
+import copy
 import math
 import re
 from collections.abc import Sequence
@@ -89,6 +90,40 @@ that description: steps of 10–15° next to the poles, 30° next to ±90°, and
 positions (0° and 180°) are sampled exactly."""
 
 PHI_SAMPLINGS = ("paper", "uniform", "equal_area")
+
+CASE_KEYS = ("C1_kPa", "phi_deg", "theta_deg", "sphere")
+"""The keys of a ``sweep`` section that choose its cases (a preset sets all of them)."""
+
+SWEEP_PRESETS: dict[str, dict[str, Any]] = {
+    "paper": {
+        "C1_kPa": {"start": 0.8, "stop": 5.0, "step": 0.1},
+        "phi_deg": {"sampling": "paper"},
+        "theta_deg": [0.0],
+    },
+}
+"""Named sweeps: ``paper`` is the paper's 688 cases (43 C1 values x its 16 angles in the plane
+θ = 0), the preset that reproduces it whatever else the config's ``sweep`` says."""
+
+
+def resolve_sweep(sweep: dict[str, Any]) -> dict[str, Any]:
+    """The ``sweep`` section with its ``preset`` (if any) written out.
+
+    A preset replaces every key of :data:`CASE_KEYS`, so that ``snakemake --config
+    sweep={preset: paper}`` (merged into the config file's ``sweep``) is the paper's sweep;
+    the other keys (``chains``) are kept.
+
+    Raises:
+        InvalidParameterError: for an unknown preset.
+    """
+    preset = sweep.get("preset")
+    if preset is None:
+        return dict(sweep)
+    if preset not in SWEEP_PRESETS:
+        raise InvalidParameterError(
+            f"sweep.preset must be one of {tuple(SWEEP_PRESETS)}, got {preset!r}"
+        )
+    kept = {k: v for k, v in sweep.items() if k not in CASE_KEYS and k != "preset"}
+    return {**kept, **copy.deepcopy(SWEEP_PRESETS[preset])}
 
 
 def sample_phi(spec: Any) -> list[float]:
@@ -196,22 +231,27 @@ def sweep_cases(sweep: dict[str, Any]) -> list[Case]:
     """All cases of a sweep config section, sorted and without duplicates.
 
     Args:
-        sweep: the ``sweep`` section: ``C1_kPa`` (list or range) and either ``phi_deg``
-            (list or sampling rule, see :func:`sample_phi`) × ``theta_deg`` (list, default
-            ``[0]``), or ``sphere: {n, part}`` (directions over the whole sphere or its
-            caudal half, :func:`sphere_directions`).
+        sweep: the ``sweep`` section: ``C1_kPa`` (list or range) and ``phi_deg`` (list or
+            sampling rule, see :func:`sample_phi`) × ``theta_deg`` (list, default ``[0]``),
+            or ``sphere: {n, part}`` (directions over the whole sphere or its caudal half,
+            :func:`sphere_directions`), or both: the plane's directions and the sphere's;
+            or a ``preset`` (:func:`resolve_sweep`).
 
     Raises:
         InvalidParameterError: if the sweep has more than :data:`MAX_CASES` cases, or two of
             its values are closer than its folder names tell apart (they would share a folder).
     """
+    sweep = resolve_sweep(sweep)
     c1s = grid(sweep["C1_kPa"], "sweep.C1_kPa")
-    if sweep.get("sphere"):
-        sphere = sweep["sphere"]
-        directions = sphere_directions(int(sphere["n"]), sphere.get("part", "whole"))
-    else:
+    directions: list[tuple[float, float]] = []
+    if sweep.get("phi_deg") is not None:
         thetas = grid(sweep.get("theta_deg", [0.0]), "sweep.theta_deg")
         directions = [(p, t) for p in sample_phi(sweep["phi_deg"]) for t in thetas]
+    if sweep.get("sphere"):
+        sphere = sweep["sphere"]
+        directions += sphere_directions(int(sphere["n"]), sphere.get("part", "whole"))
+    if not directions:
+        raise InvalidParameterError("sweep needs phi_deg or sphere")
     if len(c1s) * len(directions) > MAX_CASES:
         raise InvalidParameterError(
             f"sweep: {len(c1s)} C1 values x {len(directions)} gravity directions is "

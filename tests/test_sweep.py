@@ -10,7 +10,7 @@ import yaml
 
 from fem.exceptions import InvalidParameterError
 from fem.parameters import Gravity, Loading, Material, SolverSettings
-from fem.sweep import Case, sweep_cases
+from fem.sweep import PAPER_PHI_DEG, Case, sweep_cases
 from tests.conftest import REPO
 
 pytestmark = pytest.mark.unit
@@ -133,6 +133,24 @@ def test_the_caudal_half_covers_every_posture_short_of_head_down_evenly() -> Non
         sphere_directions(10, "cranial")
     cases = sweep_cases({"C1_kPa": [1.0], "sphere": {"n": 64, "part": "caudal"}})
     assert len(cases) == 64  # distinct folder names at the ids' 0.1 degree
+    # with the plane's angles too: both sets of directions
+    both = sweep_cases({"C1_kPa": [1.0, 2.0], "phi_deg": {"sampling": "paper"},
+                        "theta_deg": [0.0], "sphere": {"n": 64, "part": "caudal"}})
+    assert len(both) == 2 * (16 + 64) and set(cases) < set(both)
+    assert {c.phi for c in both if c.theta == 0.0} >= set(PAPER_PHI_DEG)
+
+
+def test_the_paper_preset_replaces_every_key_that_chooses_cases() -> None:
+    from fem.sweep import resolve_sweep
+
+    paper = sweep_cases({"preset": "paper"})
+    assert len(paper) == 688 and {c.theta for c in paper} == {0.0}
+    merged = {"C1_kPa": [1.0], "sphere": {"n": 64, "part": "caudal"}, "chains": False,
+              "preset": "paper"}  # as `--config sweep={preset: paper}` merges into a file's
+    assert sweep_cases(merged) == paper
+    assert resolve_sweep(merged)["chains"] is False and "sphere" not in resolve_sweep(merged)
+    with pytest.raises(InvalidParameterError, match="sweep.preset must be one of"):
+        sweep_cases({"preset": "mammogram"})
 
 
 def test_sphere_sweep_replaces_the_angle_grid() -> None:
