@@ -30,6 +30,7 @@ import json
 import logging
 import multiprocessing
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -263,6 +264,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--jobs", type=int, default=2)
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    # killed, exit through the pools' context managers, which terminate their workers
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
     result = run(args.config, tuple(args.n), args.test, tuple(args.c1), args.out, args.jobs)
     result.write(args.out / "direction_density.json")
     print(table(result))

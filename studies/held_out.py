@@ -19,13 +19,16 @@ from __future__ import annotations
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from fem.dataset import Dataset
 from studies.results import Record, Result
 from surrogate.exceptions import ExtrapolationWarning
-from surrogate.predict import Surrogate
+
+if TYPE_CHECKING:  # JAX is imported by whoever has a model, not by this module's records
+    from surrogate.predict import Surrogate
 
 #: What each split holds out, in words for the report.
 HELD_OUT = {
