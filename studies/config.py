@@ -327,12 +327,6 @@ class SurrogateStudyConfig:
     prediction_budget_ms: float | None
     postures: tuple[Posture, ...] = ()
 
-    @property
-    def outside_cases(self) -> tuple[Case, ...]:
-        """Every FE case the study solves outside the sweep (extrapolation and postures)."""
-        extra = {p.case for p in self.postures if not p.in_sweep}
-        return tuple(sorted(set(self.extrapolation) | extra))
-
     @classmethod
     def from_sections(
         cls, study: Mapping[str, Any], surrogate: SurrogateConfig, sweep: tuple[Case, ...]
