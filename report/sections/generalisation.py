@@ -43,7 +43,7 @@ def held_out_part(ctx: Context) -> str:
                  pct(inside.relative_max), inside.worst_case])
     out.append(table(
         ["split", "holds out", "held-out groups", "model", "cases", "mean (mm)",
-         "p95 (mm)", "max (mm)", "max / case max |u|", "worst case"],
+         "p95 (mm)", "max (mm)", "max / case max |u| (%)", "worst case"],
         rows, table_id="held-out"))
     return "".join(out)
 
@@ -76,7 +76,7 @@ def postures_part(ctx: Context) -> str:
                      pct(e.relative_max), row.kind])
     out.append(table(
         ["posture", "C1 (kPa)", "Φ / θ", "FE max |u| (mm)", "mean error (mm)",
-         "p95 (mm)", "max (mm)", "max / FE max", "relative to the training data"],
+         "p95 (mm)", "max (mm)", "max / FE max (%)", "relative to the training data"],
         rows, table_id="postures"))
     failed = [r for r in result.rows if r.errors is None]
     if failed:
