@@ -42,6 +42,7 @@ def _unit_directions(pairs: Any) -> np.ndarray:
     angles = np.asarray(pairs, dtype=float).reshape(-1, 2)
     return gravity_direction(angles[:, 0], angles[:, 1])
 
+
 class Surrogate:
     """A loaded surrogate that predicts the displacement of every material point.
 
@@ -320,9 +321,9 @@ class Surrogate:
         nearest = self.direction_outside(phi, theta)
         if nearest is not None:
             messages.append(
-                    f"gravity at Φ = {phi}°, θ = {theta}° is {nearest:.0f}° from the nearest "
-                    f"training direction (they are {self._direction_spacing:.0f}° apart)"
-                )
+                f"gravity at Φ = {phi}°, θ = {theta}° is {nearest:.0f}° from the nearest "
+                f"training direction (they are {self._direction_spacing:.0f}° apart)"
+            )
         if (
             self._thetas
             and abs(math.sin(math.radians(phi))) > 1e-6
