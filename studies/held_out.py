@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from fem.dataset import Dataset
+from fem.dataset import Dataset, direction_keys
 from studies.results import Record, Result
 from surrogate.exceptions import ExtrapolationWarning
 
@@ -157,11 +157,10 @@ class HeldOutEvaluation(Result):
 
 def held_out_groups(ds: Dataset, split: str, cases: np.ndarray) -> list[str]:
     """The groups of ``cases`` that ``split`` holds out, as labels."""
-    if split == "by_direction":
-        seen = {}
-        for i in cases:
-            key = tuple(np.round(ds.direction[i], 9) + 0.0)
-            seen.setdefault(key, f"phi={ds.phi[i]:g}/theta={ds.theta[i]:g}")
+    if split == "by_direction":  # one label per direction, as the split groups them
+        keys = direction_keys(ds.phi[cases], ds.theta[cases])
+        seen = {key: f"phi={ds.phi[i]:g}/theta={ds.theta[i]:g}" for key, i in
+                zip(keys[::-1], cases[::-1], strict=True)}  # the first case's angles name it
         return sorted(seen.values())
     if split == "by_c1":
         return [f"{c:g}" for c in sorted({round(float(ds.C1[i]), 9) for i in cases})]
@@ -183,6 +182,8 @@ def evaluate_held_out(
         ValueError: if a model trained on another split than its key, or a split has no
             test cases.
     """
+    converged = np.flatnonzero(ds.converged)
+    inside_of = {int(i): CaseErrors.of(inside, ds, int(i)) for i in converged}
     blocks = []
     for split, model in models.items():
         if model.config.split != split:
@@ -192,7 +193,7 @@ def evaluate_held_out(
         if test.size == 0:
             raise ValueError(f"the dataset's {split} split has no test cases")
         rows = [CaseErrors.of(model, ds, int(i)) for i in test]
-        inside_rows = [CaseErrors.of(inside, ds, int(i)) for i in test]
+        inside_rows = [inside_of[int(i)] for i in test]
         blocks.append(HeldOutBlock(
             split=split,
             held_out=HELD_OUT.get(split, split),
@@ -202,8 +203,7 @@ def evaluate_held_out(
             rows=rows,
             inside_rows=inside_rows,
         ))
-    everything = [CaseErrors.of(inside, ds, int(i)) for i in np.flatnonzero(ds.converged)]
-    return HeldOutEvaluation(blocks=blocks, inside_all=ErrorSpread.over(everything))
+    return HeldOutEvaluation(blocks=blocks, inside_all=ErrorSpread.over(list(inside_of.values())))
 
 
 __all__ = ["HELD_OUT", "CaseErrors", "ErrorSpread", "HeldOutBlock", "HeldOutEvaluation",
