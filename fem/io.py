@@ -31,6 +31,7 @@ import ufl
 from dolfinx import fem
 from mpi4py import MPI
 
+from fem.exceptions import InvalidParameterError
 from meshes.io import boundary_facets, geometry_nodes
 from meshes.tags import Boundary
 
@@ -206,3 +207,32 @@ def _json_default(obj: Any) -> Any:
     if isinstance(obj, np.ndarray):
         return obj.tolist()
     raise TypeError(f"{type(obj).__name__} is not JSON serialisable")
+
+
+def node_dofs(mesh: Any, V: Any) -> np.ndarray:
+    """The displacement space's (block) dof at every geometry node.
+
+    The geometry nodes of a straight mesh are its vertices, the first four local dofs of any
+    Lagrange element; those of a curved (order 2) mesh add the edge midpoints, which are the
+    dofs of a P2 displacement with the same local layout.
+
+    Raises:
+        InvalidParameterError: for a curved mesh with another displacement degree.
+    """
+    nodes = geometry_nodes(mesh)
+    dofs = V.dofmap.list.array.reshape(nodes.shape[0], -1)
+    k = nodes.shape[1]
+    if k > 4 and dofs.shape[1] != k:
+        raise InvalidParameterError(
+            f"the reference state of a curved mesh ({k} nodes per cell) needs a displacement "
+            f"with the same nodes (P2), not {dofs.shape[1]} dofs per cell"
+        )
+    out = np.full(mesh.geometry.x.shape[0], -1, dtype=np.int64)
+    out[nodes.ravel()] = dofs[:, :k].ravel()
+    return out
+
+
+def node_displacement(problem: Any) -> np.ndarray:
+    """The solved displacement at every geometry node (nodes, 3), in the mesh's node order."""
+    u = problem.displacement()
+    return u.x.array.reshape(-1, 3)[node_dofs(problem.mesh, u.function_space)]

@@ -141,34 +141,16 @@ class GravityProblem:
             self.pressure_dofs = np.zeros(0, dtype=np.int64)
         self._u_expr = u
 
-        F = deformation_gradient(u)
-        self.J = jacobian(F)
         self.kappa = fem.Constant(mesh, scalar(discretisation.bulk_ratio))
-        psi = strain_energy(F, p, self.C1, discretisation, self.kappa)
-
         dx = ufl.Measure(
             "dx", domain=mesh, metadata={"quadrature_degree": discretisation.quadrature}
         )
         self.dx = dx
-        potential = psi * dx - ufl.dot(self.body_force, u) * dx
         self.contact = contact
         self._contact_nodes = np.zeros(0, dtype=np.int64)  # owned skin vertices in the zone
-        if contact is not None:
-            ds = ufl.Measure(
-                "ds",
-                domain=mesh,
-                subdomain_data=facet_tags,
-                metadata={"quadrature_degree": discretisation.quadrature},
-            )
-            x = ufl.SpatialCoordinate(mesh)
-            potential += contact.energy(x, u, self.C1) * ds(int(Boundary.SKIN))
-            skin = boundary_vertex_nodes(mesh, facet_tags, [Boundary.SKIN])
-            zone = contact.obstacle.gap_values(mesh.geometry.x[skin]) >= contact.clearance
-            self._contact_nodes = skin[zone]
-            self._contact_force = fem.form(contact.pressure(x, u, self.C1) * ds(int(Boundary.SKIN)))
         # kept: the preconditioner's pressure block must use these very arguments
         self._test, self._trial = ufl.TestFunction(self.W), ufl.TrialFunction(self.W)
-        residual = ufl.derivative(potential, self.w, self._test)
+        residual = self._weak_form(u, p)
         tangent = ufl.derivative(residual, self.w, self._trial)
         self._tangent_ufl = tangent
         self.residual = fem.form(residual)
@@ -182,6 +164,39 @@ class GravityProblem:
         self._detF = fem.Expression(self.J, self._detF_points)
         n_local = mesh.topology.index_map(mesh.topology.dim).size_local
         self._cells = np.arange(n_local, dtype=np.int32)
+
+    #: The tangent is symmetric (the second variation of a potential): LDLᵀ factorises it.
+    symmetric = True
+
+    def _weak_form(self, u: ufl.core.expr.Expr, p: ufl.core.expr.Expr | None) -> ufl.Form:
+        """The residual: the first variation of the total potential, on the reference mesh.
+
+        Sets ``J`` (det F, for the volume and inversion checks) and, with contact, the
+        contact zone's skin vertices and the contact force's form.
+        """
+        mesh, dx, contact = self.mesh, self.dx, self.contact
+        F = deformation_gradient(u)
+        self.J = jacobian(F)
+        psi = strain_energy(F, p, self.C1, self.discretisation, self.kappa)
+        potential = psi * dx - ufl.dot(self.body_force, u) * dx
+        if contact is not None:
+            ds = self.skin_measure()
+            x = ufl.SpatialCoordinate(mesh)
+            potential += contact.energy(x, u, self.C1) * ds(int(Boundary.SKIN))
+            skin = boundary_vertex_nodes(mesh, self.facet_tags, [Boundary.SKIN])
+            zone = contact.obstacle.gap_values(mesh.geometry.x[skin]) >= contact.clearance
+            self._contact_nodes = skin[zone]
+            self._contact_force = fem.form(contact.pressure(x, u, self.C1) * ds(int(Boundary.SKIN)))
+        return ufl.derivative(potential, self.w, self._test)
+
+    def skin_measure(self) -> ufl.Measure:
+        """The boundary measure over the facet tags, at the forms' quadrature degree."""
+        return ufl.Measure(
+            "ds",
+            domain=self.mesh,
+            subdomain_data=self.facet_tags,
+            metadata={"quadrature_degree": self.discretisation.quadrature},
+        )
 
     @property
     def preconditioner(self) -> fem.FormMetaClass:

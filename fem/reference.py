@@ -7,7 +7,12 @@ configuration X is the one whose forward solve under the imaged posture's gravit
     X + u(X) = x,
 
 with u(X) the displacement of the forward problem on the reference X (same C1, boundary
-conditions and contact). This module finds X by the fixed-point iteration of Sellier (2011),
+conditions and contact). By default (``method="inverse"``) this module first solves the
+inverse-motion problem (:mod:`fem.inverse_motion`: the same equilibrium written on the loaded
+mesh, with the reference as unknown, in one nonlinear solve) and then checks its answer with a
+forward solve that starts from it; where the check leaves a misfit above the tolerance (a
+straight mesh), or the inverse solve fails, the fixed-point iteration of Sellier (2011) goes on
+from there (from the loaded shape after a failure),
 
     r_k = X_k + u(X_k) − x,    X_{k+1} = X_k − r_k   (the plain step),
 
@@ -17,7 +22,8 @@ relaxation of the plain step:
 
     X_{k+1} = X_k − ω_k r_k,   ω_{k+1} = −ω_k (r_k · (r_{k+1} − r_k)) / |r_{k+1} − r_k|²,
 
-starting from X_0 = x (the first iterate is the naive "reverse the sag" guess). Each forward
+starting from the inverse-motion answer, or from X_0 = x (the first iterate is then the naive
+"reverse the sag" guess). Each forward
 solve starts from the previous iterate's converged state at the full load (a warm start: the
 fields of neighbouring iterates differ little), falling back to the adaptive load path from rest
 where the warm start fails, and from rest directly after a step large against the displacement
@@ -38,8 +44,9 @@ import numpy as np
 
 from fem.case import CaseRunner
 from fem.exceptions import InvalidParameterError
+from fem.inverse_motion import InverseMotionResult, solve_inverse_motion
+from fem.io import node_displacement
 from fem.parameters import Gravity, Material
-from meshes.io import geometry_nodes
 
 log = logging.getLogger(__name__)
 
@@ -60,6 +67,7 @@ class ReferenceEstimate:
         forward_solves: forward solves done.
         method: the acceleration (:data:`METHODS`).
         restarts: Anderson histories dropped after a mixed iterate's solve failed.
+        inverse: the inverse-motion solve that started the iteration (``inverse`` method).
     """
 
     converged: bool
@@ -71,51 +79,33 @@ class ReferenceEstimate:
     relaxation: list[float] = field(default_factory=list)
     wall_s: float = 0.0
     forward_solves: int = 0
-    method: str = "anderson"
+    method: str = "inverse"
     restarts: int = 0
+    inverse: InverseMotionResult | None = None
 
     def record(self) -> dict[str, Any]:
-        """JSON-able summary (without the positions)."""
+        """JSON-able summary, without the positions.
+
+        Its keys are those ``reference.json`` shares with the workflow's record
+        (:class:`studies.reference_state.ReferenceRecord`).
+        """
+        inverse = self.inverse
         return {
             "converged": self.converged, "reason": self.reason,
-            "iterations": self.forward_solves, "misfit_mm": [1e3 * m for m in self.misfit_m],
+            "forward_solves": self.forward_solves, "misfit_mm": [1e3 * m for m in self.misfit_m],
             "newton_iterations": self.newton_iterations, "warm_starts": self.warm_starts,
             "relaxation": self.relaxation, "wall_s": self.wall_s, "method": self.method,
             "restarts": self.restarts,
+            "inverse_newton_iterations": None if inverse is None
+            else inverse.loading.total_iterations,
+            "inverse_s": None if inverse is None else inverse.wall_s,
         }
 
 
-def node_dofs(mesh: Any, V: Any) -> np.ndarray:
-    """The displacement space's (block) dof at every geometry node.
-
-    The geometry nodes of a straight mesh are its vertices, the first four local dofs of any
-    Lagrange element; those of a curved (order 2) mesh add the edge midpoints, which are the
-    dofs of a P2 displacement with the same local layout.
-
-    Raises:
-        InvalidParameterError: for a curved mesh with another displacement degree.
-    """
-    nodes = geometry_nodes(mesh)
-    dofs = V.dofmap.list.array.reshape(nodes.shape[0], -1)
-    k = nodes.shape[1]
-    if k > 4 and dofs.shape[1] != k:
-        raise InvalidParameterError(
-            f"the reference state of a curved mesh ({k} nodes per cell) needs a displacement "
-            f"with the same nodes (P2), not {dofs.shape[1]} dofs per cell"
-        )
-    out = np.full(mesh.geometry.x.shape[0], -1, dtype=np.int64)
-    out[nodes.ravel()] = dofs[:, :k].ravel()
-    return out
-
-
-def node_displacement(problem: Any) -> np.ndarray:
-    """The solved displacement at every geometry node (nodes, 3), in the mesh's node order."""
-    u = problem.displacement()
-    return u.x.array.reshape(-1, 3)[node_dofs(problem.mesh, u.function_space)]
-
-
-#: The fixed point's accelerations: Anderson's mixing of the last iterates, Aitken's relaxation.
-METHODS = ("anderson", "aitken")
+#: How the reference is found: the inverse-motion solve checked (and, where needed, finished) by
+#: the fixed point with Anderson's mixing; the fixed point alone from the loaded shape, with
+#: Anderson's mixing of the last iterates or Aitken's relaxation.
+METHODS = ("inverse", "anderson", "aitken")
 #: Iterates Anderson's mixing combines.
 ANDERSON_DEPTH = 5
 #: A forward solve starts from the previous iterate's state only where the geometry moved by
@@ -146,7 +136,7 @@ def estimate_reference(
     gravity: Gravity,
     tolerance: float = 1e-5,
     max_iterations: int = 30,
-    method: str = "anderson",
+    method: str = "inverse",
 ) -> ReferenceEstimate:
     """Find the reference geometry whose forward solve reproduces the runner's mesh.
 
@@ -156,8 +146,11 @@ def estimate_reference(
         material: C1 and density of the observation.
         gravity: the gravity the observation was under (its posture).
         tolerance: stop when every node's misfit |X + u(X) − x| is below this (m).
-        max_iterations: forward solves allowed.
-        method: ``anderson`` (the last :data:`ANDERSON_DEPTH` iterates mixed; where a mixed
+        max_iterations: forward solves allowed (the inverse-motion solve not counted).
+        method: ``inverse`` (the inverse-motion solve, :mod:`fem.inverse_motion`, then forward
+            solves from its answer, mixed as ``anderson`` until the misfit is below the
+            tolerance; after a failed inverse solve, ``anderson`` from the loaded shape),
+            ``anderson`` (the last :data:`ANDERSON_DEPTH` iterates mixed; where a mixed
             iterate's forward solve fails, the history is dropped and the plain step from the
             best iterate taken) or ``aitken`` (Aitken's relaxation of the plain step).
 
@@ -179,11 +172,20 @@ def estimate_reference(
     problem.set_case(material, gravity)
     runner.solver.scale_to_load()
     X = observed.copy()
+    warm: np.ndarray | None = None
+    inverse = None
+    if method == "inverse":
+        inverse = solve_inverse_motion(mesh, runner.facet_tags, runner.settings, material,
+                                       gravity)
+        if inverse.converged:
+            X, warm = inverse.X.copy(), inverse.state
+        else:
+            log.info("the inverse-motion solve failed (%s): the fixed point from the loaded "
+                     "shape", inverse.loading.reason)
     best: tuple[float, np.ndarray, np.ndarray | None] = (np.inf, X.copy(), None)
     misfits, iterations, relaxations = [], [], []
     history: list[tuple[np.ndarray, np.ndarray]] = []
     warm_starts = restarts = 0
-    warm: np.ndarray | None = None
     previous: np.ndarray | None = None
     omega = 1.0
     reason = f"no reference within {max_iterations} forward solves"
@@ -194,7 +196,7 @@ def estimate_reference(
             ok, its, was_warm = runner.solve_from(material, gravity, warm)
             iterations.append(its)
             warm_starts += was_warm
-            if not ok and method == "anderson" and len(history) > 1 and best[2] is not None:
+            if not ok and method != "aitken" and len(history) > 1 and best[2] is not None:
                 # a mixed iterate out of reach: drop the history, plain step from the best
                 log.info("forward solve failed on a mixed iterate: plain step from the best")
                 restarts += 1
@@ -219,7 +221,7 @@ def estimate_reference(
             if misfit <= tolerance:
                 converged, reason = True, "converged"
                 break
-            if method == "anderson":
+            if method != "aitken":
                 history = [*history, (X.copy(), residual)][-ANDERSON_DEPTH - 1:]
                 step = _anderson_step([h[0] for h in history], [h[1] for h in history]) - X
             else:
@@ -236,11 +238,13 @@ def estimate_reference(
             X = X + step
     finally:
         problem.set_geometry(observed)
+    if not converged and inverse is not None and not inverse.converged:
+        reason += f"; the inverse-motion solve failed before it: {inverse.loading.reason}"
     return ReferenceEstimate(
         converged=converged, reason=reason, X=best[1], misfit_m=misfits,
         newton_iterations=iterations, warm_starts=int(warm_starts), relaxation=relaxations,
         wall_s=time.perf_counter() - start, forward_solves=len(iterations), method=method,
-        restarts=restarts,
+        restarts=restarts, inverse=inverse,
     )
 
 
@@ -304,12 +308,14 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     args.out.mkdir(parents=True, exist_ok=True)
     write_reference_mesh(runner, estimate.X, args.out / "reference.xdmf")
+    shift = float(np.linalg.norm(estimate.X - runner.mesh.geometry.x, axis=1).max())
     runner.close()
-    record = {"observed": str(args.observed), "case": case.id, **estimate.record()}
+    record = {"imaged": str(args.observed), "case": case.id, **estimate.record(),
+              "largest_shift_mm": 1e3 * shift}
     tmp = args.out / ".reference.json.tmp"
     tmp.write_text(json.dumps(record, indent=2))
     tmp.replace(args.out / "reference.json")
-    print(json.dumps({k: record[k] for k in ("case", "reason", "iterations", "wall_s")}))
+    print(json.dumps({k: record[k] for k in ("case", "reason", "forward_solves", "wall_s")}))
     return 0
 
 
@@ -320,6 +326,5 @@ if __name__ == "__main__":
 
 
 __all__ = [
-    "ReferenceEstimate", "estimate_reference", "main", "node_displacement", "node_dofs",
-    "write_reference_mesh",
+    "ReferenceEstimate", "estimate_reference", "main", "write_reference_mesh",
 ]

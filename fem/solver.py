@@ -106,6 +106,9 @@ class NewtonSolver:
         self.options = solver_options(preset, options)
         if self.options.get("pc_type") == "fieldsplit" and not problem.mixed:
             self.options = _single_field(self.options)
+        if self.options.get("pc_type") == "cholesky" and not problem.symmetric:
+            # LDLᵀ needs a symmetric tangent (e.g. not the inverse-motion problem's): LU
+            self.options = {**self.options, "pc_type": "lu"}
         self.timings = Timings()
         #: Re-factorise when the previous Krylov solve took more iterations (0: always).
         self.refactor_above_its = int(self.options.get("refactor_above_its", 0))
@@ -128,7 +131,7 @@ class NewtonSolver:
         self._norms: list[float] = []
         comm = problem.mesh.comm
         self.A = fem_petsc.create_matrix(problem.tangent)
-        self.A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+        self.A.setOption(PETSc.Mat.Option.SYMMETRIC, problem.symmetric)
         blr_above = self.options.get("blr_above_dofs")
         #: The kept factorisation is block low-rank (large problems: :data:`BLR_OPTIONS`).
         self.low_rank = bool(self.refactor_above_its) and blr_above is not None \
@@ -142,7 +145,7 @@ class NewtonSolver:
             # The factorised copy of the tangent. PCSetUp re-factorises only when this
             # matrix changes, so leaving it untouched keeps the factors.
             self.P = fem_petsc.create_matrix(problem.tangent)
-            self.P.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+            self.P.setOption(PETSc.Mat.Option.SYMMETRIC, problem.symmetric)
         self.b = fem_petsc.create_vector(problem.residual)
         self.x = problem.w.vector.duplicate()
         self._split, self._u_order = self._split_index_sets() if self._fieldsplit else (None, None)
@@ -520,7 +523,7 @@ class NewtonSolver:
         one or two iterations.
         """
         A = fem_petsc.create_matrix(self.problem.tangent)
-        A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+        A.setOption(PETSc.Mat.Option.SYMMETRIC, self.problem.symmetric)
         P = fem_petsc.create_matrix(self.problem.preconditioner) if self._fieldsplit else None
         ksp = PETSc.KSP().create(self.problem.mesh.comm)
         # Same option prefix as the SNES's own KSP, so every linear-solver option applies.

@@ -20,8 +20,8 @@ from dolfinx import fem
 from fem.case import CaseRunner
 from fem.exceptions import InvalidParameterError
 from fem.interpolation import evaluate
+from fem.io import node_dofs
 from fem.parameters import Gravity, Material
-from fem.reference import node_dofs
 
 
 @dataclass(frozen=True)

@@ -46,12 +46,15 @@ class RoundTrip(Record):
         target_error_mm: the target shape from the estimate against the one from the truth.
         naive_error_mm: the target shape from the observed shape taken as stress-free, against
             the truth.
-        forward_solves: forward solves of the estimate.
+        forward_solves: forward solves of the estimate (the inverse-motion solve not counted).
         newton_iterations: their Newton iterations in all.
         cost: the estimate's wall time over one cold forward solve of the observed case.
         estimate_s: the estimate's wall time.
         converged: whether the estimate converged.
         reason: why it stopped.
+        method: how the reference was found (:data:`fem.reference.METHODS`).
+        inverse_newton_iterations: Newton iterations of the inverse-motion solve (None without
+            one).
     """
 
     C1_kPa: float
@@ -68,6 +71,8 @@ class RoundTrip(Record):
     estimate_s: float
     converged: bool
     reason: str
+    method: str = "anderson"
+    inverse_newton_iterations: int | None = None
 
 
 @dataclass(frozen=True)
@@ -80,7 +85,7 @@ class RoundTripTable(Result):
 
 
 HEADER = ["C1 (kPa)", "observed Φ", "predicted Φ", "observed max |u| (mm)",
-          "reference error (mm)", "predicted error (mm)", "naive error (mm)", "forward solves",
+          "reference error (mm)", "predicted error (mm)", "naive error (mm)", "solves",
           "cost (cold solves)"]
 
 
@@ -90,20 +95,29 @@ def table_rows(table: RoundTripTable) -> list[list[str]]:
     for r in table.rows:
         rows.append([
             f"{r.C1_kPa:g}", f"{r.observed_phi:g}°", f"{r.target_phi:g}°", f"{r.sag_mm:.2f}",
-            f"{r.reference_error_mm:.4f} ({100 * r.reference_error_mm / r.sag_mm:.3f} %)",
-            f"{r.target_error_mm:.4f} ({100 * r.target_error_mm / r.target_sag_mm:.3f} %)",
+            f"{r.reference_error_mm:.3g} ({100 * r.reference_error_mm / r.sag_mm:.2g} %)",
+            f"{r.target_error_mm:.3g} ({100 * r.target_error_mm / r.target_sag_mm:.2g} %)",
             f"{r.naive_error_mm:.2f} ({100 * r.naive_error_mm / r.target_sag_mm:.0f} %)",
-            f"{r.forward_solves}" + ("" if r.converged else f" (failed: {r.reason})"),
+            _solves(r) + ("" if r.converged else f" (failed: {r.reason})"),
             f"{r.cost:.2f}",
         ])
     return rows
+
+
+def _solves(r: RoundTrip) -> str:
+    """The estimate's solves: the inverse-motion solve (Newton iterations) and forward ones."""
+    forward = f"{r.forward_solves} forward"
+    if r.inverse_newton_iterations is None:
+        return forward
+    return f"1 inverse ({r.inverse_newton_iterations} Newton its) + {forward}"
 
 
 def round_trips(mesh: Path, settings: SolverSettings, c1s: list[float],
                 observed_phis: list[float], tolerance: float = 1e-5) -> RoundTripTable:
     """Run every round trip on one runner (its geometry is moved and put back)."""
     from fem.case import CaseRunner
-    from fem.reference import estimate_reference, node_displacement
+    from fem.io import node_displacement
+    from fem.reference import estimate_reference
 
     runner = CaseRunner(mesh, settings)
     X = runner.mesh.geometry.x.copy()
@@ -144,6 +158,9 @@ def round_trips(mesh: Path, settings: SolverSettings, c1s: list[float],
                     newton_iterations=int(sum(estimate.newton_iterations)),
                     cost=estimate.wall_s / cold, estimate_s=estimate.wall_s,
                     converged=estimate.converged, reason=estimate.reason,
+                    method=estimate.method,
+                    inverse_newton_iterations=(None if estimate.inverse is None else
+                                               estimate.inverse.loading.total_iterations),
                 ))
     finally:
         runner.problem.set_geometry(X)

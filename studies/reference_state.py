@@ -26,6 +26,10 @@ class NoReferenceError(RuntimeError):
 class ReferenceRecord(Result):
     """``results/mesh/reference.json``: how the reference of the imaged mesh was found.
 
+    The keys of ``python -m fem.reference``'s ``reference.json`` (``imaged``, ``case``,
+    :meth:`fem.reference.ReferenceEstimate.record`, ``largest_shift_mm``), with the cost beside
+    them; one reader serves both (the command's file lacks the cost and the machine).
+
     Attributes:
         imaged: the imaged mesh.
         case: the imaged case (the stiffness assumed and the posture).
@@ -36,13 +40,16 @@ class ReferenceRecord(Result):
         newton_iterations: Newton iterations of each.
         warm_starts: solves that converged from the previous iterate's state.
         relaxation: Aitken's ω at each update (the ``aitken`` method).
-        method: the fixed point's acceleration (:data:`fem.reference.METHODS`).
+        method: how the reference was found (:data:`fem.reference.METHODS`).
         restarts: Anderson histories dropped after a mixed iterate's solve failed.
         wall_s: the estimate's wall time.
         cold_forward_s: one cold forward solve of the imaged case on the imaged shape.
         cost: ``wall_s`` over ``cold_forward_s``.
         largest_shift_mm: the largest node distance between the imaged shape and the reference.
         machine: where it ran.
+        inverse_newton_iterations: Newton iterations of the inverse-motion solve that started the
+            estimate (None without one).
+        inverse_s: its wall time, within ``wall_s``.
     """
 
     imaged: str
@@ -61,6 +68,8 @@ class ReferenceRecord(Result):
     cost: float
     largest_shift_mm: float
     machine: dict[str, Any]
+    inverse_newton_iterations: int | None = None
+    inverse_s: float | None = None
 
 
 def reference_of_imaged(imaged: str | Path, settings: Any, c1: float, phi: float, theta: float,
@@ -88,15 +97,10 @@ def reference_of_imaged(imaged: str | Path, settings: Any, c1: float, phi: float
             raise NoReferenceError(f"no reference state for {imaged} as {case.id}: "
                                    f"{estimate.reason}")
         shift = float(np.linalg.norm(estimate.X - runner.mesh.geometry.x, axis=1).max())
+        # the keys of python -m fem.reference's reference.json, and the cost beside them
         record = ReferenceRecord(
-            imaged=str(imaged), case=case.id, converged=True, reason=estimate.reason,
-            forward_solves=estimate.forward_solves,
-            misfit_mm=[1e3 * m for m in estimate.misfit_m],
-            newton_iterations=list(estimate.newton_iterations), warm_starts=estimate.warm_starts,
-            relaxation=list(estimate.relaxation), method=estimate.method,
-            restarts=estimate.restarts, wall_s=estimate.wall_s, cold_forward_s=cold,
-            cost=estimate.wall_s / cold, largest_shift_mm=1e3 * shift,
-            machine=machine_state().to_json(),
+            imaged=str(imaged), case=case.id, **estimate.record(), largest_shift_mm=1e3 * shift,
+            cold_forward_s=cold, cost=estimate.wall_s / cold, machine=machine_state().to_json(),
         )
         write_reference_mesh(runner, estimate.X, xdmf_out)
         record.write(record_out)

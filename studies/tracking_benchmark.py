@@ -24,8 +24,9 @@ import yaml
 def main(argv: list[str] | None = None) -> int:
     """Run the benchmark and print its figures."""
     from fem.case import CaseRunner
+    from fem.io import node_displacement
     from fem.parameters import SolverSettings
-    from fem.reference import node_displacement, write_reference_mesh
+    from fem.reference import write_reference_mesh
     from fem.sweep import Case
     from meshes.io import from_file_order, geometry_nodes, nodes_in_file_order
     from studies.machine import machine_state

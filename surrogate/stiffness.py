@@ -128,7 +128,7 @@ def fe_shape(runner: Any, phi: float, theta: float = 0.0) -> Shape:
     Raises:
         StiffnessError: if a solve does not converge.
     """
-    from fem.reference import node_displacement
+    from fem.io import node_displacement
     from fem.sweep import Case
     from meshes.io import nodes_in_file_order
 

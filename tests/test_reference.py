@@ -15,8 +15,9 @@ import numpy as np
 import pytest
 
 from fem.case import CaseRunner
+from fem.io import node_displacement
 from fem.parameters import SolverSettings
-from fem.reference import estimate_reference, node_displacement, write_reference_mesh
+from fem.reference import estimate_reference, write_reference_mesh
 from fem.sweep import Case
 from meshes.io import nodes_in_file_order, read_mesh, same_cells
 
@@ -79,6 +80,53 @@ def test_the_reference_of_a_loaded_shape_is_found_and_predicts_supine(
         runner.problem.set_geometry(X_true)
 
 
+@pytest.fixture(scope="module")
+def curved_runner(tmp_path_factory: pytest.TempPathFactory) -> Iterator[CaseRunner]:
+    """The coarse default breast with curved (order-2) cells, with contact with the chest."""
+    from dataclasses import replace
+
+    from fem.contact import Contact, chest_obstacle
+    from meshes.build import MeshSize, write_parametric_mesh
+    from meshes.parametric import BreastGeometry
+    from tests.conftest import COARSE
+
+    path = tmp_path_factory.mktemp("curved") / "mesh.xdmf"
+    write_parametric_mesh(BreastGeometry(), MeshSize(**{**COARSE, "order": 2}), path)
+    settings = replace(SolverSettings(), contact=Contact(chest_obstacle(BreastGeometry())))
+    with CaseRunner(path, settings) as runner:
+        yield runner
+
+
+@pytest.mark.parametrize("observed_in", [Case(1.0, 0.0), Case(1.0, -100.0)],
+                         ids=["supine", "rolled-onto-the-chest"])
+def test_on_a_curved_mesh_the_inverse_motion_solve_is_the_forward_problem_exactly(
+    curved_runner: CaseRunner, observed_in: Case
+) -> None:
+    """With the displacement's nodes as geometry nodes, the two discrete problems are one.
+
+    So the reference found in one inverse-motion solve reproduces the observed nodes in a
+    forward solve that starts from it, within the solvers' tolerances: at Φ = −100° with the
+    skin pressed on the chest (the contact term pulled to the loaded shape) as well.
+    """
+    runner = curved_runner
+    X_true = runner.mesh.geometry.x.copy()
+    try:
+        x_observed = _deformed(runner, observed_in, X_true)
+        force = runner.problem.contact_status()["force_N"]
+        assert (force > 0) == (observed_in.phi == -100.0), force
+        runner.problem.set_geometry(x_observed)
+        estimate = estimate_reference(runner, observed_in.material(), observed_in.gravity())
+        assert estimate.converged and estimate.inverse is not None
+        assert estimate.inverse.converged, estimate.inverse.loading.reason
+        # the check starts at the answer: at most one iteration to the forward stopping test
+        assert estimate.forward_solves == 1 and estimate.newton_iterations[0] <= 1
+        sag = np.linalg.norm(x_observed - X_true, axis=1).max()
+        assert np.linalg.norm(estimate.X - X_true, axis=1).max() <= 1e-8 * sag
+        assert estimate.record()["inverse_newton_iterations"] > 0
+    finally:
+        runner.problem.set_geometry(X_true)
+
+
 def test_anderson_and_aitken_find_the_same_reference_of_a_soft_supine_shape(
     runner: CaseRunner,
 ) -> None:
@@ -110,7 +158,7 @@ def test_a_shape_without_a_reference_in_the_budget_fails_with_its_reason(
         x_observed = _deformed(runner, prone, X_true)
         runner.problem.set_geometry(x_observed)
         estimate = estimate_reference(runner, prone.material(), prone.gravity(),
-                                      max_iterations=2)
+                                      max_iterations=2, method="anderson")
         assert not estimate.converged and estimate.forward_solves == 2
         assert estimate.reason == "no reference within 2 forward solves"
         assert np.array_equal(runner.mesh.geometry.x, x_observed)
@@ -136,6 +184,11 @@ def test_the_command_line_writes_the_reference_mesh_and_its_record(
     assert main([str(observed), "--c1", "2", "--phi", "180", "--out", str(tmp_path / "ref")]) == 0
     record = json.loads((tmp_path / "ref" / "reference.json").read_text())
     assert record["converged"] and record["misfit_mm"][-1] <= 1e-2
+    # one format with the workflow's record, which adds the cost and the machine
+    from studies.reference_state import ReferenceRecord
+
+    fields = set(ReferenceRecord.__dataclass_fields__)
+    assert set(record) <= fields and fields - set(record) == {"cold_forward_s", "cost", "machine"}
     mesh, _, _ = read_mesh(tmp_path / "ref" / "reference.xdmf")
     assert mesh.geometry.x.shape == X_true.shape
     assert main([str(tmp_path / "missing.xdmf"), "--c1", "2", "--phi", "180", "--out",
@@ -366,4 +419,5 @@ def test_the_workflow_runs_from_an_imaged_mesh_to_tracked_points_and_the_stiffne
     (tmp_path / "report").mkdir()
     html = "".join(_imaged(ctx))
     assert f"{record.forward_solves} forward solves" in html
+    assert f"one inverse-motion solve ({record.inverse_newton_iterations} Newton iterations" in html
     assert 'id="tracking-tumour"' in html and "stiffness_misfit.png" in html

@@ -211,6 +211,10 @@ def test_small_sweep_report(small_run: Path) -> None:
         assert trip["converged"] and trip["target_error_mm"] < 0.01 * trip["target_sag_mm"]
         assert trip["naive_error_mm"] > 10 * trip["target_error_mm"]
         assert f"{trip['naive_error_mm']:.2f}" in roundtrip
+        # found by the inverse-motion solve, checked by forward solves from its answer
+        assert trip["method"] == "inverse" and trip["inverse_newton_iterations"] > 0
+        assert (f"1 inverse ({trip['inverse_newton_iterations']} Newton its) + "
+                f"{trip['forward_solves']} forward") in roundtrip
     stability = json.loads((results / "fe_study/stability.json").read_text())
     sweep_lowest = html_table(page, "sweep-lowest-converging")
     assert "sweep: lowest converging C1" in sweep_lowest

@@ -18,8 +18,10 @@ def reference_section(ctx: Context) -> str:
     out = [para(
         "An imaged breast is already loaded: its mesh is not stress-free. Each row solves the "
         "config's mesh (the true reference) in the observed posture, takes that shape as the "
-        "image, estimates its reference (fem.reference: Sellier's fixed point with Anderson's "
-        "mixing, warm-started forward solves, tolerance "
+        "image, estimates its reference (fem.reference: the inverse-motion problem, equilibrium "
+        "written on the imaged shape with the reference as unknown, solved once and checked by "
+        "forward solves that start from its answer, finished by Sellier's fixed point with "
+        "Anderson's mixing where the check misses; tolerance "
         f"{trips.tolerance_mm:g} mm), and predicts the other posture from the estimate. "
         "Beside it, the naive prediction that takes the imaged shape as stress-free. Errors "
         "are the largest over the mesh's nodes, against the prediction from the true "
@@ -45,7 +47,10 @@ def _imaged(ctx: Context) -> list[str]:
     if record is not None:
         out.append(para(
             f"The imaged mesh, taken as {record.case}: its reference was found in "
-            f"{record.forward_solves} forward solves ({record.warm_starts} warm-started), "
+            + ("" if record.inverse_newton_iterations is None else
+               f"one inverse-motion solve ({record.inverse_newton_iterations} Newton iterations, "
+               f"{record.inverse_s:.1f} s) and ")
+            + f"{record.forward_solves} forward solves ({record.warm_starts} warm-started), "
             f"{record.wall_s:.1f} s, {record.cost:.1f} times one cold forward solve "
             f"({record.cold_forward_s:.1f} s); the largest node misfit fell to "
             f"{record.misfit_mm[-1]:.4f} mm. The reference lies up to "
