@@ -161,3 +161,21 @@ def test_the_report_page_notes_what_is_missing(tmp_path: Path) -> None:
         assert f'<section id="{section_id}"><h2>{title}</h2>' in page
     assert "Not available: results/fe_study/speed_accuracy.json" in page
     assert "could not be built" not in page
+
+
+def test_a_sphere_sweep_is_drawn_one_column_per_direction(tmp_path: Path) -> None:
+    """Directions off the plane share a Φ: each gets its own column, the plane's first."""
+    import numpy as np
+
+    from studies.figures.fe import direction_axis, plot_sweep_map
+
+    phi = np.array([0.0, 90.0, 0.0, 90.0, 45.0, 45.0])
+    plane = np.zeros(6)
+    x, ticks, label = direction_axis(phi, plane)
+    assert ticks is None and np.array_equal(x, phi) and "Φ" in label
+    theta = np.array([0.0, 0.0, 0.0, 0.0, -90.0, -60.0])
+    x, ticks, _ = direction_axis(phi, theta)
+    assert ticks == ["0/0", "90/0", "45/-90", "45/-60"]
+    assert list(x) == [0, 1, 0, 1, 2, 3]  # the same direction in the same column
+    plot_sweep_map(np.ones(6), phi, np.arange(6.0), tmp_path / "map.png", "s", theta=theta)
+    assert (tmp_path / "map.png").stat().st_size > 0

@@ -176,7 +176,8 @@ def scene_needs_section(ctx: Context) -> str:
     out.append(ctx.figure(
         "c1_effect.png",
         lambda p: fem_plots.plot_c1_effect(effect["phi"], effect["spread_mm"], effect["single_mm"],
-                                           effect["relative"], p, NEEDS_MM, C1_range),
+                                           effect["relative"], p, NEEDS_MM, C1_range,
+                                           effect["theta"]),
         "C1's effect on the displacement per gravity angle",
         "Displacement spread across the C1 range against the gravity angle Φ."))
     sentences = []
@@ -188,7 +189,8 @@ def scene_needs_section(ctx: Context) -> str:
             sentences.append(f"For a {need:g} mm need, no angle can use a single C1 (the "
                              f"smallest single-C1 error is {effect['single_mm'].min():.3g} mm).")
         else:
-            angles = ", ".join(f"{p:g}°" for p in effect["phi"][ok])
+            angles = ", ".join(f"{p:g}°" if t == 0 else f"{p:g}°/{t:g}°" for p, t in
+                               zip(effect["phi"][ok], effect["theta"][ok], strict=True))
             sentences.append(f"For a {need:g} mm need, a single C1 is enough at Φ = {angles}.")
     out.append(para(f"Over C1 = {C1_range[0]:g}–{C1_range[1]:g} kPa: " + " ".join(sentences)))
     rows = [[f"{p:g}", f"{t:g}", f"{s:.3g}", f"{100 * r:.3g}", f"{w:.3g}", f"{b:g}"]

@@ -24,12 +24,14 @@ def sweep_cost_section(ctx: Context) -> str:
         return para("The dataset holds no solve times.", "note")
     out = [para(
         "The FE solve wall time of every case of the sweep over stiffness C1 and gravity "
-        "angle Φ: one square per case, its colour the time in seconds (colour bar); a red "
+        "angle Φ (or, for a sweep beyond the paper's plane, the gravity direction Φ/θ): one "
+        "square per case, its colour the time in seconds (colour bar); a red "
         "cross marks a case that failed. The table gives the totals.", "caption")]
     out.append(ctx.figure(
         "sweep_cost.png",
         lambda p: fem_plots.plot_sweep_map(ds.C1, ds.phi, wall, p, "FE solve wall time (s)",
-                                           failed=~ds.converged, title="FE cost per case"),
+                                           failed=~ds.converged, title="FE cost per case",
+                                           theta=ds.theta),
         "FE solve time per case over C1 and gravity angle", "FE solve time per case."))
     rows = [
         ["cases", f"{len(wall)}"],

@@ -66,6 +66,40 @@ def plain_log_ticks(ax: plt.Axes) -> None:
         axis.set_minor_formatter(FuncFormatter(minor))
 
 
+def direction_axis(
+    phi: np.ndarray, theta: np.ndarray | None
+) -> tuple[np.ndarray, list[str] | None, str]:
+    """Where each case's gravity direction goes on a figure's x axis.
+
+    A sweep in the paper's plane (one θ) is drawn against Φ. A sweep with several θ (the
+    sphere) has directions that share a Φ, so each direction gets its own column instead:
+    the plane's first, by Φ, then the others by θ and Φ, labelled "Φ/θ".
+
+    Returns:
+        the x position of every case, the tick labels (None: Φ itself) and the axis label.
+    """
+    phi = np.asarray(phi, float)
+    if theta is None or len(np.unique(np.round(np.asarray(theta, float), 6))) <= 1:
+        return phi, None, "gravity angle Φ (deg)"
+    theta = np.asarray(theta, float)
+    pairs = sorted({(round(float(p), 6), round(float(t), 6)) for p, t in zip(phi, theta,
+                                                                            strict=True)},
+                   key=lambda d: (d[1] != 0.0, d[1], d[0]))
+    index = {d: i for i, d in enumerate(pairs)}
+    x = np.array([index[(round(float(p), 6), round(float(t), 6))]
+                  for p, t in zip(phi, theta, strict=True)], dtype=float)
+    return x, [f"{p:g}/{t:g}" for p, t in pairs], \
+        "gravity direction Φ/θ (deg): the plane θ = 0 first, then the others by θ"
+
+
+def _direction_ticks(ax: Any, labels: list[str] | None) -> None:
+    """One labelled tick per direction, where the x axis holds directions."""
+    if labels is None:
+        return
+    ax.set_xticks(np.arange(len(labels)))
+    ax.set_xticklabels(labels, rotation=90, fontsize=6)
+
+
 def plot_sweep_map(
     C1: np.ndarray,
     phi: np.ndarray,
@@ -74,8 +108,9 @@ def plot_sweep_map(
     label: str,
     failed: np.ndarray | None = None,
     title: str = "",
+    theta: np.ndarray | None = None,
 ) -> None:
-    """A per-case quantity over the (C1, Φ) plane; failed cases marked with crosses.
+    """A per-case quantity over C1 and the gravity direction; failed cases marked with crosses.
 
     Args:
         C1: per case, kPa.
@@ -85,9 +120,12 @@ def plot_sweep_map(
         label: colour-bar label, with units.
         failed: True where the case failed (drawn as a red cross).
         title: figure title.
+        theta: per case, degrees; with several values, one column per direction
+            (:func:`direction_axis`).
     """
-    C1, phi, values = np.asarray(C1, float), np.asarray(phi, float), np.asarray(values, float)
-    fig, ax = plt.subplots(figsize=(8, 5), constrained_layout=True)
+    C1, values = np.asarray(C1, float), np.asarray(values, float)
+    phi, ticks, xlabel = direction_axis(phi, theta)
+    fig, ax = plt.subplots(figsize=(8 if ticks is None else 11, 5), constrained_layout=True)
     # square markers about as tall as the C1 spacing of the grid, so that a dense sweep
     # (43 C1 values) does not overlap into a smear
     rows = max(len(np.unique(np.round(C1, 6))), 1)
@@ -98,7 +136,8 @@ def plot_sweep_map(
         ax.scatter(phi[failed], C1[failed], marker="x", color="red", s=size, label="failed")
         fig.legend(loc="outside lower center")
     fig.colorbar(sc, ax=ax, label=label)
-    ax.set_xlabel("gravity angle Φ (deg)")
+    _direction_ticks(ax, ticks)
+    ax.set_xlabel(xlabel)
     ax.set_ylabel("C1 (kPa)")
     if title:
         ax.set_title(title)
@@ -293,8 +332,9 @@ def plot_c1_effect(
     path: str | Path,
     needs_mm: Sequence[float] = (),
     C1_range: tuple[float, float] | None = None,
+    theta: np.ndarray | None = None,
 ) -> None:
-    """How much C1 changes the displacement, per gravity angle.
+    """How much C1 changes the displacement, per gravity direction.
 
     Args:
         phi: gravity angles, degrees.
@@ -305,11 +345,15 @@ def plot_c1_effect(
         path: PNG to write.
         needs_mm: accuracy needs, drawn as horizontal lines.
         C1_range: the sweep's C1 range (kPa), for the title.
+        theta: the directions' θ, degrees; with several values, one column per direction
+            (:func:`direction_axis`).
     """
-    order = np.argsort(phi)
-    phi, spread_mm = np.asarray(phi)[order], np.asarray(spread_mm)[order]
+    x, ticks, xlabel = direction_axis(phi, theta)
+    order = np.argsort(x, kind="stable")
+    phi, spread_mm = x[order], np.asarray(spread_mm)[order]
     single_mm, relative = np.asarray(single_mm)[order], np.asarray(relative)[order]
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 5.0), constrained_layout=True)
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11 if ticks is None else 14, 5.0),
+                                   constrained_layout=True)
     ax1.plot(phi, spread_mm, "o-", linewidth=3.0, markersize=9, alpha=0.6,
              label="|u(C1 min) − u(C1 max)|, max over points")
     ax1.plot(phi, single_mm, "s--", markerfacecolor="none", markersize=7, markeredgewidth=1.5,
@@ -320,13 +364,15 @@ def plot_c1_effect(
                     label=f"need {need:g} mm")
     ax1.set_yscale("log")
     plain_log_ticks(ax1)
-    ax1.set_xlabel("gravity angle Φ (deg)")
+    _direction_ticks(ax1, ticks)
+    ax1.set_xlabel(xlabel)
     ax1.set_ylabel("displacement difference (mm)")
     ax1.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2)
     ax1.grid(True, which="both", alpha=0.3)
     ax2.plot(phi, 100 * relative, "o-", color="tab:purple")
-    ax2.set_xlabel("gravity angle Φ (deg)")
-    ax2.set_ylabel("spread / max |u| at that Φ (%)")
+    _direction_ticks(ax2, ticks)
+    ax2.set_xlabel(xlabel)
+    ax2.set_ylabel("spread / max |u| in that direction (%)")
     ax2.set_ylim(bottom=0)
     ax2.grid(True, alpha=0.3)
     if C1_range is not None:
@@ -334,4 +380,7 @@ def plot_c1_effect(
     save_figure(fig, path)
 
 
-__all__ = ["plot_c1_effect", "plot_speed_accuracy", "plot_stability_maps", "plot_sweep_map"]
+__all__ = [
+    "direction_axis", "plot_c1_effect", "plot_speed_accuracy", "plot_stability_maps",
+    "plot_sweep_map",
+]
