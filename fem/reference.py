@@ -261,8 +261,9 @@ def write_reference_mesh(runner: CaseRunner, X: np.ndarray, xdmf_path: str | Pat
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m fem.reference OBSERVED --c1 C1 --phi PHI [--theta T] --out DIR [--config]``.
+    """``python -m fem.reference OBSERVED --c1 C1 --phi PHI --out DIR [options]``.
 
+    Options: ``--theta``, ``--config``, ``--tolerance-mm``, ``--method`` (:data:`METHODS`).
     Estimates the reference of the observed (loaded) mesh under that case's gravity and writes
     ``DIR/reference.xdmf`` (the same tags: any rule's mesh) and ``DIR/reference.json`` (the
     iterations, misfits and cost). Nothing is written when no reference is found: the exit
@@ -289,6 +290,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--config", type=Path, help="config (sections fe, material, mesh)")
     parser.add_argument("--tolerance-mm", type=float, default=1e-2,
                         help="largest node misfit accepted, mm")
+    parser.add_argument("--method", choices=METHODS, default="inverse",
+                        help="the inverse-motion solve checked by forward solves (default), or "
+                             "the fixed point alone with Anderson's or Aitken's acceleration")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     try:
@@ -298,7 +302,7 @@ def main(argv: list[str] | None = None) -> int:
         runner = CaseRunner(args.observed, settings)
         estimate = estimate_reference(runner, case.material(settings.density),
                                       case.gravity(settings.gravity),
-                                      tolerance=1e-3 * args.tolerance_mm)
+                                      tolerance=1e-3 * args.tolerance_mm, method=args.method)
     except (FEError, MeshInputError, OSError, yaml.YAMLError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2

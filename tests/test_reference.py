@@ -184,6 +184,12 @@ def test_the_command_line_writes_the_reference_mesh_and_its_record(
     assert main([str(observed), "--c1", "2", "--phi", "180", "--out", str(tmp_path / "ref")]) == 0
     record = json.loads((tmp_path / "ref" / "reference.json").read_text())
     assert record["converged"] and record["misfit_mm"][-1] <= 1e-2
+    assert record["method"] == "inverse" and record["inverse_newton_iterations"] > 0
+    assert main([str(observed), "--c1", "2", "--phi", "180", "--out", str(tmp_path / "fixed"),
+                 "--method", "anderson"]) == 0
+    fixed = json.loads((tmp_path / "fixed" / "reference.json").read_text())
+    assert fixed["method"] == "anderson" and fixed["inverse_newton_iterations"] is None
+    assert fixed["forward_solves"] > record["forward_solves"]
     # one format with the workflow's record, which adds the cost and the machine
     from studies.reference_state import ReferenceRecord
 
