@@ -27,14 +27,21 @@ def test_case_id_rejects_garbage() -> None:
         Case.from_id("c1=1_phi=0")
 
 
-def test_default_config_is_the_papers_688_cases() -> None:
+def test_default_config_is_the_papers_plane_and_the_caudal_half() -> None:
+    from fem.sweep import sphere_directions
+
     config = yaml.safe_load((REPO / "config.yaml").read_text())
     cases = sweep_cases(config["sweep"])
-    assert len(cases) == 688
     c1s = sorted({c.C1 for c in cases})
-    phis = sorted({c.phi for c in cases})
-    assert len(c1s) == 43 and c1s[0] == 0.8 and c1s[-1] == 5.0
-    assert len(phis) == 16 and phis[0] == -150.0 and phis[-1] == 180.0
+    assert len(c1s) == 22 and c1s[0] == 0.8 and c1s[-1] == 5.0
+    assert np.allclose(np.diff(c1s), 0.2)
+    directions = {(c.phi, c.theta) for c in cases}
+    assert len(directions) == 32 and len(cases) == 22 * 32
+    assert {(phi, 0.0) for phi in PAPER_PHI_DEG} <= directions  # the paper's plane, whole
+    lattice = (Case(1.0, phi, theta) for phi, theta in sphere_directions(16, "caudal"))
+    caudal = {(case.phi, case.theta) for case in lattice}  # as the case folders round them
+    assert caudal <= directions and len(caudal) == 16
+    phis = sorted({c.phi for c in cases if c.theta == 0.0})
     assert 0.0 in phis  # the supine clinical cases are part of the sweep
 
 

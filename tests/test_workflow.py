@@ -16,14 +16,23 @@ from tests.conftest import REPO, job_counts, snakemake
 pytestmark = pytest.mark.workflow
 
 
-def test_full_config_plans_688_solves_in_16_chains(tmp_path: Path) -> None:
+def test_full_config_plans_704_solves_in_32_chains_and_the_paper_preset_688_in_16(
+    tmp_path: Path,
+) -> None:
     run = snakemake(tmp_path, "-n", "-j2", config=REPO / "config.yaml")
     assert run.returncode == 0, run.stderr
     text = run.stdout + run.stderr
     counts = job_counts(text)
-    assert counts["solve_chain"] == 16 and "solve" not in counts
+    assert counts["solve_chain"] == 32 and "solve" not in counts  # 16 in the plane, 16 caudal
     summaries = set(re.findall(r"results/cases/[^,\s]+/summary\.json", text))
-    assert len(summaries) == 688
+    assert len(summaries) == 22 * 32
+    # the paper's own sweep, on the same config
+    run = snakemake(tmp_path, "-n", "-j2", "--config", "sweep={preset: paper}",
+                    config=REPO / "config.yaml")
+    assert run.returncode == 0, run.stderr
+    text = run.stdout + run.stderr
+    assert job_counts(text)["solve_chain"] == 16
+    assert len(set(re.findall(r"results/cases/[^,\s]+/summary\.json", text))) == 688
     # chains off: one job per case
     config = yaml.safe_load((REPO / "config.yaml").read_text())
     config["sweep"]["chains"] = False
@@ -31,15 +40,15 @@ def test_full_config_plans_688_solves_in_16_chains(tmp_path: Path) -> None:
     run = snakemake(tmp_path, "-n", "-j2", config=tmp_path / "per_case.yaml")
     assert run.returncode == 0, run.stderr
     counts = job_counts(run.stdout + run.stderr)
-    assert counts["solve"] == 688 and "solve_chain" not in counts
+    assert counts["solve"] == 22 * 32 and "solve_chain" not in counts
     assert counts["mesh"] == counts["aggregate"] == counts["select_model"] == counts["report"] == 1
 
 
 def test_one_case_path_runs_its_chain_or_itself(tmp_path: Path) -> None:
     """A sweep case's path runs its direction's chain; any other case is solved alone."""
-    for target, job in (("c1=2.30_phi=-150.0_theta=0.0", "solve_chain"),
-                        ("c1=2.35_phi=-150.0_theta=0.0", "solve"),
-                        ("c1=2.30_phi=-140.0_theta=0.0", "solve")):
+    for target, job in (("c1=2.20_phi=-150.0_theta=0.0", "solve_chain"),
+                        ("c1=2.30_phi=-150.0_theta=0.0", "solve"),
+                        ("c1=2.20_phi=-140.0_theta=0.0", "solve")):
         run = snakemake(tmp_path, "-n", "-j2", f"results/cases/{target}/summary.json",
                         config=REPO / "config.yaml")
         assert run.returncode == 0, run.stderr
