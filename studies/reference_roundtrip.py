@@ -159,8 +159,7 @@ def round_trips(mesh: Path, settings: SolverSettings, c1s: list[float],
                     cost=estimate.wall_s / cold, estimate_s=estimate.wall_s,
                     converged=estimate.converged, reason=estimate.reason,
                     method=estimate.method,
-                    inverse_newton_iterations=(None if estimate.inverse is None else
-                                               estimate.inverse.loading.total_iterations),
+                    inverse_newton_iterations=estimate.record()["inverse_newton_iterations"],
                 ))
     finally:
         runner.problem.set_geometry(X)

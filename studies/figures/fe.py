@@ -354,10 +354,12 @@ def plot_c1_effect(
     single_mm, relative = np.asarray(single_mm)[order], np.asarray(relative)[order]
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11 if ticks is None else 14, 5.0),
                                    constrained_layout=True)
-    ax1.plot(phi, spread_mm, "o-", linewidth=3.0, markersize=9, alpha=0.6,
+    # lines join neighbouring angles of the plane; the sphere's columns are not neighbours
+    line, dashed = ("-", "--") if ticks is None else ("none", "none")
+    ax1.plot(phi, spread_mm, marker="o", linestyle=line, linewidth=3.0, markersize=9, alpha=0.6,
              label="|u(C1 min) − u(C1 max)|, max over points")
-    ax1.plot(phi, single_mm, "s--", markerfacecolor="none", markersize=7, markeredgewidth=1.5,
-             label="error of the best single C1")
+    ax1.plot(phi, single_mm, marker="s", linestyle=dashed, markerfacecolor="none", markersize=7,
+             markeredgewidth=1.5, label="error of the best single C1")
     styles = ("--", "-.", ":", (0, (5, 1)))
     for i, need in enumerate(needs_mm):
         ax1.axhline(need, color="grey", linestyle=styles[i % len(styles)], linewidth=1.1,
@@ -369,7 +371,7 @@ def plot_c1_effect(
     ax1.set_ylabel("displacement difference (mm)")
     ax1.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2)
     ax1.grid(True, which="both", alpha=0.3)
-    ax2.plot(phi, 100 * relative, "o-", color="tab:purple")
+    ax2.plot(phi, 100 * relative, marker="o", linestyle=line, color="tab:purple")
     _direction_ticks(ax2, ticks)
     ax2.set_xlabel(xlabel)
     ax2.set_ylabel("spread / max |u| in that direction (%)")
