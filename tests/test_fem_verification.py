@@ -40,6 +40,7 @@ class UniaxialStretch:
     """
 
     mixed = True
+    symmetric = True  # the second variation of a potential, as the solver's problems declare
 
     def __init__(self, stretch: float, C1: float, degree: int) -> None:
         self.mesh = dmesh.create_box(
