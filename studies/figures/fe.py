@@ -124,16 +124,16 @@ def plot_sweep_map(
             (:func:`direction_axis`).
     """
     C1, values = np.asarray(C1, float), np.asarray(values, float)
-    phi, ticks, xlabel = direction_axis(phi, theta)
+    x, ticks, xlabel = direction_axis(phi, theta)
     fig, ax = plt.subplots(figsize=(8 if ticks is None else 11, 5), constrained_layout=True)
     # square markers about as tall as the C1 spacing of the grid, so that a dense sweep
     # (43 C1 values) does not overlap into a smear
     rows = max(len(np.unique(np.round(C1, 6))), 1)
     size = float(np.clip((260.0 / rows) ** 2, 12.0, 80.0))
-    sc = ax.scatter(phi, C1, c=values, cmap="viridis", s=size, marker="s")
+    sc = ax.scatter(x, C1, c=values, cmap="viridis", s=size, marker="s")
     if failed is not None and np.any(failed):
         failed = np.asarray(failed, bool)
-        ax.scatter(phi[failed], C1[failed], marker="x", color="red", s=size, label="failed")
+        ax.scatter(x[failed], C1[failed], marker="x", color="red", s=size, label="failed")
         fig.legend(loc="outside lower center")
     fig.colorbar(sc, ax=ax, label=label)
     _direction_ticks(ax, ticks)
@@ -350,15 +350,15 @@ def plot_c1_effect(
     """
     x, ticks, xlabel = direction_axis(phi, theta)
     order = np.argsort(x, kind="stable")
-    phi, spread_mm = x[order], np.asarray(spread_mm)[order]
+    x, spread_mm = x[order], np.asarray(spread_mm)[order]
     single_mm, relative = np.asarray(single_mm)[order], np.asarray(relative)[order]
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11 if ticks is None else 14, 5.0),
                                    constrained_layout=True)
     # lines join neighbouring angles of the plane; the sphere's columns are not neighbours
     line, dashed = ("-", "--") if ticks is None else ("none", "none")
-    ax1.plot(phi, spread_mm, marker="o", linestyle=line, linewidth=3.0, markersize=9, alpha=0.6,
+    ax1.plot(x, spread_mm, marker="o", linestyle=line, linewidth=3.0, markersize=9, alpha=0.6,
              label="|u(C1 min) − u(C1 max)|, max over points")
-    ax1.plot(phi, single_mm, marker="s", linestyle=dashed, markerfacecolor="none", markersize=7,
+    ax1.plot(x, single_mm, marker="s", linestyle=dashed, markerfacecolor="none", markersize=7,
              markeredgewidth=1.5, label="error of the best single C1")
     styles = ("--", "-.", ":", (0, (5, 1)))
     for i, need in enumerate(needs_mm):
@@ -371,7 +371,7 @@ def plot_c1_effect(
     ax1.set_ylabel("displacement difference (mm)")
     ax1.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2)
     ax1.grid(True, which="both", alpha=0.3)
-    ax2.plot(phi, 100 * relative, marker="o", linestyle=line, color="tab:purple")
+    ax2.plot(x, 100 * relative, marker="o", linestyle=line, color="tab:purple")
     _direction_ticks(ax2, ticks)
     ax2.set_xlabel(xlabel)
     ax2.set_ylabel("spread / max |u| in that direction (%)")
