@@ -27,7 +27,7 @@ class ReferenceRecord(Result):
     """``results/mesh/reference.json``: how the reference of the imaged mesh was found.
 
     The keys of ``python -m fem.reference``'s ``reference.json`` (``imaged``, ``case``,
-    :meth:`fem.reference.ReferenceEstimate.record`, ``largest_shift_mm``), with the cost beside
+    :meth:`fem.reference.ReferenceEstimate.record`), with the cost beside
     them; one reader serves both (the command's file lacks the cost and the machine).
 
     Attributes:
@@ -80,8 +80,6 @@ def reference_of_imaged(imaged: str | Path, settings: Any, c1: float, phi: float
     Raises:
         NoReferenceError: with the estimate's reason, before anything is written.
     """
-    import numpy as np
-
     from fem.case import CaseRunner
     from fem.reference import estimate_reference, write_reference_mesh
     from fem.sweep import Case
@@ -96,10 +94,9 @@ def reference_of_imaged(imaged: str | Path, settings: Any, c1: float, phi: float
         if not estimate.converged:
             raise NoReferenceError(f"no reference state for {imaged} as {case.id}: "
                                    f"{estimate.reason}")
-        shift = float(np.linalg.norm(estimate.X - runner.mesh.geometry.x, axis=1).max())
         # the keys of python -m fem.reference's reference.json, and the cost beside them
         record = ReferenceRecord(
-            imaged=str(imaged), case=case.id, **estimate.record(), largest_shift_mm=1e3 * shift,
+            imaged=str(imaged), case=case.id, **estimate.record(),
             cold_forward_s=cold, cost=estimate.wall_s / cold, machine=machine_state().to_json(),
         )
         write_reference_mesh(runner, estimate.X, xdmf_out)
