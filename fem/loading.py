@@ -6,7 +6,8 @@ inverts (det F ≤ 0) it restores the last converged state and cuts the step;
 after an easy step it grows the step; each step starts from a linear
 extrapolation of the last two converged states. When the step has been cut below
 ``min_step``, a last resort starts again from rest with Newton's
-:data:`fem.options.RESCUE_OPTIONS` before the case is declared failed. With
+:data:`fem.options.RESCUE_OPTIONS` before the case is declared failed; it gives an attempt up
+once its residual sits on a plateau (``Loading.stall_window``). With
 ``fixed_steps`` it becomes the classic fixed-increment scheme that it is
 benchmarked against (no last resort).
 """
@@ -130,7 +131,8 @@ def failure_kind(reason: str) -> str:
     (the residual became NaN/Inf: an element inverted during the iteration),
     ``line_search`` (no acceptable step length), ``linear_solver`` (factorisation or
     Krylov failure), ``petsc_error`` (PETSc raised, e.g. AMG set-up on a garbage
-    state), ``newton`` (iteration limit or divergence), ``other``.
+    state), ``stalled`` (the residual sat on a plateau: the last resort's stall test),
+    ``newton`` (iteration limit or divergence), ``other``.
     """
     if reason.startswith("inverted"):
         return "inversion"
@@ -142,6 +144,8 @@ def failure_kind(reason: str) -> str:
         return "line_search"
     if "linear_solve" in reason:
         return "linear_solver"
+    if reason == "diverged_stalled":
+        return "stalled"
     if reason.startswith("diverged"):
         return "newton"
     return "other"
@@ -246,9 +250,10 @@ def solve_incrementally(
             if loading.rescue and newton is None:
                 # From the stalled state the creasing fold does not let Newton through; from
                 # rest, the whole load at once with another line search can get past it.
+                newton = {**RESCUE_OPTIONS, "stall_window": loading.stall_window}
                 log.info("λ=%.4f: steps below min_step fail (%s); last resort: from rest with %s",
-                         fraction, reason, RESCUE_OPTIONS)
-                newton, first_pass = RESCUE_OPTIONS, (fraction, state.copy())
+                         fraction, reason, newton)
+                first_pass = (fraction, state.copy())
                 result.path_start = len(result.attempts)
                 state[:] = rest[1]
                 history, fraction, step = [rest], 0.0, loading.initial_step

@@ -205,6 +205,10 @@ class Loading:
             iterations) before declaring the case failed; a failed case keeps whichever
             pass got further. A case that converges without it is solved exactly as
             before.
+        stall_window: the last resort gives an attempt up once this many Newton iterations
+            sit on a plateau of the residual (``fem.solver._stalled``) instead of running on
+            to its 60th iteration there; 0 turns the test off. The last resort's failing
+            attempts on the default mesh sat on such plateaus for up to 50 iterations.
     """
 
     initial_step: float = 1.0
@@ -216,6 +220,7 @@ class Loading:
     extrapolate: bool = True
     fixed_steps: int = 0
     rescue: bool = True
+    stall_window: int = 8
 
     def __post_init__(self) -> None:
         if not 0 < _finite("initial_step", self.initial_step) <= 1:
@@ -230,6 +235,10 @@ class Loading:
             raise InvalidParameterError("loading.cutback must lie in (0, 1)")
         if self.fixed_steps < 0:
             raise InvalidParameterError("loading.fixed_steps must be >= 0")
+        if (isinstance(self.stall_window, bool) or not isinstance(self.stall_window, int)
+                or self.stall_window < 0):
+            raise InvalidParameterError(
+                f"loading.stall_window must be a non-negative integer, got {self.stall_window!r}")
 
     @classmethod
     def from_mapping(cls, values: dict[str, Any]) -> Loading:

@@ -13,6 +13,8 @@ import dataclasses
 import functools
 import os
 import platform
+import subprocess
+import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -80,6 +82,24 @@ def one_core(core: int | None = None) -> Iterator[int]:
         yield core
     finally:
         pin(allowed)
+
+
+def run_pinned(command: list[str], core: int, log: Path, cwd: Path | None = None
+               ) -> tuple[float, float, int]:
+    """Run ``command`` pinned to ``core`` with BLAS on one thread, its output into ``log``.
+
+    Returns:
+        Its wall seconds, its CPU seconds (the kernel's count for the whole process tree,
+        so that another process's load on the machine does not enter it) and its exit status.
+    """
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+    start = time.perf_counter()
+    with open(log, "w") as out:
+        proc = subprocess.Popen(["taskset", "-c", str(core), *command], env=env, cwd=cwd,
+                                stdout=out, stderr=subprocess.STDOUT)
+        _, status, usage = os.wait4(proc.pid, 0)
+    return (time.perf_counter() - start, usage.ru_utime + usage.ru_stime,
+            os.waitstatus_to_exitcode(status))
 
 
 def timed_on_one_core(func: Callable[..., R]) -> Callable[..., R]:

@@ -24,12 +24,9 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import os
 import statistics
-import subprocess
 import sys
 import threading
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -38,7 +35,7 @@ import yaml
 
 from fem.dataset import read_points
 from fem.sweep import Case
-from studies.machine import MachineState, machine_state
+from studies.machine import MachineState, machine_state, run_pinned
 from studies.results import Record, Result
 
 REPO = Path(__file__).resolve().parent.parent
@@ -87,18 +84,6 @@ class SweepSpeed(Result):
     machine_after: MachineState
 
 
-def _run(command: list[str], core: int, cwd: Path) -> tuple[float, float, int]:
-    """Run ``command`` pinned to ``core``; its wall and CPU seconds (children included), status."""
-    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
-    start = time.perf_counter()
-    with open(cwd / "run.log", "w") as out:
-        proc = subprocess.Popen(["taskset", "-c", str(core), *command], env=env, cwd=cwd,
-                                stdout=out, stderr=subprocess.STDOUT)
-        _, status, usage = os.wait4(proc.pid, 0)
-    return (time.perf_counter() - start, usage.ru_utime + usage.ru_stime,
-            os.waitstatus_to_exitcode(status))
-
-
 def _summaries(workdir: Path, cases: list[Case]) -> dict[Case, dict]:
     out = {}
     for case in cases:
@@ -141,7 +126,7 @@ def run(config: dict, c1_values: list[float], directions: list[float], out: Path
         (workdir / "config.yaml").write_text(yaml.safe_dump(values))
         command = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-d",
                    str(workdir), "--configfile", str(workdir / "config.yaml"), "-j1", TARGET]
-        runs[chains] = _run(command, 0 if chains else 1, workdir)
+        runs[chains] = run_pinned(command, 0 if chains else 1, workdir / "run.log", workdir)
 
     before = machine_state()
     threads = [threading.Thread(target=path, args=(chains,)) for chains in (False, True)]

@@ -111,3 +111,27 @@ def test_a_chain_writes_every_case_as_run_case_does(coarse_mesh: Path, tmp_path:
                                              if s.case.phi == 180 else s.case.id)
     points = read_points(tmp_path / Case(1.0, 180.0).id / "points.h5")
     assert points["case"] == Case(1.0, 180.0).id and np.abs(points["u"]).max() > 0
+
+
+def test_the_rescue_benchmark_solves_the_chains_both_ways(coarse_mesh: Path,
+                                                          tmp_path: Path) -> None:
+    """``studies.rescue_cost``: each way's chains in their own processes, compared case by case."""
+    import yaml
+
+    from studies.rescue_cost import RescueCost, run
+
+    config = {"fe": {"loading": {"stall_window": 6}}}
+    result = run(coarse_mesh, config, [(-90.0, 0.0)], [1.5, 1.0], tmp_path)
+    assert result.returncodes == [0, 0] and result.stall_window == 6
+    assert [r.case for r in result.cases] == [Case(1.5, -90.0).id, Case(1.0, -90.0).id]
+    for row in result.cases:  # nothing stalls here: the same answer both ways
+        assert row.status_on == row.status_off == "converged"
+        assert row.difference_mm == 0.0 and row.newton_on == row.newton_off
+    assert result.cpu_on_s > 0 and result.cpu_off_s > 0
+    off = yaml.safe_load((tmp_path / "off" / "config.yaml").read_text())
+    assert off["fe"]["loading"]["stall_window"] == 0
+    summary = json.loads((tmp_path / "on" / "cases" / Case(1.0, -90.0).id / "summary.json")
+                         .read_text())
+    assert summary["settings"]["loading"]["stall_window"] == 6
+    result.write(tmp_path / "rescue_cost.json")
+    assert RescueCost.read(tmp_path / "rescue_cost.json") == result

@@ -90,6 +90,101 @@ def test_the_last_resort_goes_on_where_the_steps_fail(coarse_mesh: Path) -> None
         runner.solver.solve({"snes_linesearch_type": "nleqerr"})
 
 
+def _solve_whole_load(runner, case: Case, newton: dict | None = None):
+    """One Newton solve of the whole load from rest (no load path)."""
+    problem, solver = runner.problem, runner.solver
+    problem.set_case(case.material(900.0), case.gravity(9.81))
+    problem.w.x.array[:] = 0.0
+    solver.scale_to_load()
+    problem.set_load_fraction(1.0)
+    return solver.solve(newton)
+
+
+def test_the_stall_test_keeps_petscs_own_tests_where_it_does_not_stall(coarse_mesh: Path) -> None:
+    """A solve with a stall window that never fires is PETSc's own, residual for residual."""
+    from fem.case import CaseRunner
+
+    with CaseRunner(coarse_mesh) as runner:
+        for newton in ({}, {"snes_max_it": 2}):  # converged; and stopped by the iteration limit
+            plain = _solve_whole_load(runner, Case(1.5, 0.0), newton)
+            windowed = _solve_whole_load(runner, Case(1.5, 0.0), {**newton, "stall_window": 1000})
+            assert windowed.reason == plain.reason
+            assert windowed.iterations == plain.iterations
+            assert windowed.residuals == plain.residuals
+        assert plain.reason == "diverged_max_it" and not plain.converged
+
+
+def test_the_stall_test_tells_a_plateau_from_a_noisy_descent() -> None:
+    from fem.solver import _stalled
+
+    plateau = [0.36, 0.18, 0.1, *[0.072, 0.071, 0.073, 0.071] * 2]  # traced: 40 such iterations
+    assert _stalled(plateau, 8) and not _stalled(plateau, 9) and not _stalled(plateau, 0)
+    # Newton on its way over the fold: noisy, then converging (traced, 31 iterations)
+    noisy = [0.14, 0.1, 0.065, 0.047, 0.013, 0.0031, 0.0023, 0.0019, 0.002, 0.0016, 0.0029,
+             0.0011, 0.0023, 0.0018, 0.0018, 0.0021, 0.0018, 0.0026, 0.0013, 0.0018, 0.0013]
+    # creeping for 15 iterations, then over the fold and converged (traced, 41 iterations)
+    creeping = [0.18, 0.138, 0.127, 0.117, 0.105, 0.0858, 0.0694, 0.062, 0.0472, 0.0471, 0.0388,
+                0.0359, 0.0337, 0.0268, 0.0235, 0.0221, 0.0213, 0.0212, 0.0202, 0.0201, 0.0178,
+                0.0185, 0.0158, 0.0169, 0.0164, 0.0156, 0.0164, 0.0163, 0.0126, 0.00881]
+    for moving in (noisy, creeping):
+        assert not any(_stalled(moving[:k], 8) for k in range(len(moving) + 1))
+    # flat, but at less than half the best residual before: progress, not a stall
+    assert not _stalled([1.0, 0.9, *[0.4] * 8], 8) and _stalled([1.0, 0.7, *[0.4] * 8], 8)
+
+
+def test_a_solve_whose_residual_stops_falling_is_given_up_as_stalled(coarse_mesh: Path) -> None:
+    from fem.case import CaseRunner
+    from fem.solver import STALL_RATIO
+
+    case = Case(0.8, -90.0)  # soft, rolled medially: the line search damps the first iterations
+    with CaseRunner(coarse_mesh, SolverSettings(contact=None)) as runner:
+        free = _solve_whole_load(runner, case, {"snes_max_it": 60})
+        stalled = _solve_whole_load(runner, case, {"snes_max_it": 60, "stall_window": 1})
+        again = _solve_whole_load(runner, case, {"snes_max_it": 60})  # the window is dropped
+    assert again.residuals == free.residuals and free.converged
+    norms = stalled.residuals
+    assert stalled.reason == "diverged_stalled" and not stalled.converged
+    assert stalled.iterations < free.iterations
+    # it went as the plain solve did up to the iteration that failed to halve the residual
+    assert norms == free.residuals[: len(norms)]
+    assert norms[-1] > STALL_RATIO * min(norms[:-1])
+    assert all(b <= STALL_RATIO * min(norms[: k + 1]) for k, b in enumerate(norms[1:-1]))
+    from fem.loading import failure_kind
+
+    assert failure_kind(stalled.reason) == "stalled"
+
+
+def test_the_last_resort_gives_a_stalled_attempt_up(coarse_mesh: Path) -> None:
+    """The loader hands ``Loading.stall_window`` to the last resort's attempts."""
+    from fem.case import CaseRunner
+
+    case = Case(0.8, -90.0)
+    results = {}
+    for window in (0, 1):
+        # one Newton iteration fails the whole load, and a half step is below min_step: the
+        # last resort follows at once, with the whole load from rest
+        settings = SolverSettings(contact=None, petsc_options={"snes_max_it": 1},
+                                  loading=Loading(min_step=1.0, stall_window=window))
+        with CaseRunner(coarse_mesh, settings) as runner:
+            results[window], _ = runner.solve(case)
+    assert results[0].converged and results[0].rescued
+    stalled = results[1].attempts[-1]
+    assert not results[1].converged and stalled.rescue
+    assert stalled.reason == "diverged_stalled" and stalled.iterations == 1
+    assert results[1].failure_kinds.get("stalled") == 1
+
+
+@pytest.mark.parametrize("window", [-1, 1.5, True])
+def test_a_bad_stall_window_is_named(coarse_mesh: Path, window: object) -> None:
+    from fem.case import CaseRunner
+
+    with pytest.raises(InvalidParameterError, match="loading.stall_window"):
+        Loading(stall_window=window)
+    with CaseRunner(coarse_mesh) as runner, pytest.raises(InvalidParameterError,
+                                                          match="stall_window"):
+        runner.solver.solve({"stall_window": window})
+
+
 @pytest.mark.parametrize("c1", [0.0, -1.0, math.nan, math.inf])
 def test_bad_c1_is_named(c1: float) -> None:
     with pytest.raises(InvalidParameterError, match="C1"):
