@@ -27,6 +27,7 @@ import numpy as np
 import yaml
 
 from fem.dataset import read_points
+from fem.parameters import Loading
 from fem.sweep import Case
 from studies.machine import MachineState, machine_state, run_pinned
 from studies.results import Record, Result
@@ -71,7 +72,7 @@ class RescueCost(Result):
 def run(mesh: Path, config: dict, directions: list[tuple[float, float]], c1_values: list[float],
         out: Path) -> RescueCost:
     """Solve the chains both ways at once and compare them."""
-    window = int(config.get("fe", {}).get("loading", {}).get("stall_window", 8))
+    window = Loading.from_mapping(config.get("fe", {}).get("loading", {})).stall_window
     if window == 0:
         raise SystemExit("the config's fe.loading.stall_window is 0: nothing to compare")
     cpu = {way: 0.0 for way in WAYS}
