@@ -687,8 +687,8 @@ def _stalled(norms: list[float], window: int) -> bool:
     finds no descent along Newton's direction (a local minimum of the residual's norm). A
     residual that still moves is not a plateau: Newton on its way over a fold creeps and jumps
     like that for a dozen iterations and more before converging (traced on the default mesh's
-    soft medial cases: attempts of the last resort that converged after 20 to 41 iterations
-    spent up to 15 of them within a factor 1.7, and 8 within a factor 1.25).
+    soft medial and caudal cases: attempts of the last resort that converged after 20 to 41
+    iterations spent up to 15 of them within a factor 1.7, and 8 within a factor 1.25).
     """
     if not window or len(norms) <= window:
         return False
