@@ -135,3 +135,6 @@ def test_the_rescue_benchmark_solves_the_chains_both_ways(coarse_mesh: Path,
     assert summary["settings"]["loading"]["stall_window"] == 6
     result.write(tmp_path / "rescue_cost.json")
     assert RescueCost.read(tmp_path / "rescue_cost.json") == result
+    with pytest.raises(InvalidParameterError, match="stall_window is 0"):
+        run(coarse_mesh, {"fe": {"loading": {"stall_window": 0}}}, [(-90.0, 0.0)], [1.0],
+            tmp_path / "none")
