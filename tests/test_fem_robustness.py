@@ -92,8 +92,8 @@ def test_the_last_resort_goes_on_where_the_steps_fail(coarse_mesh: Path) -> None
 
 def _solve_whole_load(runner, case: Case, newton: dict | None = None):
     """One Newton solve of the whole load from rest (no load path)."""
-    problem, solver = runner.problem, runner.solver
-    problem.set_case(case.material(900.0), case.gravity(9.81))
+    problem, solver, settings = runner.problem, runner.solver, runner.settings
+    problem.set_case(case.material(settings.density), case.gravity(settings.gravity))
     problem.w.x.array[:] = 0.0
     solver.scale_to_load()
     problem.set_load_fraction(1.0)
