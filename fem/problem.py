@@ -110,6 +110,8 @@ class GravityProblem:
     ) -> None:
         check_mesh(mesh, facet_tags, fixed)
         self.mesh = mesh
+        #: Counts :meth:`set_geometry`'s moves (what was measured on a geometry keys on it).
+        self.geometry_version = 0
         self.facet_tags = facet_tags
         self.discretisation = discretisation
         self.fixed = fixed
@@ -246,6 +248,7 @@ class GravityProblem:
         reference volume is measured again. The contact zone stays the one found at set-up.
         """
         self.mesh.geometry.x[:] = x
+        self.geometry_version += 1
         self._volume = self._measure_volume()
 
     def _measure_volume(self) -> float:

@@ -211,6 +211,61 @@ def test_newtons_absolute_tolerance_is_scaled_to_the_load(coarse_mesh: Path) -> 
     twice.solver.destroy()
 
 
+def test_the_load_norm_is_measured_again_on_another_geometry(coarse_mesh: Path) -> None:
+    """A chain's cases share the load's norm; a moved mesh (a reference estimate) does not."""
+    from fem.case import CaseRunner
+
+    with CaseRunner(coarse_mesh, SolverSettings(petsc_options={"load_atol": 1e-6})) as runner:
+        problem, solver = runner.problem, runner.solver
+        problem.set_case(CASE.material(), CASE.gravity())
+        atol = solver.scale_to_load()
+        problem.set_case(Case(2.5 * CASE.C1, CASE.phi).material(), CASE.gravity())
+        assert solver.scale_to_load() == atol  # C1 does not enter the load at rest
+        x = problem.mesh.geometry.x.copy()
+        problem.set_geometry(1.1 * x)  # every nodal load scales with the volume, 1.1³
+        assert solver.scale_to_load() == pytest.approx(1.1**3 * atol, rel=1e-10)
+        problem.set_geometry(x)
+        assert solver.scale_to_load() == pytest.approx(atol, rel=1e-12)
+
+
+def test_the_residual_is_lifted_only_where_the_lifting_is_not_zero(coarse_mesh: Path) -> None:
+    """Zero Dirichlet values and a state zero there: the lifting adds exactly nothing."""
+    from dolfinx.fem import petsc as fem_petsc
+
+    from fem.case import CaseRunner
+
+    with CaseRunner(coarse_mesh) as runner:
+        problem, solver = runner.problem, runner.solver
+        problem.set_case(CASE.material(), CASE.gravity())
+        problem.set_load_fraction(1.0)
+        fixed = solver._fixed_dofs
+        assert fixed is not None and fixed.size > 0
+        rng = np.random.default_rng(0)
+        state = 1e-5 * rng.standard_normal(problem.w.x.array.size)  # no element inverted
+        state[fixed] = 0.0
+
+        def residual(lift_always: bool) -> np.ndarray:
+            problem.w.x.array[:] = state
+            solver._fixed_dofs = None if lift_always else fixed
+            b = solver.b.duplicate()
+            solver._residual(solver.snes, problem.w.vector, b)
+            values = b.array.copy()
+            b.destroy()
+            return values
+
+        assert np.all(np.isfinite(residual(True)))
+        assert np.array_equal(residual(False), residual(True))
+        state[fixed[0]] = 1e-5  # a state off its Dirichlet value: the lifting counts
+        lifted = residual(True)
+        assert np.array_equal(residual(False), lifted)
+        # ... and it is not nothing: the bare assembly differs on the free entries
+        b = solver.b.duplicate()
+        fem_petsc.assemble_vector(b, problem.residual)
+        free = np.setdiff1d(np.arange(b.array.size), fixed)
+        assert not np.allclose(b.array[free], lifted[free])
+        b.destroy()
+
+
 def test_the_linear_path_is_chosen_by_size_and_named(coarse_mesh: Path) -> None:
     """Above blr_above_dofs the kept factorisation is block low-rank, and says so.
 
