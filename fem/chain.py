@@ -7,7 +7,7 @@ and the pressure scaled by λ. The sweep's cases at one gravity direction are th
 on one load path. A chain solves them from the stiffest to the softest, and starts each case's
 load path (:func:`fem.loading.solve_incrementally`) from its stiffer neighbours' solutions,
 which are equilibrium states of the case at λ < 1, instead of from rest: the first step
-extrapolates from the last two to the full load, with the kept factorisation, and cuts back
+extrapolates from the last three to the full load, with the kept factorisation, and cuts back
 towards them where it fails, as any step does; the last resort still starts from rest. The
 answer meets the same stopping test as a case solved alone.
 
@@ -50,7 +50,7 @@ def direction_chains(cases: Iterable[Case]) -> list[list[Case]]:
 
 
 class Neighbours:
-    """The last two converged cases of each direction, as states on another case's load path.
+    """The last three converged cases of each direction, as states on another case's load path.
 
     Args:
         pressure_dofs: the pressure's entries in the state's array (scaled by the load
@@ -62,9 +62,9 @@ class Neighbours:
         self._known: dict[tuple[float, float], list[tuple[Case, np.ndarray]]] = {}
 
     def add(self, case: Case, state: np.ndarray) -> None:
-        """Keep a converged case's state (a copy): the last two of each direction."""
+        """Keep a converged case's state (a copy): the last three of each direction."""
         known = self._known.get(_direction(case), [])
-        self._known[_direction(case)] = [*known[-1:], (case, state.copy())]
+        self._known[_direction(case)] = [*known[-2:], (case, state.copy())]
 
     def path(self, case: Case) -> tuple[list[tuple[float, np.ndarray]], Start]:
         """The known states of ``case``'s load path, as ``(fraction, state)``, and the start.

@@ -4,7 +4,8 @@ Gravity is applied as a load fraction λ that goes from 0 to 1. The scheme tries
 a large step first (by default the whole load); when Newton fails or an element
 inverts (det F ≤ 0) it restores the last converged state and cuts the step;
 after an easy step it grows the step; each step starts from a linear
-extrapolation of the last two converged states. When the step has been cut below
+extrapolation of the last two converged states (quadratic, through three, at the start of a
+path through known states). When the step has been cut below
 ``min_step``, a last resort starts again from rest with Newton's
 :data:`fem.options.RESCUE_OPTIONS` before the case is declared failed; it gives an attempt up
 once its residual sits on a plateau (``Loading.stall_window``). With
@@ -170,9 +171,9 @@ def solve_incrementally(
 
     With ``path`` (equilibrium states of this very case at load fractions in (0, 1),
     increasing, e.g. a stiffer neighbour's solution: see :mod:`fem.chain`), the load path
-    starts from the last of them instead of from rest, extrapolating from the last two as
-    after any two steps, and the first step keeps the last factorisation; the last resort
-    still starts from rest.
+    starts from the last of them instead of from rest, extrapolating from the last three
+    (with rest, where only two are given), and the first step keeps the last factorisation; the
+    last resort still starts from rest.
 
     Raises:
         InvalidParameterError: for a ``path`` whose fractions are not increasing in (0, 1),
@@ -193,7 +194,7 @@ def solve_incrementally(
             raise InvalidParameterError(
                 f"a load path's known fractions must increase within (0, 1), without a guess; "
                 f"got {fractions}{' and a guess' if guess is not None else ''}")
-        history = [history[-1], *((f, w.copy()) for f, w in path)][-2:]
+        history = [history[-1], *((f, w.copy()) for f, w in path)][-3:]
         fraction = result.start_fraction = history[-1][0]
         state[:] = history[-1][1]
         reuse = True
@@ -306,15 +307,33 @@ def _solve_from_guess(
 def _predict(
     problem: GravityProblem, history: list[tuple[float, np.ndarray]], step: float, extrapolate: bool
 ) -> None:
-    """Set the initial guess: linear extrapolation in λ, unless it would invert an element."""
+    """Set the initial guess: the polynomial through the known states, extrapolated by ``step``.
+
+    Through two states the line, through three the quadratic; where it would invert an
+    element, the line through the last two, then the last state. Three states are known at
+    the start of a path through stiffer neighbours: there the quadratic saves Newton
+    iterations on cases whose guess already needs few.
+    """
     state = problem.w.x.array
     lam1, w1 = history[-1]
     state[:] = w1
     if not extrapolate or len(history) < 2:
         return
-    lam0, w0 = history[0]
-    if lam1 <= lam0:
-        return
-    state[:] = w1 + (step / (lam1 - lam0)) * (w1 - w0)
-    if not problem.min_detF() > 0:
-        state[:] = w1
+    target = lam1 + step
+    for known in (history[-3:], history[-2:]) if len(history) > 2 else (history,):
+        lams = [lam for lam, _ in known]
+        if any(b <= a for a, b in zip(lams, lams[1:], strict=False)):
+            continue
+        state[:] = sum(_lagrange(lams, k, target) * w for k, (_, w) in enumerate(known))
+        if problem.min_detF() > 0:
+            return
+    state[:] = w1
+
+
+def _lagrange(nodes: list[float], k: int, x: float) -> float:
+    """The k-th Lagrange basis polynomial through ``nodes``, at ``x``."""
+    value = 1.0
+    for j, node in enumerate(nodes):
+        if j != k:
+            value *= (x - node) / (nodes[k] - node)
+    return value

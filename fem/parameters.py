@@ -197,7 +197,8 @@ class Loading:
         easy_iterations: a step converging in at most this many Newton
             iterations counts as easy.
         cutback: factor applied to the increment after a failed step.
-        extrapolate: predict each step's initial guess from the previous two.
+        extrapolate: predict each step's initial guess from the previous two (three at the
+            start of a path through known states, :func:`fem.loading.solve_incrementally`).
         fixed_steps: if > 0, disable adaptivity and use this many equal steps
             (the baseline the adaptive scheme is compared against).
         rescue: when the step has been cut below ``min_step``, load once more from

@@ -43,13 +43,65 @@ def test_neighbours_are_states_of_the_softer_case_at_lower_load() -> None:
     assert [f for f, _ in path] == [0.25, 0.5]
     np.testing.assert_allclose(path[0][1], [1.0, 2.0, 2.0])
     np.testing.assert_allclose(path[1][1], [2.0, 4.0, 4.0])
-    # only stiffer cases of the same direction lie on a case's path; two are kept
+    # only stiffer cases of the same direction lie on a case's path; three are kept
     assert neighbours.path(Case(5.0, 0.0))[1].kind == "rest"
     assert neighbours.path(Case(1.0, 90.0))[1].kind == "rest"
     neighbours.add(Case(5.0, 90.0), np.zeros(3))
     neighbours.add(Case(1.5, 0.0), np.zeros(3))
+    neighbours.add(Case(1.2, 0.0), np.zeros(3))
     assert neighbours.path(Case(1.0, 0.0))[1].neighbours == (
-        "c1=2.00_phi=0.0_theta=0.0", "c1=1.50_phi=0.0_theta=0.0")
+        "c1=2.00_phi=0.0_theta=0.0", "c1=1.50_phi=0.0_theta=0.0", "c1=1.20_phi=0.0_theta=0.0")
+
+
+def test_the_prediction_is_the_polynomial_through_the_known_states(coarse_mesh: Path) -> None:
+    """Three known states: the quadratic through them.
+
+    Where it inverts an element, the line through the last two; where that does too, the last
+    state.
+    """
+    from dolfinx import fem
+
+    from fem.case import CaseRunner
+    from fem.loading import _predict
+
+    with CaseRunner(coarse_mesh) as runner:
+        problem = runner.problem
+        rng = np.random.default_rng(1)
+        a, b, c = (1e-6 * rng.standard_normal(problem.w.x.array.size) for _ in range(3))
+
+        def state(lam: float, c: np.ndarray = c) -> np.ndarray:
+            return a + lam * b + lam**2 * c
+
+        history = [(lam, state(lam)) for lam in (0.5, 0.6, 0.75)]
+        _predict(problem, history, 0.25, extrapolate=True)
+        np.testing.assert_allclose(problem.w.x.array, state(1.0), rtol=0, atol=1e-15)
+        _predict(problem, history[1:], 0.25, extrapolate=True)  # two states: the line
+        line = history[2][1] + (0.25 / 0.15) * (history[2][1] - history[1][1])
+        np.testing.assert_allclose(problem.w.x.array, line, rtol=0, atol=1e-15)
+        # u = -1.05 λ² X: det F = (1 - 1.05 λ²)³, positive at the known states and on the line
+        # (λ² extrapolated linearly to 0.9 at λ = 1), negative for the quadratic
+        shrink = fem.Function(problem.V)
+        shrink.interpolate(lambda x: -1.05 * x)
+        fold = np.zeros_like(c)
+        fold[problem.W.sub(0).collapse()[1]] = shrink.x.array
+        a[:] = b[:] = 0.0
+        history = [(lam, state(lam, fold)) for lam in (0.5, 0.6, 0.75)]
+        assert all(_detF_positive(problem, w) for _, w in history)
+        _predict(problem, history, 0.25, extrapolate=True)
+        line = history[2][1] + (0.25 / 0.15) * (history[2][1] - history[1][1])
+        assert _detF_positive(problem, line)
+        np.testing.assert_allclose(problem.w.x.array, line, rtol=0, atol=1e-15)
+        history = [(lam, state(lam, fold * 1.5 / 1.05)) for lam in (0.5, 0.6, 0.75)]
+        _predict(problem, history, 0.25, extrapolate=True)  # the line inverts too
+        np.testing.assert_array_equal(problem.w.x.array, history[2][1])
+
+
+def _detF_positive(problem, w: np.ndarray) -> bool:
+    saved = problem.w.x.array.copy()
+    problem.w.x.array[:] = w
+    positive = problem.min_detF() > 0
+    problem.w.x.array[:] = saved
+    return positive
 
 
 def test_the_answer_does_not_depend_on_where_the_path_starts(coarse_mesh: Path) -> None:
