@@ -181,6 +181,17 @@ class FixedBoundaries:
         return [b for b, comps in self.items() if len(comps) == 3]
 
 
+def check_stall_window(value: Any, name: str = "stall_window") -> int:
+    """A stall window (:attr:`Loading.stall_window`): a non-negative integer, not a bool.
+
+    Raises:
+        InvalidParameterError: naming ``name`` and the value, for anything else.
+    """
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise InvalidParameterError(f"{name} must be a non-negative integer, got {value!r}")
+    return value
+
+
 @dataclass(frozen=True, slots=True)
 class Loading:
     """Adaptive incremental gravity loading.
@@ -236,10 +247,7 @@ class Loading:
             raise InvalidParameterError("loading.cutback must lie in (0, 1)")
         if self.fixed_steps < 0:
             raise InvalidParameterError("loading.fixed_steps must be >= 0")
-        if (isinstance(self.stall_window, bool) or not isinstance(self.stall_window, int)
-                or self.stall_window < 0):
-            raise InvalidParameterError(
-                f"loading.stall_window must be a non-negative integer, got {self.stall_window!r}")
+        check_stall_window(self.stall_window, "loading.stall_window")
 
     @classmethod
     def from_mapping(cls, values: dict[str, Any]) -> Loading:

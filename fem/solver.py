@@ -30,7 +30,7 @@ from fem.options import (
     default_parameters,
     solver_options,
 )
-from fem.parameters import STANDARD_GRAVITY
+from fem.parameters import STANDARD_GRAVITY, check_stall_window
 from fem.problem import GravityProblem
 
 log = logging.getLogger(__name__)
@@ -484,10 +484,7 @@ class NewtonSolver:
                 f"per-solve Newton settings take snes_linesearch_type, snes_max_it and "
                 f"stall_window, not {', '.join(unknown)}"
             )
-        window = newton.get("stall_window", 0)
-        if isinstance(window, bool) or not isinstance(window, int) or window < 0:
-            raise InvalidParameterError(
-                f"stall_window must be a non-negative integer, got {window!r}")
+        window = check_stall_window(newton.get("stall_window", 0))
         newton = {k: v for k, v in newton.items() if k != "stall_window"}
         line_search = newton.get("snes_linesearch_type")
         if line_search is not None and line_search not in LINE_SEARCHES:
