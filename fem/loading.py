@@ -8,7 +8,8 @@ extrapolation of the last two converged states (quadratic, through three, at the
 path through known states). When the step has been cut below
 ``min_step``, a last resort starts again from rest with Newton's
 :data:`fem.options.RESCUE_OPTIONS` before the case is declared failed; it gives an attempt up
-once its residual sits on a plateau (``Loading.stall_window``). With
+once its residual sits on a plateau (``Loading.stall_window``), and itself up once its step is
+cut below ``Loading.rescue_min_step``. With
 ``fixed_steps`` it becomes the classic fixed-increment scheme that it is
 benchmarked against (no last resort).
 """
@@ -247,7 +248,7 @@ def solve_incrementally(
             result.reason = f"fixed step at λ={target:.4f} failed: {reason}"
             break
         step *= loading.cutback
-        if step < loading.min_step:
+        if step < (loading.rescue_min_step if newton else loading.min_step):
             if loading.rescue and newton is None:
                 # From the stalled state the creasing fold does not let Newton through; from
                 # rest, the whole load at once with another line search can get past it.
@@ -259,10 +260,10 @@ def solve_incrementally(
                 state[:] = rest[1]
                 history, fraction, step = [rest], 0.0, loading.initial_step
                 continue
-            result.reason = (
-                f"step cut below min_step={loading.min_step:g} at λ={fraction:.4f}"
-                f"{' (also with the last resort)' if newton else ''}; last failure: {reason}"
-            )
+            then = (f", then the last resort below rescue_min_step={loading.rescue_min_step:g},"
+                    if newton else "")
+            result.reason = (f"step cut below min_step={loading.min_step:g}{then} at "
+                             f"λ={fraction:.4f}; last failure: {reason}")
             break
 
     if first_pass is not None and fraction < _FULL and first_pass[0] > fraction:

@@ -221,6 +221,10 @@ class Loading:
             sit on a plateau of the residual (``fem.solver._stalled``) instead of running on
             to its 60th iteration there; 0 turns the test off. The last resort's failing
             attempts on the default mesh sat on such plateaus for up to 50 iterations.
+        rescue_min_step: smallest increment of the last resort before the case is declared
+            failed (its own floor, in place of ``min_step``). The last resort is there to pass
+            the fold in large steps from rest; where its steps shrink below this, it creeps
+            along the path that the first pass already failed on (``docs/solver.md``).
     """
 
     initial_step: float = 1.0
@@ -233,6 +237,7 @@ class Loading:
     fixed_steps: int = 0
     rescue: bool = True
     stall_window: int = 8
+    rescue_min_step: float = 1.0 / 16
 
     def __post_init__(self) -> None:
         if not 0 < _finite("initial_step", self.initial_step) <= 1:
@@ -248,6 +253,8 @@ class Loading:
         if self.fixed_steps < 0:
             raise InvalidParameterError("loading.fixed_steps must be >= 0")
         check_stall_window(self.stall_window, "loading.stall_window")
+        if not 0 < _finite("rescue_min_step", self.rescue_min_step) <= 1:
+            raise InvalidParameterError("loading.rescue_min_step must lie in (0, 1]")
 
     @classmethod
     def from_mapping(cls, values: dict[str, Any]) -> Loading:

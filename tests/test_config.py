@@ -355,6 +355,8 @@ REPEATED: list[tuple[str, tuple[str, ...], Callable[[Any], Any], type[Exception]
      InvalidParameterError),
     (f"{LOADING}/min_step", ("exclusiveMinimum", "maximum"), loading("min_step"),
      InvalidParameterError),
+    (f"{LOADING}/rescue_min_step", ("exclusiveMinimum", "maximum"), loading("rescue_min_step"),
+     InvalidParameterError),
     (f"{LOADING}/max_steps", ("minimum",), loading("max_steps"), InvalidParameterError),
     (f"{LOADING}/growth", ("minimum",), loading("growth"), InvalidParameterError),
     (f"{LOADING}/cutback", ("exclusiveMinimum", "exclusiveMaximum"), loading("cutback"),

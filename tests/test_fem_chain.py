@@ -170,23 +170,29 @@ def test_the_rescue_benchmark_solves_the_chains_both_ways(coarse_mesh: Path,
     """``studies.rescue_cost``: each way's chains in their own processes, compared case by case."""
     import yaml
 
-    from studies.rescue_cost import RescueCost, run
+    from studies.rescue_cost import RescueCost, parse_against, run
 
     config = {"fe": {"loading": {"stall_window": 6}}}
     result = run(coarse_mesh, config, [(-90.0, 0.0)], [1.5, 1.0], tmp_path)
-    assert result.returncodes == [0, 0] and result.stall_window == 6
+    assert result.loading["stall_window"] == 6 and result.against == {"stall_window": 0}
     assert [r.case for r in result.cases] == [Case(1.5, -90.0).id, Case(1.0, -90.0).id]
     for row in result.cases:  # nothing stalls here: the same answer both ways
-        assert row.status_on == row.status_off == "converged"
-        assert row.difference_mm == 0.0 and row.newton_on == row.newton_off
-    assert result.cpu_on_s > 0 and result.cpu_off_s > 0
-    off = yaml.safe_load((tmp_path / "off" / "config.yaml").read_text())
-    assert off["fe"]["loading"]["stall_window"] == 0
-    summary = json.loads((tmp_path / "on" / "cases" / Case(1.0, -90.0).id / "summary.json")
+        assert row.status_config == row.status_against == "converged"
+        assert row.difference_mm == 0.0 and row.newton_config == row.newton_against
+    assert result.cpu_config_s > 0 and result.cpu_against_s > 0
+    other = yaml.safe_load((tmp_path / "against" / "config.yaml").read_text())
+    assert other["fe"]["loading"]["stall_window"] == 0
+    summary = json.loads((tmp_path / "config" / "cases" / Case(1.0, -90.0).id / "summary.json")
                          .read_text())
     assert summary["settings"]["loading"]["stall_window"] == 6
     result.write(tmp_path / "rescue_cost.json")
     assert RescueCost.read(tmp_path / "rescue_cost.json") == result
-    with pytest.raises(InvalidParameterError, match="stall_window is 0"):
-        run(coarse_mesh, {"fe": {"loading": {"stall_window": 0}}}, [(-90.0, 0.0)], [1.0],
-            tmp_path / "none")
+    assert parse_against(["rescue_min_step=0.015625", "stall_window=0"]) == {
+        "rescue_min_step": 0.015625, "stall_window": 0}
+    for against, message in (({"stall_window": 6}, "is the config's own"),
+                             ({"stall_windw": 0}, "unknown loading parameter"),
+                             ({"rescue_min_step": 0}, "rescue_min_step must lie")):
+        with pytest.raises(InvalidParameterError, match=message):
+            run(coarse_mesh, config, [(-90.0, 0.0)], [1.0], tmp_path / "none", against)
+    with pytest.raises(InvalidParameterError, match="KEY=VALUE"):
+        parse_against(["rescue_min_step"])

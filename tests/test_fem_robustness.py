@@ -162,9 +162,10 @@ def test_the_last_resort_gives_a_stalled_attempt_up(coarse_mesh: Path) -> None:
     results = {}
     for window in (0, 1):
         # one Newton iteration fails the whole load, and a half step is below min_step: the
-        # last resort follows at once, with the whole load from rest
+        # last resort follows at once, with the whole load from rest, and only that
         settings = SolverSettings(contact=None, petsc_options={"snes_max_it": 1},
-                                  loading=Loading(min_step=1.0, stall_window=window))
+                                  loading=Loading(min_step=1.0, stall_window=window,
+                                                  rescue_min_step=1.0))
         with CaseRunner(coarse_mesh, settings) as runner:
             results[window], _ = runner.solve(case)
     assert results[0].converged and results[0].rescued
@@ -172,6 +173,29 @@ def test_the_last_resort_gives_a_stalled_attempt_up(coarse_mesh: Path) -> None:
     assert not results[1].converged and stalled.rescue
     assert stalled.reason == "diverged_stalled" and stalled.iterations == 1
     assert results[1].failure_kinds.get("stalled") == 1
+
+
+def test_the_last_resort_stops_at_its_own_floor(coarse_mesh: Path) -> None:
+    """``Loading.rescue_min_step``: the last resort's steps are not cut below it."""
+    from fem.case import CaseRunner
+
+    case = Case(0.8, -90.0)
+    results = {}
+    for floor in (1.0, 0.25):
+        # as above: the last resort follows at once, and its whole load from rest stalls
+        settings = SolverSettings(contact=None, petsc_options={"snes_max_it": 1},
+                                  loading=Loading(min_step=1.0, stall_window=1,
+                                                  rescue_min_step=floor))
+        with CaseRunner(coarse_mesh, settings) as runner:
+            results[floor], _ = runner.solve(case)
+    rescue = {floor: [a for a in r.attempts if a.rescue] for floor, r in results.items()}
+    assert [a.step for a in rescue[1.0]] == [1.0] and not rescue[1.0][0].converged
+    assert not results[1.0].converged
+    assert "then the last resort below rescue_min_step=1" in results[1.0].reason
+    assert len(rescue[0.25]) > 1 and min(a.step for a in rescue[0.25]) >= 0.25
+    assert results[0.25].fraction > results[1.0].fraction
+    with pytest.raises(InvalidParameterError, match="rescue_min_step"):
+        Loading(rescue_min_step=0.0)
 
 
 @pytest.mark.parametrize("window", [-1, 1.5, True])
