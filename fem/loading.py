@@ -260,10 +260,12 @@ def solve_incrementally(
                 state[:] = rest[1]
                 history, fraction, step = [rest], 0.0, loading.initial_step
                 continue
-            then = (f", then the last resort below rescue_min_step={loading.rescue_min_step:g},"
-                    if newton else "")
-            result.reason = (f"step cut below min_step={loading.min_step:g}{then} at "
-                             f"λ={fraction:.4f}; last failure: {reason}")
+            where = f"at λ={fraction:.4f}"
+            if first_pass is not None:
+                where = (f"at λ={first_pass[0]:.4f}, and the last resort's below "
+                         f"rescue_min_step={loading.rescue_min_step:g} {where}")
+            result.reason = (f"step cut below min_step={loading.min_step:g} {where}; "
+                             f"last failure: {reason}")
             break
 
     if first_pass is not None and fraction < _FULL and first_pass[0] > fraction:

@@ -191,7 +191,7 @@ def test_the_last_resort_stops_at_its_own_floor(coarse_mesh: Path) -> None:
     rescue = {floor: [a for a in r.attempts if a.rescue] for floor, r in results.items()}
     assert [a.step for a in rescue[1.0]] == [1.0] and not rescue[1.0][0].converged
     assert not results[1.0].converged
-    assert "then the last resort below rescue_min_step=1" in results[1.0].reason
+    assert "and the last resort's below rescue_min_step=1 at λ=0.0000" in results[1.0].reason
     assert len(rescue[0.25]) > 1 and min(a.step for a in rescue[0.25]) >= 0.25
     assert results[0.25].fraction > results[1.0].fraction
     with pytest.raises(InvalidParameterError, match="rescue_min_step"):
