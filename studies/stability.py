@@ -135,6 +135,8 @@ def stability_map(
                 "initial_step": s.initial_step,
                 "max_steps": s.max_steps,
                 "min_step": s.min_step,
+                "rescue": s.rescue and not s.fixed_steps,
+                "rescue_min_step": s.rescue_min_step,
             }
             for name, s in schemes.items()
         },

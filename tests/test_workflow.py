@@ -317,6 +317,11 @@ def test_fe_study_rules_run_end_to_end(small_run: Path) -> None:
     stability = json.loads((study / "stability.json").read_text())
     schemes = {r["scheme"] for r in stability["records"]}
     assert schemes == {"adaptive", "fixed-4"}
+    assert stability["schemes"]["adaptive"]["rescue"] and not stability["schemes"]["fixed-4"][
+        "rescue"]
+    assert stability["schemes"]["adaptive"]["rescue_min_step"] == 1 / 16
+    page = (small_run / "results" / "report" / "index.html").read_text()
+    assert "down to 0.0156, then a last resort from rest down to 0.0625" in page
     assert len(stability["records"]) == 2 * 2 * 2
     assert stability["lowest_converging"]["adaptive"]["all_phi"] is not None
 

@@ -27,7 +27,10 @@ def stability_section(ctx: Context) -> str:
             f"{name}: " + (f"{s.get('fixed_steps')} equal load steps"
                            if s.get("fixed_steps") else
                            f"adaptive steps from {s.get('initial_step', 'n/a')} of the load, "
-                           f"cut back on failure down to {fmt(s.get('min_step'), '.3g')}")
+                           f"cut back on failure down to {fmt(s.get('min_step'), '.3g')}"
+                           + (f", then a last resort from rest down to "
+                              f"{fmt(s.get('rescue_min_step'), '.3g')}" if s.get("rescue")
+                              else ""))
             for name, s in stab.schemes.items())
         out.append(para(
             "Where the nonlinear FE solve struggles or fails: each cell is one solve from rest "
