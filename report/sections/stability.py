@@ -15,6 +15,17 @@ from report.sections.extrapolation import extrapolation_section
 from studies.figures import fe as fem_plots
 
 
+def _scheme(s: Mapping[str, Any]) -> str:
+    """One loading scheme of the stability map, in words."""
+    if s.get("fixed_steps"):
+        return f"{s.get('fixed_steps')} equal load steps"
+    text = (f"adaptive steps from {s.get('initial_step', 'n/a')} of the load, "
+            f"cut back on failure down to {fmt(s.get('min_step'), '.3g')}")
+    if s.get("rescue"):
+        text += f", then a last resort from rest down to {fmt(s.get('rescue_min_step'), '.3g')}"
+    return text
+
+
 def stability_section(ctx: Context) -> str:
     """The stability section: the study's grid, the sweep's own failures, extrapolation."""
     out = []
@@ -23,15 +34,7 @@ def stability_section(ctx: Context) -> str:
         out.append(missing("results/fe_study/stability.json"))
     else:
         records = stab.records
-        described = "; ".join(
-            f"{name}: " + (f"{s.get('fixed_steps')} equal load steps"
-                           if s.get("fixed_steps") else
-                           f"adaptive steps from {s.get('initial_step', 'n/a')} of the load, "
-                           f"cut back on failure down to {fmt(s.get('min_step'), '.3g')}"
-                           + (f", then a last resort from rest down to "
-                              f"{fmt(s.get('rescue_min_step'), '.3g')}" if s.get("rescue")
-                              else ""))
-            for name, s in stab.schemes.items())
+        described = "; ".join(f"{name}: {_scheme(s)}" for name, s in stab.schemes.items())
         out.append(para(
             "Where the nonlinear FE solve struggles or fails: each cell is one solve from rest "
             "at a tissue stiffness C1 (rows) and gravity angle Φ (columns), extended below the "
