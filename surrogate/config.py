@@ -14,6 +14,7 @@ BOUNDARY_MODES = ("network", "shared", "exact")
 LR_SCHEDULES = ("constant", "cosine", "exponential")
 C1_ENCODINGS = ("linear", "log", "inverse")
 OUTPUT_SCALINGS = ("none", "compliance")
+OUTPUT_FORMS = ("vector", "gravity_linear")
 
 
 @dataclass(frozen=True, slots=True)
@@ -38,6 +39,10 @@ class SurrogateConfig:
         output_scaling: ``none`` (the network predicts u) or ``compliance`` (it predicts
             u · C1 / C1_ref and the output is divided by C1 / C1_ref, since gravity sag
             scales roughly as 1 / C1).
+        output_form: ``vector`` (the network's three outputs are the displacement, the paper)
+            or ``gravity_linear`` (its nine outputs are a 3x3 matrix M and the displacement is
+            M ĝ, with ĝ the unit gravity direction: linear in ĝ as linear elasticity's
+            superposition is, M's own dependence on ĝ carrying the nonlinearity).
         learning_rate: Adam step size (paper 0.01).
         beta1: Adam β1 (paper 0.5).
         beta2: Adam β2 (paper 0.9).
@@ -62,6 +67,7 @@ class SurrogateConfig:
     bc_length: float = 0.25
     c1_encoding: str = "linear"
     output_scaling: str = "none"
+    output_form: str = "vector"
     learning_rate: float = 0.01
     beta1: float = 0.5
     beta2: float = 0.9
@@ -90,6 +96,7 @@ class SurrogateConfig:
             ("lr_schedule", LR_SCHEDULES),
             ("c1_encoding", C1_ENCODINGS),
             ("output_scaling", OUTPUT_SCALINGS),
+            ("output_form", OUTPUT_FORMS),
         ):
             if getattr(self, name) not in allowed:
                 raise SurrogateConfigError(

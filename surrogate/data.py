@@ -19,6 +19,8 @@ import numpy as np
 from fem.dataset import Dataset, DatasetError
 
 N_INPUTS = 7
+DIRECTION = slice(4, 7)
+"""Columns of the inputs that hold the unit gravity direction."""
 
 
 @dataclass(frozen=True)

@@ -44,7 +44,9 @@ def export_web(model: Surrogate) -> dict[str, Any]:
     their own or share the domain's): the indices of its points, its layers
     ``[{W, b}, ...]`` (the first layer's rows: the three point coordinates, then the four case
     features) and its points' output gain (the exact-Dirichlet factor times the network's
-    displacement unit, mm). Rib points of a part-less model (``exact`` mode) are zero.
+    displacement unit, mm). Rib points of a part-less model (``exact`` mode) are zero. The
+    last layer of a ``gravity_linear`` model has nine outputs, the matrix that the page
+    contracts with the query's gravity direction.
     """
     config, norm = model.config, model.normalisation
     factor = np.ones(len(model.X)) if model.point_factor is None else model.point_factor
@@ -71,6 +73,7 @@ def export_web(model: Surrogate) -> dict[str, Any]:
         "architecture": config.architecture,
         "activation": config.activation,
         "boundary": config.boundary,
+        "output_form": config.output_form,
         "n_points": int(len(model.X)),
         "X_m": encode_array(model.X, "float32"),
         "points_standardised": encode_array(norm.points(model.X), "float32"),

@@ -17,7 +17,11 @@ on ``SurrogateConfig.boundary``:
   construction and the boundary term of Eq. 2 vanishes.
 
 Every prediction is ``network(x) * gain``, where ``gain`` holds φ (exact mode) and
-the compliance scaling (``output_scaling``), both precomputed per sample.
+the compliance scaling (``output_scaling``), both precomputed per sample. A network's output
+is the displacement itself (``output_form: vector``) or, in ``gravity_linear`` form, nine
+numbers read as a matrix M that multiplies the input's unit gravity direction ĝ:
+``network(x) = M(x) ĝ``, linear in ĝ as a linear-elastic body's response to its load is, so
+that the network learns from direction to direction only what the nonlinearity changes.
 """
 
 from __future__ import annotations
@@ -30,7 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from surrogate.config import SurrogateConfig
-from surrogate.data import N_INPUTS
+from surrogate.data import DIRECTION, N_INPUTS
 
 Layers = list[tuple[jax.Array, jax.Array]]
 Params = dict[str, Layers]
@@ -54,9 +58,14 @@ def boundary_network(config: SurrogateConfig) -> str | None:
     return {"network": "boundary", "shared": "domain", "exact": None}[config.boundary]
 
 
+def output_width(config: SurrogateConfig) -> int:
+    """Outputs of one network: the displacement (3) or the matrix that multiplies ĝ (9)."""
+    return 9 if config.output_form == "gravity_linear" else 3
+
+
 def layer_sizes(config: SurrogateConfig) -> list[int]:
     """Input, hidden and output widths of one network."""
-    return [N_INPUTS] + [config.width] * config.hidden_layers + [3]
+    return [N_INPUTS] + [config.width] * config.hidden_layers + [output_width(config)]
 
 
 def init_mlp(key: jax.Array, sizes: list[int]) -> Layers:
@@ -87,6 +96,17 @@ def mlp(layers: Layers, x: jax.Array, activation: str) -> jax.Array:
     return x @ W + b
 
 
+def network(layers: Layers, x: jax.Array, config: SurrogateConfig) -> jax.Array:
+    """One network's displacement (n, 3) before the gain.
+
+    Its outputs, or M ĝ in ``gravity_linear`` form (output ``3 i + j`` is M's entry (i, j)).
+    """
+    out = mlp(layers, x, config.activation)
+    if config.output_form == "gravity_linear":
+        out = jnp.einsum("nij,nj->ni", out.reshape(-1, 3, 3), x[:, DIRECTION])
+    return out
+
+
 def apply(
     params: Params, x: jax.Array, boundary: jax.Array, gain: jax.Array, config: SurrogateConfig
 ) -> jax.Array:
@@ -99,14 +119,14 @@ def apply(
         gain: output multipliers (n,) (see the module docstring).
         config: architecture and boundary mode.
     """
-    domain = mlp(params["domain"], x, config.activation)
+    domain = network(params["domain"], x, config)
     net = boundary_network(config)
     if net is None:
         bound = jnp.zeros_like(domain)
     elif net == "domain":
         bound = domain
     else:
-        bound = mlp(params[net], x, config.activation)
+        bound = network(params[net], x, config)
     return jnp.where(boundary[:, None], bound, domain) * gain[:, None]
 
 
@@ -128,12 +148,12 @@ def split_loss(
     which halves the cost of the paper's pair against evaluating both everywhere.
     """
     x, y, g = domain
-    total = jnp.sum(pointwise_error(mlp(params["domain"], x, config.activation) * g[:, None], y))
+    total = jnp.sum(pointwise_error(network(params["domain"], x, config) * g[:, None], y))
     count = x.shape[0]
     net = boundary_network(config)
     if boundary is not None and net is not None:
         xb, yb, gb = boundary
-        pred = mlp(params[net], xb, config.activation) * gb[:, None]
+        pred = network(params[net], xb, config) * gb[:, None]
         total = total + config.alpha * jnp.sum(pointwise_error(pred, yb))
         count += xb.shape[0]
     return total / count

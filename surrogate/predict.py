@@ -3,9 +3,11 @@
 Prediction is built for speed: the first layer's point part ``X W_x + b`` does not
 depend on the query, so it is computed once per model; a query then costs one
 rank-one update, the remaining layers and one gather, in one jitted float32 call
-with static shapes. Points on the rib go through the boundary network (``network``
-mode), the shared network (``shared``) or are exactly zero (``exact``). A model folder
-is read by :mod:`surrogate.checkpoint`; the command line is :mod:`surrogate.cli`.
+with static shapes. A ``gravity_linear`` model's last layer is contracted with the query's
+gravity direction first, so its nine outputs cost what three do. Points on the rib go
+through the boundary network (``network`` mode), the shared network (``shared``) or are
+exactly zero (``exact``). A model folder is read by :mod:`surrogate.checkpoint`; the
+command line is :mod:`surrogate.cli`.
 
 Example::
 
@@ -104,11 +106,16 @@ class Surrogate:
         n_bound = int(bound.size)
         inverse_j = jnp.asarray(inverse.astype(np.int32))
 
+        linear_in_gravity = config.output_form == "gravity_linear"
+
         def forward(part, c):
             h = act(part["pre"] + c[:4] @ part["Wc"])
             for W, b in part["rest"][:-1]:
                 h = act(h @ W + b)
             W, b = part["rest"][-1]
+            if linear_in_gravity:  # M ĝ: the last layer contracted with ĝ, once per query
+                W = W.reshape(W.shape[0], 3, 3) @ c[1:4]
+                b = b.reshape(3, 3) @ c[1:4]
             return (h @ W + b) * (part["gain"] * c[4])
 
         def run(parts, c):

@@ -27,7 +27,14 @@ import optax
 from fem.dataset import Dataset
 from surrogate.config import SurrogateConfig
 from surrogate.data import Normalisation, Samples, dirichlet_factor, sample_arrays
-from surrogate.model import Params, boundary_network, init_params, mlp, pointwise_error, split_loss
+from surrogate.model import (
+    Params,
+    boundary_network,
+    init_params,
+    network,
+    pointwise_error,
+    split_loss,
+)
 
 log = logging.getLogger(__name__)
 
@@ -192,9 +199,9 @@ def train_epoch(
     return params, opt_state, jnp.mean(losses)
 
 
-@partial(jax.jit, static_argnames=("net", "activation"))
-def _error_sum(layers, x, y, g, w, *, net, activation):
-    pred = jnp.zeros_like(y) if net is None else mlp(layers, x, activation) * g[:, None]
+@partial(jax.jit, static_argnames=("net", "config"))
+def _error_sum(layers, x, y, g, w, *, net, config):
+    pred = jnp.zeros_like(y) if net is None else network(layers, x, config) * g[:, None]
     return jnp.sum(w * pointwise_error(pred, y))
 
 
@@ -217,7 +224,7 @@ def error_sums(params: Params, samples: Samples, config: SurrogateConfig) -> tup
             ]
             w = np.concatenate([np.ones(stop - start, np.float32), np.zeros(pad, np.float32)])
             layers = None if net is None else params[net]
-            total += float(_error_sum(layers, *chunk, w, net=net, activation=config.activation))
+            total += float(_error_sum(layers, *chunk, w, net=net, config=config))
         sums.append(total)
     return sums[0], sums[1]
 

@@ -419,8 +419,8 @@ def test_a_geometry_length_is_refused_at_the_schemas_bound(
 
 ENUMS: list[tuple[str, Callable[[Any], Any], type[Exception]]] = [
     *[(f"{SURROGATE}/{name}", surrogate(name), SurrogateConfigError)
-      for name in ("activation", "boundary", "c1_encoding", "output_scaling", "lr_schedule",
-                   "split")],
+      for name in ("activation", "boundary", "c1_encoding", "output_scaling", "output_form",
+                   "lr_schedule", "split")],
     ("properties/fe/properties/solver", lambda value: SolverSettings(solver=value),
      InvalidParameterError),
     ("properties/fe/properties/petsc_options/properties/snes_linesearch_type",

@@ -71,6 +71,38 @@ def test_loss_is_eq2() -> None:
     assert float(value) == pytest.approx((5.0 + 1.0 + 10.0 * 1.0) / 3, rel=1e-5)
 
 
+
+def test_a_gravity_linear_network_is_a_matrix_times_the_gravity_direction() -> None:
+    """With M blind to ĝ (its direction weights zeroed), u(ĝ) = Σ_j ĝ_j u(e_j) exactly.
+
+    A ``vector`` network blind to ĝ predicts one displacement for every direction, so the
+    superposition fails there: the test tells the forms apart.
+    """
+    import jax
+    import jax.numpy as jnp
+
+    from surrogate.data import DIRECTION
+    from surrogate.model import apply, init_params, layer_sizes
+
+    rng = np.random.default_rng(3)
+    points = rng.normal(size=(5, 3))
+    g = np.array([0.48, -0.6, 0.64])  # a unit direction
+    for form, superposes in (("gravity_linear", True), ("vector", False)):
+        config = SurrogateConfig(hidden_layers=2, width=8, activation="silu", output_form=form)
+        assert layer_sizes(config)[-1] == (9 if form == "gravity_linear" else 3)
+        params = init_params(jax.random.PRNGKey(1), config)
+        W, b = params["domain"][0]
+        params["domain"][0] = (W.at[DIRECTION].set(0.0), b + 0.1)
+        params["domain"][-1] = tuple(a + 0.05 for a in params["domain"][-1])  # nonzero bias
+
+        def u(direction: np.ndarray, params=params, config=config) -> np.ndarray:
+            x = np.concatenate([points, np.full((5, 1), 0.3), np.tile(direction, (5, 1))], 1)
+            return np.asarray(apply(params, jnp.asarray(x, jnp.float32), jnp.zeros(5, bool),
+                                    jnp.ones(5), config))
+
+        superposed = sum(g[j] * u(np.eye(3)[j]) for j in range(3))
+        assert np.allclose(u(g), superposed, atol=1e-6) == superposes, form
+
 def test_training_reduces_the_loss_and_round_trips(dataset_path: Path, tmp_path: Path) -> None:
     from fem.dataset import read_dataset
     from surrogate.checkpoint import save_model
@@ -330,14 +362,17 @@ def test_train_command_line_trains_saves_and_names_bad_settings(
     assert "not KEY=VALUE" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("boundary", ["network", "shared", "exact"])
+@pytest.mark.parametrize(("boundary", "output_form"), [
+    ("network", "vector"), ("shared", "vector"), ("exact", "vector"),
+    ("network", "gravity_linear"), ("exact", "gravity_linear")])
 def test_fast_prediction_is_the_plain_network(
-    dataset_path: Path, tmp_path: Path, boundary: str
+    dataset_path: Path, tmp_path: Path, boundary: str, output_form: str
 ) -> None:
     """``Surrogate.predict`` gives the plain forward pass of the saved networks at every point.
 
     The fast path precomputes the first layer's point part, runs in float32 and gathers the
-    points per network; ``model.apply`` is the plain forward pass.
+    points per network (and contracts a ``gravity_linear`` model's last layer with ĝ before
+    the points pass it); ``model.apply`` is the plain forward pass.
     """
     import warnings
 
@@ -360,6 +395,7 @@ def test_fast_prediction_is_the_plain_network(
         boundary=boundary,
         c1_encoding="log",
         output_scaling="compliance",
+        output_form=output_form,
     )
     save_model(tmp_path / "m", train_and_evaluate(ds, config, progress=False), ds)
     model = Surrogate.load(tmp_path / "m")

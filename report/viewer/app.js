@@ -52,8 +52,31 @@ class WebSurrogate {
         }
         return { Wt, b: decode(layer.b), nIn, nOut };
       }),
-    }));
+    })).map((part) => {
+      if (model.output_form !== 'gravity_linear') return part;
+      // the last layer contracted with the query's gravity direction: filled per query
+      const { nIn } = part.layers[part.layers.length - 1];
+      const contracted = { Wt: new Float64Array(3 * nIn), b: new Float64Array(3), nIn, nOut: 3 };
+      return { ...part, contracted };
+    });
     this.range = model.training_range;
+  }
+
+  // A gravity_linear model's last layer contracted with the gravity direction c[1..3]: its
+  // nine outputs (the matrix M, row by row) become the three of M ĝ, as in Surrogate.predict.
+  static contract(part, c) {
+    const full = part.layers[part.layers.length - 1];
+    const out = part.contracted;
+    for (let i = 0; i < 3; i += 1) {
+      out.b[i] = 0;
+      for (let j = 0; j < 3; j += 1) out.b[i] += full.b[3 * i + j] * c[1 + j];
+      for (let k = 0; k < full.nIn; k += 1) {
+        let s = 0;
+        for (let j = 0; j < 3; j += 1) s += full.Wt[(3 * i + j) * full.nIn + k] * c[1 + j];
+        out.Wt[i * full.nIn + k] = s;
+      }
+    }
+    return out;
   }
 
   // Encoded C1, gravity direction and output gain, as Surrogate.features computes them.
@@ -99,6 +122,7 @@ class WebSurrogate {
         gain: Float32Array.from(local, (i) => part.gain[i]),
         pre,
         layers: part.layers,
+        contracted: part.contracted,
         q: new Float64Array(w),
         h: new Float64Array(rows.length * widest),
         g: new Float64Array(rows.length * widest),
@@ -128,7 +152,8 @@ class WebSurrogate {
       }
       const last = part.layers.length - 1;
       for (let l = 1; l <= last; l += 1) {
-        const { Wt, b, nIn, nOut } = part.layers[l];
+        const contract = l === last && part.contracted;
+        const { Wt, b, nIn, nOut } = contract ? WebSurrogate.contract(part, c) : part.layers[l];
         const hidden = l < last;
         // four points at a time share each weight they load; each sum keeps the order of one
         let i = 0;
