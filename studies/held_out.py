@@ -12,6 +12,10 @@ as inside the data").
 
 A case's error is given as its mean, 95th percentile and maximum over the material points
 (a tumour is one point), in mm and relative to the case's largest FE displacement.
+
+``python -m studies.held_out DATASET MODEL... [--bands 1.1 1.9]`` prints models trained outside
+the workflow (``python -m surrogate.cli train``) on their held-out and training cases, by
+stiffness band.
 """
 
 from __future__ import annotations
@@ -19,6 +23,7 @@ from __future__ import annotations
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -206,5 +211,77 @@ def evaluate_held_out(
     return HeldOutEvaluation(blocks=blocks, inside_all=ErrorSpread.over(list(inside_of.values())))
 
 
+def by_stiffness(rows: Sequence[CaseErrors], edges: Sequence[float]) -> list[
+        tuple[str, ErrorSpread]]:
+    """The spread of ``rows`` in each band of C1 that ``edges`` (kPa, ascending) bound.
+
+    Bands without cases are left out.
+    """
+    bounds = [0.0, *sorted(edges), float("inf")]
+    bands = []
+    for lo, hi in zip(bounds[:-1], bounds[1:], strict=False):
+        inside = [r for r in rows if lo <= r.C1 < hi]
+        if inside:
+            label = f"C1 < {hi:g}" if lo == 0 else (f"C1 >= {lo:g}" if hi == float("inf")
+                                                    else f"{lo:g} <= C1 < {hi:g}")
+            bands.append((label, ErrorSpread.over(inside)))
+    return bands
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Each model on the cases its split held out and on those it trained on, by stiffness."""
+    import argparse
+    import sys
+
+    from fem.dataset import DatasetError, read_dataset
+    from surrogate.exceptions import SurrogateError
+    from surrogate.predict import Surrogate
+
+    parser = argparse.ArgumentParser(
+        prog="python -m studies.held_out",
+        description="Point errors (mean of the cases' means / 95th percentile of their 95th "
+                    "percentiles / largest, mm) of trained models on the dataset's cases that "
+                    "each model's split held out, and on the cases it trained on.")
+    parser.add_argument("dataset", type=Path, help="the dataset the models trained on")
+    parser.add_argument("models", type=Path, nargs="+", help="model folders")
+    parser.add_argument("--bands", type=float, nargs="*", default=[1.1, 1.9],
+                        help="C1 values (kPa) between the stiffness bands (default 1.1 1.9)")
+    args = parser.parse_args(argv)
+    try:
+        ds = read_dataset(args.dataset)
+        models = [(folder, Surrogate.load(folder)) for folder in args.models]
+    except (DatasetError, SurrogateError, OSError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+
+    def show(label: str, spread: ErrorSpread) -> None:
+        print(f"  {label:<22}{spread.cases:>5} cases  {spread.mean_mm:.4f} / "
+              f"{spread.p95_mm:.3f} / {spread.max_mm:.3f} mm  (worst {spread.worst_case})")
+
+    for folder, model in models:
+        config = model.config
+        split = ds.splits.get(config.split)
+        if split is None:
+            print(f"error: the dataset has no {config.split} split ({folder})", file=sys.stderr)
+            return 2
+        print(f"{folder}: {config.architecture}, {config.output_form} output, split "
+              f"{config.split}, validation error {model.metrics.get('validation_error_mm')} mm")
+        parts = ([(np.arange(len(ds.C1)), "every case")] if config.split == "by_sample" else
+                 [(np.asarray(split[part], dtype=np.int64), label)  # whole cases
+                  for part, label in (("test", "held out"), ("train", "trained on"))])
+        for cases, label in parts:  # a by-sample split draws points, not cases
+            cases = cases[ds.converged[cases]]
+            rows = [CaseErrors.of(model, ds, int(i)) for i in cases]
+            if rows:
+                show(label, ErrorSpread.over(rows))
+                for band, spread in by_stiffness(rows, args.bands):
+                    show(f"  {band}", spread)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
+
+
 __all__ = ["HELD_OUT", "CaseErrors", "ErrorSpread", "HeldOutBlock", "HeldOutEvaluation",
-           "evaluate_held_out", "held_out_groups"]
+           "by_stiffness", "evaluate_held_out", "held_out_groups"]

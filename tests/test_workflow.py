@@ -287,6 +287,24 @@ def test_held_out_models_and_postures_are_judged_against_fe(small_run: Path) -> 
     assert "by-direction" in held_table and f"{direction.held_out_model.max_mm:.3g}" in held_table
 
 
+def test_held_out_command_prints_the_workflows_figures(small_run: Path, capsys) -> None:
+    """``python -m studies.held_out`` gives a model's held-out errors as the workflow's JSON."""
+    from studies.held_out import HeldOutEvaluation, main
+
+    results = small_run / "results"
+    dataset = results / "dataset/dataset.h5"
+    direction = HeldOutEvaluation.read(results / "surrogate/held_out.json").blocks[1]
+    assert main([str(dataset), str(results / "surrogate/model_by_direction"),
+                 "--bands", "1.5"]) == 0
+    out = capsys.readouterr().out
+    spread = direction.held_out_model
+    assert (f"held out{spread.cases:>19} cases  {spread.mean_mm:.4f} / {spread.p95_mm:.3f} / "
+            f"{spread.max_mm:.3f} mm") in out
+    assert "trained on" in out and "C1 < 1.5" in out and "C1 >= 1.5" in out
+    assert main([str(dataset), str(results / "no_such_model")]) == 2
+    assert "error:" in capsys.readouterr().err
+
+
 def test_fe_study_rules_run_end_to_end(small_run: Path) -> None:
     """The FE study's rules ran as part of the small workflow (the report needs them)."""
     config = yaml.safe_load((REPO / "tests" / "config.yaml").read_text())
