@@ -71,7 +71,6 @@ def test_loss_is_eq2() -> None:
     assert float(value) == pytest.approx((5.0 + 1.0 + 10.0 * 1.0) / 3, rel=1e-5)
 
 
-
 def test_a_gravity_linear_network_is_a_matrix_times_the_gravity_direction() -> None:
     """With M blind to ĝ (its direction weights zeroed), u(ĝ) = Σ_j ĝ_j u(e_j) exactly.
 
@@ -102,6 +101,7 @@ def test_a_gravity_linear_network_is_a_matrix_times_the_gravity_direction() -> N
 
         superposed = sum(g[j] * u(np.eye(3)[j]) for j in range(3))
         assert np.allclose(u(g), superposed, atol=1e-6) == superposes, form
+
 
 def test_training_reduces_the_loss_and_round_trips(dataset_path: Path, tmp_path: Path) -> None:
     from fem.dataset import read_dataset
