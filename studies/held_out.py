@@ -221,10 +221,15 @@ def by_stiffness(rows: Sequence[CaseErrors], edges: Sequence[float]) -> list[
     bands = []
     for lo, hi in zip(bounds[:-1], bounds[1:], strict=False):
         inside = [r for r in rows if lo <= r.C1 < hi]
-        if inside:
-            label = f"C1 < {hi:g}" if lo == 0 else (f"C1 >= {lo:g}" if hi == float("inf")
-                                                    else f"{lo:g} <= C1 < {hi:g}")
-            bands.append((label, ErrorSpread.over(inside)))
+        if not inside:
+            continue
+        if lo == 0:
+            label = f"C1 < {hi:g}"
+        elif hi == float("inf"):
+            label = f"C1 >= {lo:g}"
+        else:
+            label = f"{lo:g} <= C1 < {hi:g}"
+        bands.append((label, ErrorSpread.over(inside)))
     return bands
 
 
@@ -266,10 +271,12 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         print(f"{folder}: {config.architecture}, {config.output_form} output, split "
               f"{config.split}, validation error {model.metrics.get('validation_error_mm')} mm")
-        parts = ([(np.arange(len(ds.C1)), "every case")] if config.split == "by_sample" else
-                 [(np.asarray(split[part], dtype=np.int64), label)  # whole cases
-                  for part, label in (("test", "held out"), ("train", "trained on"))])
-        for cases, label in parts:  # a by-sample split draws points, not cases
+        if config.split == "by_sample":  # its split draws points, not cases
+            parts = {"every case": np.arange(len(ds.C1))}
+        else:
+            parts = {"held out": np.asarray(split["test"], dtype=np.int64),
+                     "trained on": np.asarray(split["train"], dtype=np.int64)}
+        for label, cases in parts.items():
             cases = cases[ds.converged[cases]]
             rows = [CaseErrors.of(model, ds, int(i)) for i in cases]
             if rows:
