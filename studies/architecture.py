@@ -11,6 +11,7 @@ used downstream.
 
 from __future__ import annotations
 
+import itertools
 import json
 import shutil
 from collections.abc import Iterable, Sequence
@@ -24,7 +25,8 @@ from fem.dataset import Dataset
 from studies import paper
 from studies.results import Record, Result
 from surrogate.checkpoint import HISTORY_JSON, MODEL_JSON, PARAMS_NPZ, unconverged_cases, write_json
-from surrogate.config import parse_architecture
+from surrogate.config import SurrogateConfig, parse_architecture
+from surrogate.model import layer_sizes, network_names
 
 
 @dataclass(frozen=True, slots=True)
@@ -113,15 +115,19 @@ def read_run(folder: str | Path) -> dict[str, Any]:
         **{k: meta["metrics"].get(k) for k in (
             "validation_error_mm", "validation_error_domain_mm", "train_s", "compile_s",
             "epochs", "best_epoch")},
-        "parameters": _count_parameters(cfg),
+        "parameters": count_parameters(cfg),
         "config": cfg,
     }
 
 
-def _count_parameters(cfg: dict[str, Any]) -> int:
-    sizes = [7] + [cfg["width"]] * cfg["hidden_layers"] + [3]
-    per_net = sum(a * b + b for a, b in zip(sizes[:-1], sizes[1:], strict=True))
-    return per_net * (2 if cfg.get("boundary", "network") == "network" else 1)
+def count_parameters(cfg: dict[str, Any]) -> int:
+    """Weights and biases of every network of a run's config (``model.json``'s ``config``)."""
+    config = SurrogateConfig.from_mapping(cfg)
+    return sum(
+        a * b + b
+        for net in network_names(config)
+        for a, b in itertools.pairwise(layer_sizes(config, net))
+    )
 
 
 def _mean_sd(values: Sequence[float]) -> dict[str, float]:

@@ -269,8 +269,9 @@ def main(argv: list[str] | None = None) -> int:
         if split is None:
             print(f"error: the dataset has no {config.split} split ({folder})", file=sys.stderr)
             return 2
-        print(f"{folder}: {config.architecture}, {config.output_form} output, split "
-              f"{config.split}, validation error {model.metrics.get('validation_error_mm')} mm")
+        print(f"{folder}: {config.architecture} {config.structure}, {config.output_form} output, "
+              f"split {config.split}, validation error "
+              f"{model.metrics.get('validation_error_mm')} mm")
         if config.split == "by_sample":  # its split draws points, not cases
             parts = {"every case": np.arange(len(ds.C1))}
         else:

@@ -15,6 +15,7 @@ LR_SCHEDULES = ("constant", "cosine", "exponential")
 C1_ENCODINGS = ("linear", "log", "inverse")
 OUTPUT_SCALINGS = ("none", "compliance")
 OUTPUT_FORMS = ("vector", "gravity_linear")
+STRUCTURES = ("pointwise", "separable")
 
 
 @dataclass(frozen=True, slots=True)
@@ -43,6 +44,12 @@ class SurrogateConfig:
             or ``gravity_linear`` (its nine outputs are a 3x3 matrix M and the displacement is
             M ĝ, with ĝ the unit gravity direction: linear in ĝ as linear elasticity's
             superposition is, M's own dependence on ĝ carrying the nonlinearity).
+        structure: ``pointwise`` (each network maps a point and the case to its displacement,
+            the paper) or ``separable`` (each network maps the point alone to ``modes``
+            displacement fields, and a third network, the branch, maps the case to their
+            weights: u = Σ_k b_k(C1, ĝ) T_k(X); a query then costs the branch and one
+            weighted sum, whatever the networks' size).
+        modes: number of fields T_k of a ``separable`` model.
         learning_rate: Adam step size (paper 0.01).
         beta1: Adam β1 (paper 0.5).
         beta2: Adam β2 (paper 0.9).
@@ -68,6 +75,8 @@ class SurrogateConfig:
     c1_encoding: str = "linear"
     output_scaling: str = "none"
     output_form: str = "vector"
+    structure: str = "pointwise"
+    modes: int = 64
     learning_rate: float = 0.01
     beta1: float = 0.5
     beta2: float = 0.9
@@ -80,7 +89,7 @@ class SurrogateConfig:
     split: str = "by_sample"
 
     def __post_init__(self) -> None:
-        for name in ("hidden_layers", "width", "batch_size", "max_epochs", "patience"):
+        for name in ("hidden_layers", "width", "modes", "batch_size", "max_epochs", "patience"):
             value = getattr(self, name)
             if not isinstance(value, int) or value < 1:
                 raise SurrogateConfigError(
@@ -97,6 +106,7 @@ class SurrogateConfig:
             ("c1_encoding", C1_ENCODINGS),
             ("output_scaling", OUTPUT_SCALINGS),
             ("output_form", OUTPUT_FORMS),
+            ("structure", STRUCTURES),
         ):
             if getattr(self, name) not in allowed:
                 raise SurrogateConfigError(

@@ -11,8 +11,8 @@ by one scalar scale, so the loss's L2 norm stays isotropic.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
-from typing import Any
+from dataclasses import asdict, dataclass, fields
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -159,19 +159,43 @@ class Samples:
         gain: per-sample output multiplier (n,), float32: the compliance gain times
             φ (exact Dirichlet mode) or 1.
         boundary: clamped flags (n,).
+        point: the sample's material point (n,), int32: its row of :class:`Tables` ``points``.
+        case: the sample's case (n,), int32: its row of :class:`Tables` ``cases``.
     """
 
     x: np.ndarray
     y: np.ndarray
     gain: np.ndarray
     boundary: np.ndarray
+    point: np.ndarray
+    case: np.ndarray
 
     def __len__(self) -> int:
         return self.x.shape[0]
 
     def subset(self, mask: np.ndarray) -> Samples:
         """The samples where ``mask`` holds."""
-        return Samples(self.x[mask], self.y[mask], self.gain[mask], self.boundary[mask])
+        return Samples(*(getattr(self, f.name)[mask] for f in fields(self)))
+
+
+class Tables(NamedTuple):
+    """Every point's and every case's inputs, which samples index (a separable model's tables).
+
+    Attributes:
+        points: standardised material points (N, 3), float32.
+        cases: case features (n_cases, 4), float32: encoded C1 and the gravity direction.
+    """
+
+    points: np.ndarray
+    cases: np.ndarray
+
+
+def tables(ds: Dataset, norm: Normalisation) -> Tables:
+    """The dataset's points and cases as the networks see them."""
+    return Tables(
+        norm.points(ds.X).astype(np.float32),
+        norm.case(ds.C1, ds.direction).astype(np.float32),
+    )
 
 
 def sample_arrays(
@@ -193,4 +217,11 @@ def sample_arrays(
     gain = norm.gain(ds.C1)[case]
     if point_factor is not None:
         gain = gain * point_factor[point]
-    return Samples(inputs, targets, gain.astype(np.float32), ds.boundary[point])
+    return Samples(
+        inputs,
+        targets,
+        gain.astype(np.float32),
+        ds.boundary[point],
+        point.astype(np.int32),
+        case.astype(np.int32),
+    )

@@ -47,6 +47,11 @@ def export_web(model: Surrogate) -> dict[str, Any]:
     displacement unit, mm). Rib points of a part-less model (``exact`` mode) are zero. The
     last layer of a ``gravity_linear`` model has nine outputs, the matrix that the page
     contracts with the query's gravity direction.
+
+    A ``separable`` model's parts carry their points' fields instead of layers
+    (``fields``: (n, 3, modes), gain and 1/√modes included, as :class:`Surrogate` precomputes
+    them), and the model its ``branch`` layers: the page evaluates the branch once per query
+    and weighs the fields with its outputs.
     """
     config, norm = model.config, model.normalisation
     factor = np.ones(len(model.X)) if model.point_factor is None else model.point_factor
@@ -55,17 +60,15 @@ def export_web(model: Surrogate) -> dict[str, Any]:
     net = boundary_network(config)
     if net is not None and model.boundary.any():
         members["boundary"] = np.flatnonzero(model.boundary)
+    separable = config.structure == "separable"
     for part, index in members.items():
-        layers = model.params["domain" if part == "domain" else net]
-        parts[part] = {
-            "points": encode_array(index, "int32"),
-            "gain": encode_array(factor[index] * norm.u_scale, "float32"),
-            "layers": [
-                {"W": encode_array(np.asarray(W), "float32"),
-                 "b": encode_array(np.asarray(b), "float32")}
-                for W, b in layers
-            ],
-        }
+        parts[part] = {"points": encode_array(index, "int32")}
+        if separable:
+            parts[part]["fields"] = encode_array(model.fields(part), "float32")
+        else:
+            layers = model.params["domain" if part == "domain" else net]
+            parts[part]["gain"] = encode_array(factor[index] * norm.u_scale, "float32")
+            parts[part]["layers"] = _layers(layers)
     checks = model.range_checks()
     return {
         "format": FORMAT,
@@ -74,6 +77,9 @@ def export_web(model: Surrogate) -> dict[str, Any]:
         "activation": config.activation,
         "boundary": config.boundary,
         "output_form": config.output_form,
+        "structure": config.structure,
+        "modes": config.modes if separable else None,
+        "branch": _layers(model.params["branch"]) if separable else None,
         "n_points": int(len(model.X)),
         "X_m": encode_array(model.X, "float32"),
         "points_standardised": encode_array(norm.points(model.X), "float32"),
@@ -88,3 +94,10 @@ def export_web(model: Surrogate) -> dict[str, Any]:
         "parts": parts,
         "training_range": checks,
     }
+
+
+def _layers(layers: Any) -> list[dict[str, Any]]:
+    return [
+        {"W": encode_array(np.asarray(W), "float32"), "b": encode_array(np.asarray(b), "float32")}
+        for W, b in layers
+    ]

@@ -26,13 +26,16 @@ import optax
 
 from fem.dataset import Dataset
 from surrogate.config import SurrogateConfig
-from surrogate.data import Normalisation, Samples, dirichlet_factor, sample_arrays
+from surrogate.data import Normalisation, Samples, Tables, dirichlet_factor, sample_arrays, tables
 from surrogate.model import (
     Params,
+    Part,
+    PointOrder,
     boundary_network,
+    grid_loss,
     init_params,
-    network,
     pointwise_error,
+    samples_network,
     split_loss,
 )
 
@@ -135,20 +138,18 @@ def make_optimizer(
     )
 
 
-Part = tuple[jax.Array, jax.Array, jax.Array]
-
-
 def train_step(
     params: Params,
     opt_state: Any,
     domain: Part,
     boundary: Part | None,
+    tables: Tables,
     *,
     config: SurrogateConfig,
     optimizer: optax.GradientTransformation,
 ) -> tuple[Params, Any, jax.Array]:
     """One Adam step on one batch (domain part and boundary part); returns the loss."""
-    value, grads = jax.value_and_grad(split_loss)(params, domain, boundary, config)
+    value, grads = jax.value_and_grad(split_loss)(params, domain, boundary, config, tables)
     updates, opt_state = optimizer.update(grads, opt_state, params)
     return optax.apply_updates(params, updates), opt_state, value
 
@@ -167,6 +168,7 @@ def train_epoch(
     key: jax.Array,
     domain: Part,
     boundary: Part | None,
+    tables: Tables,
     *,
     config: SurrogateConfig,
     optimizer: optax.GradientTransformation,
@@ -190,6 +192,7 @@ def train_epoch(
             opt_state,
             tuple(a[i_d] for a in domain),
             part_b,
+            tables,
             config=config,
             optimizer=optimizer,
         )
@@ -199,13 +202,79 @@ def train_epoch(
     return params, opt_state, jnp.mean(losses)
 
 
+PART_FIELDS = ("x", "y", "gain", "point", "case")
+"""The :class:`Samples` fields of a batch part, in :data:`surrogate.model.Part` order."""
+
+
+def case_grid(
+    samples: Samples, n_points: int, use_rib: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Training samples laid out as whole cases for a separable model's :func:`grid_loss`.
+
+    Returns ``(case rows (C,), targets (C, N, 3), gains (C, N), member (C, N))``: ``member``
+    marks the (case, point) pairs that are training samples; rib samples are left out where
+    no network predicts them (``use_rib`` False), as the pointwise path leaves them out.
+    """
+    cases, row = np.unique(samples.case, return_inverse=True)
+    y = np.zeros((len(cases), n_points, 3), np.float32)
+    gain = np.zeros((len(cases), n_points), np.float32)
+    member = np.zeros((len(cases), n_points), np.float32)
+    y[row, samples.point] = samples.y
+    gain[row, samples.point] = samples.gain
+    member[row, samples.point] = 1.0 if use_rib else (~samples.boundary).astype(np.float32)
+    return cases.astype(np.int32), y, gain, member
+
+
+def point_order(boundary: np.ndarray) -> PointOrder:
+    """The rows each point network of a separable model takes (:class:`PointOrder`)."""
+    domain, rib = np.flatnonzero(~boundary), np.flatnonzero(boundary)
+    inverse = np.argsort(np.concatenate([domain, rib]))
+    return PointOrder(*(jnp.asarray(a.astype(np.int32)) for a in (domain, rib, inverse)),
+                      jnp.asarray(boundary, bool))
+
+
+@partial(jax.jit, static_argnames=("config", "optimizer", "per_step", "steps"))
+def train_epoch_grid(
+    params: Params,
+    opt_state: Any,
+    key: jax.Array,
+    grid: tuple[jax.Array, jax.Array, jax.Array, jax.Array],
+    order: PointOrder,
+    tables: Tables,
+    *,
+    config: SurrogateConfig,
+    optimizer: optax.GradientTransformation,
+    per_step: int,
+    steps: int,
+) -> tuple[Params, Any, jax.Array]:
+    """One pass over a separable model's training cases, ``per_step`` whole cases a step."""
+
+    def step(carry, idx):
+        params, opt_state = carry
+        batch = tuple(a[idx] for a in grid)
+        value, grads = jax.value_and_grad(grid_loss)(params, batch, tables, order, config)
+        updates, opt_state = optimizer.update(grads, opt_state, params)
+        return (optax.apply_updates(params, updates), opt_state), value
+
+    order_c = _batches(key, grid[0].shape[0], per_step, steps)
+    (params, opt_state), losses = jax.lax.scan(step, (params, opt_state), order_c)
+    return params, opt_state, jnp.mean(losses)
+
+
 @partial(jax.jit, static_argnames=("net", "config"))
-def _error_sum(layers, x, y, g, w, *, net, config):
-    pred = jnp.zeros_like(y) if net is None else network(layers, x, config) * g[:, None]
+def _error_sum(params, part, w, tables, *, net, config):
+    y, g = part[1], part[2]
+    pred = (
+        jnp.zeros_like(y)
+        if net is None
+        else samples_network(params, net, part, tables, config) * g[:, None]
+    )
     return jnp.sum(w * pointwise_error(pred, y))
 
 
-def error_sums(params: Params, samples: Samples, config: SurrogateConfig) -> tuple[float, float]:
+def error_sums(
+    params: Params, samples: Samples, config: SurrogateConfig, tables: Tables
+) -> tuple[float, float]:
     """Sums of the error norm (scaled units) over the domain and the boundary samples.
 
     Evaluated in fixed-size chunks (zero-weight padding) so that one compilation serves
@@ -220,20 +289,19 @@ def error_sums(params: Params, samples: Samples, config: SurrogateConfig) -> tup
             pad = EVAL_CHUNK - (stop - start)
             chunk = [
                 np.concatenate([a[start:stop], np.zeros((pad, *a.shape[1:]), a.dtype)])
-                for a in (part.x, part.y, part.gain)
+                for a in (part.x, part.y, part.gain, part.point, part.case)
             ]
             w = np.concatenate([np.ones(stop - start, np.float32), np.zeros(pad, np.float32)])
-            layers = None if net is None else params[net]
-            total += float(_error_sum(layers, *chunk, w, net=net, config=config))
+            total += float(_error_sum(params, tuple(chunk), w, tables, net=net, config=config))
         sums.append(total)
     return sums[0], sums[1]
 
 
 def evaluate(
-    params: Params, samples: Samples, config: SurrogateConfig, u_scale: float
+    params: Params, samples: Samples, config: SurrogateConfig, u_scale: float, tables: Tables
 ) -> dict[str, float]:
     """Loss (Eq. 2, sample mean, scaled units) and mean per-point error norms in mm."""
-    domain, boundary = error_sums(params, samples, config)
+    domain, boundary = error_sums(params, samples, config, tables)
     n = max(len(samples), 1)
     n_domain = max(int(np.sum(~samples.boundary)), 1)
     return {
@@ -296,19 +364,32 @@ def train_and_evaluate(
     """
     start = time.perf_counter()
     norm, phi, train, val, train_cases = prepare(ds, config, holdout)
-    domain = train.subset(~train.boundary)
-    bset = train.subset(train.boundary)
-    use_boundary = boundary_network(config) is not None and len(bset) > 0
-    n_used = len(domain) + (len(bset) if use_boundary else 0)
-    batch = min(config.batch_size, n_used)
-    steps = -(-n_used // batch)
-    per_b = max(1, round(batch * len(bset) / n_used)) if use_boundary else 0
-    per_step = (batch - per_b, per_b)
+    inputs = Tables(*(jnp.asarray(a) for a in tables(ds, norm)))
+    use_boundary = boundary_network(config) is not None and bool(np.any(train.boundary))
+    if config.structure == "separable":
+        grid = case_grid(train, ds.n_points, use_boundary)
+        per_step = max(1, min(round(config.batch_size / ds.n_points), len(grid[0])))
+        steps = -(-len(grid[0]) // per_step)
+        data: tuple[Any, ...] = (tuple(jnp.asarray(a) for a in grid), point_order(ds.boundary))
+        epoch = train_epoch_grid
+        what = f"{len(grid[0])} cases on {ds.n_points} points, {steps} steps of {per_step} cases"
+    else:
+        domain = train.subset(~train.boundary)
+        bset = train.subset(train.boundary)
+        n_used = len(domain) + (len(bset) if use_boundary else 0)
+        batch = min(config.batch_size, n_used)
+        steps = -(-n_used // batch)
+        per_b = max(1, round(batch * len(bset) / n_used)) if use_boundary else 0
+        per_step = (batch - per_b, per_b)
+        data = (
+            tuple(jnp.asarray(getattr(domain, f)) for f in PART_FIELDS),
+            tuple(jnp.asarray(getattr(bset, f)) for f in PART_FIELDS) if use_boundary else None,
+        )
+        epoch = train_epoch
+        what = f"{steps} steps of {per_step} samples"
 
     params, optimizer, opt_state, key = init(config, steps)
     schedule = learning_rate_schedule(config, steps)
-    d_arrays = tuple(jnp.asarray(a) for a in (domain.x, domain.y, domain.gain))
-    b_arrays = tuple(jnp.asarray(a) for a in (bset.x, bset.y, bset.gain)) if use_boundary else None
     kwargs = dict(config=config, optimizer=optimizer, per_step=per_step, steps=steps)
 
     result = TrainResult(
@@ -320,17 +401,17 @@ def train_and_evaluate(
         held_out_cases=None if holdout is None else np.asarray(holdout),
     )
     t0 = time.perf_counter()
-    epoch_fn = train_epoch.lower(params, opt_state, key, d_arrays, b_arrays, **kwargs).compile()
+    epoch_fn = epoch.lower(params, opt_state, key, *data, inputs, **kwargs).compile()
     result.compile_s = time.perf_counter() - t0
     log.info(
-        "%s (%s boundary): %d training samples (%d on the rib), %d steps of %s per epoch, "
+        "%s %s (%s boundary): %d training samples (%d on the rib), %s per epoch, "
         "compiled in %.1f s",
         config.architecture,
+        config.structure,
         config.boundary,
         len(train),
-        len(bset),
-        steps,
-        per_step,
+        int(np.sum(train.boundary)),
+        what,
         result.compile_s,
     )
 
@@ -339,9 +420,9 @@ def train_and_evaluate(
     for epoch in range(1, config.max_epochs + 1):
         t0 = time.perf_counter()
         key, epoch_key = jax.random.split(key)
-        params, opt_state, train_loss = epoch_fn(params, opt_state, epoch_key, d_arrays, b_arrays)
+        params, opt_state, train_loss = epoch_fn(params, opt_state, epoch_key, *data, inputs)
         train_loss = float(train_loss)
-        metrics = evaluate(params, val, config, norm.u_scale)
+        metrics = evaluate(params, val, config, norm.u_scale, inputs)
         result.history.append(
             {
                 "epoch": epoch,
@@ -377,7 +458,7 @@ def train_and_evaluate(
         best_loss,
         best_epoch,
     )
-    final = evaluate(best_params, val, config, norm.u_scale)
+    final = evaluate(best_params, val, config, norm.u_scale, inputs)
     result.validation_error_mm = final["error_mm"]
     result.validation_error_domain_mm = final["domain_error_mm"]
     log.info(

@@ -103,6 +103,53 @@ def test_a_gravity_linear_network_is_a_matrix_times_the_gravity_direction() -> N
         assert np.allclose(u(g), superposed, atol=1e-6) == superposes, form
 
 
+@pytest.mark.parametrize("boundary", ["network", "shared", "exact"])
+def test_a_separable_model_trains_on_whole_cases_with_the_loss_of_eq2(
+    dataset_path: Path, boundary: str
+) -> None:
+    """The whole-case loss of a separable model is Eq. 2 over the same samples.
+
+    ``grid_loss`` (point networks once per point, branch once per case) equals ``split_loss``
+    on the samples one by one (both networks at every sample, α on the rib), for the by-sample
+    split's training samples of three cases; and the gathered evaluation equals the direct one.
+    """
+    import jax
+    import jax.numpy as jnp
+
+    from fem.dataset import read_dataset
+    from studies.architecture import count_parameters
+    from surrogate.data import tables
+    from surrogate.model import grid_loss, init_params, network, samples_network, split_loss
+    from surrogate.train import PART_FIELDS, case_grid, point_order, prepare
+
+    ds = read_dataset(dataset_path)
+    config = SurrogateConfig(hidden_layers=2, width=8, activation="silu", alpha=3.0, modes=4,
+                             structure="separable", output_form="gravity_linear",
+                             output_scaling="compliance", boundary=boundary)
+    params = init_params(jax.random.PRNGKey(2), config)
+    assert count_parameters(config.as_dict()) == sum(
+        W.size + b.size for layers in params.values() for W, b in layers)
+    norm, _, train, _, _ = prepare(ds, config)
+    train = train.subset(np.isin(train.case, np.unique(train.case)[:3]))
+    use_rib = boundary != "exact"
+    inputs = tables(ds, norm)
+    grid = case_grid(train, ds.n_points, use_rib)
+    assert len(grid[0]) == 3 and grid[3].sum() == (len(train) if use_rib else
+                                                   np.sum(~train.boundary))
+    whole = grid_loss(params, tuple(jnp.asarray(a) for a in grid), inputs,
+                      point_order(ds.boundary), config)
+
+    def part(mask: np.ndarray) -> tuple:
+        return tuple(jnp.asarray(getattr(train.subset(mask), f)) for f in PART_FIELDS)
+
+    one_by_one = split_loss(params, part(~train.boundary),
+                            part(train.boundary) if use_rib else None, config)
+    assert float(whole) == pytest.approx(float(one_by_one), rel=1e-5)
+    domain = part(~train.boundary)
+    np.testing.assert_allclose(samples_network(params, "domain", domain, inputs, config),
+                               network(params, "domain", domain[0], config), atol=1e-5)
+
+
 def test_training_reduces_the_loss_and_round_trips(dataset_path: Path, tmp_path: Path) -> None:
     from fem.dataset import read_dataset
     from surrogate.checkpoint import save_model
@@ -362,17 +409,20 @@ def test_train_command_line_trains_saves_and_names_bad_settings(
     assert "not KEY=VALUE" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize(("boundary", "output_form"), [
-    ("network", "vector"), ("shared", "vector"), ("exact", "vector"),
-    ("network", "gravity_linear"), ("exact", "gravity_linear")])
+@pytest.mark.parametrize(("boundary", "output_form", "structure"), [
+    ("network", "vector", "pointwise"), ("shared", "vector", "pointwise"),
+    ("exact", "vector", "pointwise"), ("network", "gravity_linear", "pointwise"),
+    ("exact", "gravity_linear", "pointwise"), ("network", "gravity_linear", "separable"),
+    ("shared", "vector", "separable"), ("exact", "gravity_linear", "separable")])
 def test_fast_prediction_is_the_plain_network(
-    dataset_path: Path, tmp_path: Path, boundary: str, output_form: str
+    dataset_path: Path, tmp_path: Path, boundary: str, output_form: str, structure: str
 ) -> None:
     """``Surrogate.predict`` gives the plain forward pass of the saved networks at every point.
 
-    The fast path precomputes the first layer's point part, runs in float32 and gathers the
-    points per network (and contracts a ``gravity_linear`` model's last layer with ĝ before
-    the points pass it); ``model.apply`` is the plain forward pass.
+    The fast path precomputes the first layer's point part (a separable model's fields), runs
+    in float32 and gathers the points per network (and contracts a ``gravity_linear`` model's
+    last layer with ĝ before the points pass it); ``model.apply`` is the plain forward pass,
+    every network evaluated at every sample.
     """
     import warnings
 
@@ -396,6 +446,8 @@ def test_fast_prediction_is_the_plain_network(
         c1_encoding="log",
         output_scaling="compliance",
         output_form=output_form,
+        structure=structure,
+        modes=5,
     )
     save_model(tmp_path / "m", train_and_evaluate(ds, config, progress=False), ds)
     model = Surrogate.load(tmp_path / "m")

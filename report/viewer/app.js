@@ -37,6 +37,20 @@ class WebSurrogate {
     this.act = ACTIVATIONS[model.activation];
     this.X = decode(model.X_m);
     this.Xs = decode(model.points_standardised);
+    this.separable = model.structure === 'separable';
+    if (this.separable) {
+      // a separable model: each part's fields at its points, weighted per query by the branch
+      this.modes = model.modes;
+      this.branch = model.branch.map((layer) => {
+        const [nIn, nOut] = layer.W.shape;
+        return { W: decode(layer.W), b: decode(layer.b), nIn, nOut };
+      });
+      this.parts = Object.values(model.parts).map((part) => ({
+        points: decode(part.points), fields: decode(part.fields),
+      }));
+      this.range = model.training_range;
+      return;
+    }
     this.parts = Object.values(model.parts).map((part) => ({
       points: decode(part.points),
       gain: decode(part.gain),
@@ -105,6 +119,13 @@ class WebSurrogate {
         if (where[point] >= 0) { rows.push(where[point]); local.push(i); }
       });
       if (!rows.length) continue;
+      if (this.separable) {
+        const m = 3 * this.modes;
+        const fields = new Float32Array(rows.length * m);
+        local.forEach((i, r) => fields.set(part.fields.subarray(i * m, (i + 1) * m), r * m));
+        parts.push({ rows: Int32Array.from(rows), fields });
+        continue;
+      }
       const first = part.layers[0];
       const w = first.nOut;
       const pre = new Float32Array(rows.length * w);
@@ -131,11 +152,49 @@ class WebSurrogate {
     return { n: indices.length, parts, out: new Float32Array(3 * indices.length) };
   }
 
+  // A separable model's weights of its fields for case features c, as surrogate.model's
+  // branch_weights: the branch network, its outputs contracted with ĝ in gravity_linear form.
+  weights(c) {
+    let h = c.slice(0, 4);
+    this.branch.forEach((layer, l) => {
+      const { W, b, nIn, nOut } = layer;
+      const g = new Float64Array(nOut);
+      for (let o = 0; o < nOut; o += 1) {
+        let s = b[o];
+        for (let k = 0; k < nIn; k += 1) s += h[k] * W[k * nOut + o];
+        g[o] = l < this.branch.length - 1 ? this.act(s) : s;
+      }
+      h = g;
+    });
+    if (this.model.output_form !== 'gravity_linear') return h;
+    const w = new Float64Array(this.modes);
+    for (let k = 0; k < this.modes; k += 1) {
+      for (let j = 0; j < 3; j += 1) w[k] += h[3 * k + j] * c[1 + j];
+    }
+    return w;
+  }
+
   // Displacement (mm) of the evaluator's points for one query, into ev.out (3 per point).
   evaluate(ev, C1, phi, theta) {
     const c = this.features(C1, phi, theta);
     const act = this.act;
     ev.out.fill(0);  // rib points of an exact-Dirichlet model stay zero
+    if (this.separable) {
+      const w = this.weights(c);
+      const K = this.modes;
+      for (const part of ev.parts) {
+        const { rows, fields } = part;
+        for (let i = 0; i < rows.length; i += 1) {
+          for (let d = 0; d < 3; d += 1) {
+            const f = (3 * i + d) * K;
+            let s = 0;
+            for (let k = 0; k < K; k += 1) s += fields[f + k] * w[k];
+            ev.out[3 * rows[i] + d] = s * c[4];
+          }
+        }
+      }
+      return ev.out;
+    }
     for (const part of ev.parts) {
       const n = part.rows.length;
       const first = part.layers[0];
