@@ -59,7 +59,8 @@ def test_the_default_config_parses_into_every_layer() -> None:
     assert config.surrogate.activation == "silu"  # the file's, not the dataclass default
     study = config.surrogate_study
     assert study.architectures[0] == "2x32" and len(study.architectures) == 8
-    assert {v.name for v in study.variants} == {"exact_bc", "paper_protocol", "vector_output"}
+    assert {v.name for v in study.variants} == {"exact_bc", "paper_protocol", "vector_output",
+                                                "pointwise"}
     # three extrapolation blocks: 6 x 2 + 2 x 6 + 2 x 1 cases, none of them in the sweep
     assert len(study.extrapolation) == 26 and not set(study.extrapolation) & set(config.cases)
     assert config.fe_study.reference.element == "p2p1"
@@ -94,9 +95,12 @@ def test_variants_override_the_surrogate_settings() -> None:
     assert protocol.settings.max_epochs == 200 and protocol.settings.width == config.surrogate.width
     assert protocol.settings.replace(activation="silu", c1_encoding="inverse",
                                      output_scaling="compliance", output_form="gravity_linear",
-                                     lr_schedule="cosine", max_epochs=100) == config.surrogate
+                                     structure="separable", lr_schedule="cosine",
+                                     max_epochs=100) == config.surrogate
     vector = config.surrogate_study.variant("vector_output").settings
     assert vector == config.surrogate.replace(output_form="vector")
+    pointwise = config.surrogate_study.variant("pointwise").settings
+    assert pointwise == config.surrogate.replace(structure="pointwise")
     assert config.held_out_splits == ("by_case", "by_direction", "by_c1")
     for split in config.held_out_splits:
         held_out = config.surrogate_held_out(split)
@@ -422,7 +426,7 @@ def test_a_geometry_length_is_refused_at_the_schemas_bound(
 ENUMS: list[tuple[str, Callable[[Any], Any], type[Exception]]] = [
     *[(f"{SURROGATE}/{name}", surrogate(name), SurrogateConfigError)
       for name in ("activation", "boundary", "c1_encoding", "output_scaling", "output_form",
-                   "lr_schedule", "split")],
+                   "structure", "lr_schedule", "split")],
     ("properties/fe/properties/solver", lambda value: SolverSettings(solver=value),
      InvalidParameterError),
     ("properties/fe/properties/petsc_options/properties/snes_linesearch_type",

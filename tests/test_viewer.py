@@ -61,6 +61,42 @@ def test_the_page_predicts_what_python_predicts(viewer: Path, model: Surrogate) 
         assert not errors
 
 
+def test_the_page_predicts_a_pointwise_model_as_python_does(
+    small_run: Path, tmp_path: Path
+) -> None:
+    """A pointwise model's page predicts what Python does.
+
+    The small run's model, whose page the other tests read, is separable; this one has the
+    paper's pointwise networks, in gravity_linear form (the last layer contracted with ĝ).
+    """
+    from fem.dataset import read_dataset
+    from report.viewer import build_viewer
+    from surrogate.checkpoint import save_model
+    from surrogate.config import SurrogateConfig
+    from surrogate.train import train_and_evaluate
+
+    results = small_run / "results"
+    config = SurrogateConfig(hidden_layers=2, width=8, activation="silu", max_epochs=2,
+                             structure="pointwise", output_form="gravity_linear",
+                             output_scaling="compliance")
+    ds = read_dataset(results / "dataset" / "dataset.h5")
+    save_model(tmp_path / "model", train_and_evaluate(ds, config, progress=False), ds)
+    page_path = tmp_path / "index.html"
+    build_viewer(tmp_path / "model", results / "mesh" / "mesh.xdmf",
+                 results / "dataset" / "dataset.h5", page_path)
+    model = Surrogate.load(tmp_path / "model")
+    with open_page(page_path, ready=READY) as (page, errors, _):
+        for C1, phi, theta in ((1.0, 180.0, 0.0), (1.7, -40.0, 0.0), (2.3, 95.0, 30.0)):
+            in_page = np.asarray(page.evaluate(
+                f"window.viewer.predictAll({C1}, {phi}, {theta})")).reshape(-1, 3)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", ExtrapolationWarning)
+                expected = model.predict(C1, phi, theta)
+            assert np.abs(expected).max() > 0
+            assert np.abs(in_page - expected).max() <= 1e-4, (C1, phi, theta)
+        assert not errors
+
+
 def _picture(page, path: Path) -> np.ndarray:
     page.locator("#view").screenshot(path=str(path))
     return np.asarray(Image.open(path).convert("RGB"), dtype=float)
