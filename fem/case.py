@@ -205,6 +205,7 @@ class CaseRunner:
             "first_failure": result.first_failure,
             "failure_kinds": result.failure_kinds,
             "rescued": result.rescued,
+            "branch_check": result.branch_check,
             "start": start.as_dict(),
             "exact_retries": result.exact_retries,
             "newton_iterations": result.newton_iterations,

@@ -49,6 +49,9 @@ class StepRecord:
     exact_retry: bool = False
     #: The whole load tried at once from a given guess (a neighbouring case's solution).
     warm_start: bool = False
+    #: A step of the walk back from the last resort's answer to the first pass's furthest
+    #: state (:func:`_walk_back`), which checks that both lie on one branch of equilibria.
+    walk_back: bool = False
 
 
 @dataclass
@@ -65,6 +68,10 @@ class LoadingResult:
     #: second path from rest): ``attempts[path_start:path_end]``.
     path_start: int = 0
     path_end: int | None = None
+    #: Where the last resort's answer, walked back down the load, met the first pass's
+    #: furthest state: the load fraction and the largest distance of the two displacements in
+    #: metres (None: the walk back failed); None without such a check (:func:`_walk_back`).
+    branch_check: dict[str, float | None] | None = None
 
     @property
     def accepted(self) -> list[StepRecord]:
@@ -123,6 +130,7 @@ class LoadingResult:
             "fraction": self.fraction,
             "reason": self.reason,
             "attempts": [asdict(a) for a in self.attempts],
+            "branch_check": self.branch_check,
         }
 
 
@@ -268,6 +276,20 @@ def solve_incrementally(
                              f"last failure: {reason}")
             break
 
+    if first_pass is not None and fraction >= _FULL and first_pass[0] > 0 \
+            and loading.check_branch and not _continues(problem, solver, loading, first_pass,
+                                                        result):
+        fraction, state[:] = first_pass[0], first_pass[1]  # another branch: not this case's
+        result.path_start, result.path_end = 0, result.path_start
+        stopped = (f"λ={first_pass[0]:.4f}, where the first pass stopped (step cut below "
+                   f"min_step={loading.min_step:g})")
+        distance = (result.branch_check or {}).get("distance_m")
+        result.reason = (
+            f"the last resort's answer could not be walked back to {stopped}: it may be another "
+            f"equilibrium than the load path's" if distance is None else
+            f"the last resort's answer is another equilibrium than the load path's: walked back "
+            f"to {stopped}, it lies {1e3 * distance:.3g} mm from that pass's state")
+        log.info("%s", result.reason)
     if first_pass is not None and fraction < _FULL and first_pass[0] > fraction:
         fraction, state[:] = first_pass[0], first_pass[1]  # the last resort got less far
         result.path_start, result.path_end = 0, result.path_start
@@ -278,6 +300,97 @@ def solve_incrementally(
         result.fraction = 1.0
         result.reason = "converged"
     return result
+
+
+#: The last resort's answer continues the load path when, walked back to where the first pass
+#: stopped, it lies within this fraction of the first pass's largest displacement of that
+#: pass's state. Two solves of one equilibrium to Newton's tolerance agreed to within 1e-8 of it
+#: (the coarse test mesh, supine, prone and lying on the side); the other equilibria that the
+#: last resort reached from rest on the default breast lay percents away.
+BRANCH_TOLERANCE = 1e-3
+
+
+def _continues(
+    problem: GravityProblem,
+    solver: NewtonSolver,
+    loading: Loading,
+    first_pass: tuple[float, np.ndarray],
+    result: LoadingResult,
+) -> bool:
+    """Whether the last resort's answer (the state, at the full load) continues the load path.
+
+    The last resort starts again from rest in large steps, and where equilibria are not unique
+    (a soft mound rolling over its fold) it can reach another one than the load path leads to:
+    the case's answer would then depend on how it was solved. The answer is walked back down
+    the load (:func:`_walk_back`) to where the first pass stopped and compared with that pass's
+    state there. Records the check in ``result.branch_check``; the state is the answer again
+    on return.
+    """
+    answer = problem.w.x.array.copy()
+    result.path_end = len(result.attempts)
+    goal, reference = first_pass
+    distance = scale = None
+    if _walk_back(problem, solver, loading, goal, result):
+        back = _node_displacements(problem)
+        problem.w.x.array[:] = reference
+        there = _node_displacements(problem)
+        distance = float(np.linalg.norm(back - there, axis=1).max())
+        scale = float(np.linalg.norm(there, axis=1).max())
+    problem.w.x.array[:] = answer
+    result.branch_check = {"fraction": goal, "distance_m": distance}
+    log.info("the last resort's answer walked back to λ=%.4f: %s", goal,
+             "failed" if distance is None else f"{1e3 * distance:.3g} mm from the load path")
+    return distance is not None and distance <= BRANCH_TOLERANCE * scale
+
+
+def _node_displacements(problem: GravityProblem) -> np.ndarray:
+    """The state's displacement, one row per node."""
+    return problem.displacement().x.array.reshape(-1, 3)
+
+
+def _walk_back(
+    problem: GravityProblem, solver: NewtonSolver, loading: Loading, goal: float,
+    result: LoadingResult,
+) -> bool:
+    """Continue the state from the full load down to the load fraction ``goal``.
+
+    Adaptive as the load path is, in the other direction: the whole way at once first, cut
+    back on failure down to ``loading.min_step``, the guess extrapolated from the last states.
+    Each attempt is recorded (``walk_back``); at most ``loading.max_steps`` of them. Returns
+    whether the state got to ``goal``.
+    """
+    state = problem.w.x.array
+    budget = len(result.attempts) + loading.max_steps
+    # the fractions negated, so that the known states' abscissae increase as _predict expects
+    history: list[tuple[float, np.ndarray]] = [(-1.0, state.copy())]
+    fraction, step = 1.0, 1.0 - goal
+    while fraction > goal + 1e-12:
+        if len(result.attempts) >= budget:
+            return False
+        step = min(step, fraction - goal)
+        _predict(problem, history, step, loading.extrapolate)
+        problem.set_load_fraction(fraction - step)
+        outcome = solver.solve()
+        min_det = problem.min_detF() if outcome.converged else None
+        ok = outcome.converged and min_det is not None and min_det > 0
+        result.attempts.append(StepRecord(
+            fraction=fraction - step, step=step, converged=ok, iterations=outcome.iterations,
+            reason=outcome.reason if min_det is None or min_det > 0 else
+            f"inverted element (min det F = {min_det:.3g})",
+            final_residual=outcome.residuals[-1] if outcome.residuals else None,
+            min_detF=min_det, linear_iterations=outcome.linear_iterations,
+            exact_retry=outcome.exact_retry, walk_back=True))
+        if ok:
+            fraction -= step
+            history = [history[-1], (-fraction, state.copy())]
+            if outcome.iterations <= loading.easy_iterations:
+                step *= loading.growth
+            continue
+        state[:] = history[-1][1]
+        step *= loading.cutback
+        if step < loading.min_step:
+            return False
+    return True
 
 
 def _solve_from_guess(

@@ -225,6 +225,12 @@ class Loading:
             failed (its own floor, in place of ``min_step``). The last resort is there to pass
             the fold in large steps from rest; where its steps shrink below this, it creeps
             along the path that the first pass already failed on (``docs/solver.md``).
+        check_branch: accept the last resort's answer only where it continues the load path:
+            walked back down the load to where the first pass stopped, it must meet that
+            pass's state (``fem.loading.BRANCH_TOLERANCE``). From rest in large steps the last
+            resort can reach another equilibrium (a soft mound rolled over its fold another
+            way), and the case's answer would then depend on how it was solved; such a case
+            fails with the first pass's state, as if the last resort had not converged.
     """
 
     initial_step: float = 1.0
@@ -238,6 +244,7 @@ class Loading:
     rescue: bool = True
     stall_window: int = 8
     rescue_min_step: float = 1.0 / 16
+    check_branch: bool = True
 
     def __post_init__(self) -> None:
         if not 0 < _finite("initial_step", self.initial_step) <= 1:

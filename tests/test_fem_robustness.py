@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -196,6 +197,78 @@ def test_the_last_resort_stops_at_its_own_floor(coarse_mesh: Path) -> None:
     assert results[0.25].fraction > results[1.0].fraction
     with pytest.raises(InvalidParameterError, match="rescue_min_step"):
         Loading(rescue_min_step=0.0)
+
+
+def _half_load_state(runner, case: Case) -> np.ndarray:
+    """``case`` at half its load: the case of twice its C1 at the full load (fem.chain)."""
+    from fem.chain import Neighbours
+
+    stiffer = Case(2 * case.C1, case.phi, case.theta)
+    result, _ = runner.solve(stiffer)
+    assert result.converged
+    neighbours = Neighbours(runner.problem.pressure_dofs)
+    neighbours.add(stiffer, runner.problem.w.x.array)
+    (fraction, state), = neighbours.path(case)[0]
+    assert fraction == 0.5
+    return state
+
+
+def test_the_last_resorts_answer_is_checked_against_the_load_path(coarse_mesh: Path) -> None:
+    """Walked back to where the first pass stopped, an answer meets that pass's state or not."""
+    from fem.case import CaseRunner
+    from fem.loading import BRANCH_TOLERANCE, LoadingResult, _continues
+
+    case, other = Case(1.0, 0.0), Case(1.0, 180.0)
+    with CaseRunner(coarse_mesh) as runner:
+        on_path = _half_load_state(runner, case)
+        elsewhere = _half_load_state(runner, other)  # prone's half-load state: not supine's
+        assert runner.solve(case)[0].converged
+        answer = runner.problem.w.x.array.copy()
+        sag = np.linalg.norm(runner.problem.displacement().x.array.reshape(-1, 3), axis=1).max()
+        checks = {}
+        for name, state in (("on_path", on_path), ("elsewhere", elsewhere)):
+            record = LoadingResult(converged=True, fraction=1.0, reason="")
+            checks[name] = (_continues(runner.problem, runner.solver, Loading(), (0.5, state),
+                                       record), record)
+            assert np.array_equal(runner.problem.w.x.array, answer)  # the answer is kept
+    (same, record), (different, apart) = checks["on_path"], checks["elsewhere"]
+    assert same and record.branch_check["fraction"] == 0.5
+    # one equilibrium, solved two ways to Newton's tolerance: far inside the tolerance
+    assert record.branch_check["distance_m"] < 1e-2 * BRANCH_TOLERANCE * sag
+    assert record.attempts and all(a.walk_back for a in record.attempts)
+    assert record.path_end == 0  # the walk back is not part of the load path held
+    assert not different and apart.branch_check["distance_m"] > 0.1 * sag
+
+
+def test_a_last_resorts_answer_off_the_load_path_fails_the_case(coarse_mesh: Path) -> None:
+    """A case whose last resort cannot be walked back to the first pass fails where that stopped.
+
+    One Newton iteration passes no half of the load: the first pass, started from the half-load
+    state, fails at once; the last resort's 60 converge the whole load from rest, and the walk
+    back fails as the first pass did.
+    """
+    from fem.case import CaseRunner
+
+    case = Case(1.0, 0.0)
+    crippled = SolverSettings(petsc_options={"snes_max_it": 1},
+                              loading=Loading(min_step=0.5, rescue_min_step=1.0))
+    with CaseRunner(coarse_mesh) as runner:
+        half = _half_load_state(runner, case)
+    results = {}
+    for check in (True, False):
+        settings = replace(crippled, loading=replace(crippled.loading, check_branch=check))
+        with CaseRunner(coarse_mesh, settings) as runner:
+            results[check], _ = runner.solve(case, path=[(0.5, half)])
+            state = runner.problem.w.x.array.copy()
+        if check:
+            assert np.array_equal(state, half)  # the first pass's furthest state is kept
+    unchecked, checked = results[False], results[True]
+    assert unchecked.converged and unchecked.rescued and unchecked.branch_check is None
+    assert not checked.converged and checked.rescued and checked.fraction == 0.5
+    assert "could not be walked back to λ=0.5000, where the first pass stopped" in checked.reason
+    assert checked.branch_check == {"fraction": 0.5, "distance_m": None}
+    assert any(a.walk_back for a in checked.attempts)
+    assert all(not a.rescue and not a.walk_back for a in checked.accepted)
 
 
 @pytest.mark.parametrize("window", [-1, 1.5, True])
