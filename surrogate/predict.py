@@ -231,28 +231,37 @@ class Surrogate:
 
     def _unconverged_beside(
         self, C1: float, phi: float, theta: float
-    ) -> tuple[float, float] | None:
-        """The stiffest failed sweep case at a sweep angle next to Φ, if C1 is not stiffer.
+    ) -> tuple[float, float, float] | None:
+        """The stiffest failed sweep case beside the query's direction, if C1 is not stiffer.
 
-        The sweep's FE solves fail below some C1 at some angles (the model has no equilibrium
-        there; docs/solver.md). A query at a sweep angle is judged by that angle's
-        failures, one between two angles by both neighbours' (same θ).
+        The sweep's FE solves fail below some C1 in some directions (the model has no
+        equilibrium there, or none on the load path; docs/solver.md). A model of the plane
+        judges a query at a sweep angle by that angle's failures, one between two angles by
+        both neighbours' (same θ); a model off the plane by the failures whose direction lies
+        within the training directions' typical spacing of the query's.
         """
         if not self._unconverged:
             return None
-        q = phi % 360.0
-        below = min(self._sweep_angles, key=lambda p: (q - p) % 360.0)
-        above = min(self._sweep_angles, key=lambda p: (p - q) % 360.0)
-        beside = [
-            (c, p)
-            for c, p, t in self._unconverged
-            if abs(t - theta) < 1e-6
-            and any(abs((p - n + 180.0) % 360.0 - 180.0) < 1e-6 for n in (below, above))
-        ]
+        if self._directions is not None:
+            query = _unit_directions([(phi, theta)])[0]
+            failed = _unit_directions([(p, t) for _, p, t in self._unconverged])
+            angles = np.degrees(np.arccos(np.clip(failed @ query, -1.0, 1.0)))
+            beside = [case for case, angle in zip(self._unconverged, angles, strict=True)
+                      if angle <= self._direction_spacing + 1e-9]
+        else:
+            q = phi % 360.0
+            below = min(self._sweep_angles, key=lambda p: (q - p) % 360.0)
+            above = min(self._sweep_angles, key=lambda p: (p - q) % 360.0)
+            beside = [
+                (c, p, t)
+                for c, p, t in self._unconverged
+                if abs(t - theta) < 1e-6
+                and any(abs((p - n + 180.0) % 360.0 - 180.0) < 1e-6 for n in (below, above))
+            ]
         if not beside:
             return None
-        c, p = max(beside)
-        return (c, p) if C1 <= c + 1e-9 else None
+        stiffest = max(beside)
+        return stiffest if C1 <= stiffest[0] + 1e-9 else None
 
     @classmethod
     def load(cls, folder: str | Path) -> Surrogate:
@@ -377,10 +386,12 @@ class Surrogate:
             )
         failed = self._unconverged_beside(C1, phi, theta)
         if failed is not None:
+            c1, p, t = failed
+            at = f"Φ = {p:g}°" if self._directions is None else f"Φ = {p:g}°, θ = {t:g}°"
             messages.append(
-                f"the sweep's FE solve did not converge at C1 = {failed[0]:g} kPa, Φ = "
-                f"{failed[1]:g}° (beside C1 = {C1} kPa, Φ = {phi}°, θ = {theta}°), so no FE "
-                f"solution backs C1 ≤ {failed[0]:g} kPa there"
+                f"the sweep's FE solve did not converge at C1 = {c1:g} kPa, {at} (beside C1 = "
+                f"{C1} kPa, Φ = {phi}°, θ = {theta}°), so no FE solution backs C1 ≤ {c1:g} kPa "
+                f"there"
             )
         for message in messages:
             warnings.warn(

@@ -263,15 +263,17 @@ def test_prediction_warns_where_the_sweep_did_not_converge(
 def test_a_model_of_the_caudal_half_warns_by_direction(tmp_path: Path) -> None:
     """Trained off the plane, a model judges a query by its direction.
 
-    Between the sweep's directions it answers quietly whatever Φ's sign; head-down is outside.
+    Between the sweep's directions it answers quietly whatever Φ's sign; head-down is outside;
+    near a failed case, at or below its C1, it warns.
     """
+    import dataclasses
     import warnings
 
     from fem.dataset import read_dataset
     from fem.sweep import sphere_directions
     from surrogate.checkpoint import save_model
     from surrogate.exceptions import ExtrapolationWarning
-    from surrogate.predict import Surrogate
+    from surrogate.predict import Surrogate, _unit_directions
     from surrogate.train import train_and_evaluate
 
     rng = np.random.default_rng(0)
@@ -308,6 +310,21 @@ def test_a_model_of_the_caudal_half_warns_by_direction(tmp_path: Path) -> None:
     with pytest.warns(ExtrapolationWarning, match=r"gravity at Φ = 90.0°, θ = 90.0° is \d+° from "
                       r"the nearest training direction \(they are \d+° apart\)"):
         model.predict(2.0, 90.0, 90.0)  # head down
+    # a failed case warns the queries within the directions' typical spacing of it, at or
+    # below its C1 (here the direction nearest standing, at C1 = 1 kPa)
+    nearest = max(sphere_directions(32, "caudal"),
+                  key=lambda d: float(_unit_directions([d])[0] @ [0.0, 0.0, -1.0]))
+    converged = ds.converged.copy()
+    converged[ds.case_index(1.0, *nearest)] = False
+    save_model(tmp_path / "failed", result, dataclasses.replace(ds, converged=converged))
+    failed = Surrogate.load(tmp_path / "failed")
+    with pytest.warns(ExtrapolationWarning, match=rf"did not converge at C1 = 1 kPa, Φ = "
+                      rf"{nearest[0]:g}°, θ = {nearest[1]:g}° \(beside C1 = 1.0 kPa, Φ = 90.0°"):
+        failed.predict(1.0, 90.0, -90.0)  # standing
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        failed.predict(1.5, 90.0, -90.0)  # stiffer than the failure
+        failed.predict(1.0, 0.0, 0.0)  # supine: far from it
 
 
 def test_selection_takes_the_most_accurate_architecture_within_the_prediction_budget() -> None:

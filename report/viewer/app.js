@@ -297,20 +297,38 @@ class WebSurrogate {
         + 'only');
     }
     if (r.unconverged.length) {
-      const q = mod(phi);
-      const angles = r.sweep_phi_deg;
-      const below = angles.reduce((a, p) => (mod(q - p) < mod(q - a) ? p : a));
-      const above = angles.reduce((a, p) => (mod(p - q) < mod(a - q) ? p : a));
-      const near = (p, n) => Math.abs(mod(p - n + 180) - 180) < 1e-6;
-      const beside = r.unconverged.filter(([, p, t]) => Math.abs(t - theta) < 1e-6
-        && (near(p, below) || near(p, above)));
+      // as Surrogate._unconverged_beside: off the plane, the failures within one typical spacing
+      // of the query's direction; in the plane, those at the sweep angles on either side
+      let beside;
+      if (r.directions) {
+        const unit = (a, b) => {
+          const [p, t] = [(a * Math.PI) / 180, (b * Math.PI) / 180];
+          return [Math.cos(p), Math.sin(p) * Math.cos(t), Math.sin(p) * Math.sin(t)];
+        };
+        const g = unit(phi, theta);
+        beside = r.unconverged.filter(([, p, t]) => {
+          const d = unit(p, t);
+          const cos = Math.min(Math.max(d[0] * g[0] + d[1] * g[1] + d[2] * g[2], -1), 1);
+          return (Math.acos(cos) * 180) / Math.PI <= r.direction_spacing_deg + 1e-9;
+        });
+      } else {
+        const q = mod(phi);
+        const angles = r.sweep_phi_deg;
+        const below = angles.reduce((a, p) => (mod(q - p) < mod(q - a) ? p : a));
+        const above = angles.reduce((a, p) => (mod(p - q) < mod(a - q) ? p : a));
+        const near = (p, n) => Math.abs(mod(p - n + 180) - 180) < 1e-6;
+        beside = r.unconverged.filter(([, p, t]) => Math.abs(t - theta) < 1e-6
+          && (near(p, below) || near(p, above)));
+      }
       if (beside.length) {
-        const [c1, p] = beside.reduce((a, b) => (b[0] > a[0] || (b[0] === a[0] && b[1] > a[1])
-          ? b : a));
+        const later = (a, b) => b[0] > a[0] || (b[0] === a[0] && (b[1] > a[1]
+          || (b[1] === a[1] && b[2] > a[2])));
+        const [c1, p, t] = beside.reduce((a, b) => (later(a, b) ? b : a));
         if (C1 <= c1 + 1e-9) {
-          messages.push(`the sweep's FE solve did not converge at C1 = ${c1} kPa, Φ = ${p}° `
-            + `(beside C1 = ${py(C1)} kPa, Φ = ${py(phi)}°, θ = ${py(theta)}°), so no FE solution backs `
-            + `C1 ≤ ${c1} kPa there`);
+          const at = r.directions ? `Φ = ${p}°, θ = ${t}°` : `Φ = ${p}°`;
+          messages.push(`the sweep's FE solve did not converge at C1 = ${c1} kPa, ${at} `
+            + `(beside C1 = ${py(C1)} kPa, Φ = ${py(phi)}°, θ = ${py(theta)}°), so no FE solution `
+            + `backs C1 ≤ ${c1} kPa there`);
         }
       }
     }
