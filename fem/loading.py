@@ -181,8 +181,9 @@ def solve_incrementally(
     With ``path`` (equilibrium states of this very case at load fractions in (0, 1),
     increasing, e.g. a stiffer neighbour's solution: see :mod:`fem.chain`), the load path
     starts from the last of them instead of from rest, extrapolating from the last three
-    (with rest, where only two are given), and the first step keeps the last factorisation; the
-    last resort still starts from rest.
+    (with rest, where only two are given), and the first step keeps the last factorisation;
+    where it fails, the last resort (from rest) is tried only with
+    ``loading.rescue_after_neighbours``.
 
     Raises:
         InvalidParameterError: for a ``path`` whose fractions are not increasing in (0, 1),
@@ -257,7 +258,8 @@ def solve_incrementally(
             break
         step *= loading.cutback
         if step < (loading.rescue_min_step if newton else loading.min_step):
-            if loading.rescue and newton is None:
+            if loading.rescue and newton is None and (
+                    not path or loading.rescue_after_neighbours):
                 # From the stalled state the creasing fold does not let Newton through; from
                 # rest, the whole load at once with another line search can get past it.
                 newton = {**RESCUE_OPTIONS, "stall_window": loading.stall_window}
@@ -272,6 +274,9 @@ def solve_incrementally(
             if first_pass is not None:
                 where = (f"at λ={first_pass[0]:.4f}, and the last resort's below "
                          f"rescue_min_step={loading.rescue_min_step:g} {where}")
+            if loading.rescue and newton is None:
+                where += (" (no last resort after a start from the neighbours' solutions: "
+                          "loading.rescue_after_neighbours)")
             result.reason = (f"step cut below min_step={loading.min_step:g} {where}; "
                              f"last failure: {reason}")
             break

@@ -231,6 +231,12 @@ class Loading:
             resort can reach another equilibrium (a soft mound rolled over its fold another
             way), and the case's answer would then depend on how it was solved; such a case
             fails with the first pass's state, as if the last resort had not converged.
+        rescue_after_neighbours: try the last resort also where the load path started from
+            known states (a chain's stiffer neighbours, :mod:`fem.chain`), not only from rest.
+            Off by default: the path from the neighbours is the case's own load path, and on
+            the default sweep none of the last resort's answers after it continued that path
+            (``check_branch``), while each cost minutes; a case solved alone starts from rest
+            and keeps its last resort.
     """
 
     initial_step: float = 1.0
@@ -245,6 +251,7 @@ class Loading:
     stall_window: int = 8
     rescue_min_step: float = 1.0 / 16
     check_branch: bool = True
+    rescue_after_neighbours: bool = False
 
     def __post_init__(self) -> None:
         if not 0 < _finite("initial_step", self.initial_step) <= 1:

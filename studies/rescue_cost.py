@@ -2,15 +2,16 @@
 
 The soft cases that fail, or converge only after the last resort, are most of a sweep's cost:
 their last resort runs attempts of up to 60 Newton iterations, many of them on a plateau of the
-residual (``fe.loading.stall_window`` gives those up, :func:`fem.solver._stalled`), and cuts
-its steps back down to ``fe.loading.rescue_min_step``. This runs the given directions' chains
-(the C1 values stiffest first, each case from its stiffer neighbours as in the sweep:
+residual (``fe.loading.stall_window`` gives those up, :func:`fem.solver._stalled`), and cuts its
+steps back down to ``fe.loading.rescue_min_step``. This runs the given directions' chains (the
+C1 values stiffest first, each case from its stiffer neighbours as in the sweep:
 :mod:`fem.chain`) twice at once, each way in its own process per direction, pinned to its own
 core with BLAS on one thread: with the config's loading (``config``) and with the config's
-loading changed by ``--against`` (``against``; by default ``stall_window=0``, the stall test
-off). The cost of a way is the kernel's CPU count of its processes, so the other way's load
-does not enter it. Per case it reports the outcome, Newton iterations and solve CPU both ways,
-and the largest distance between the two answers.
+loading changed by ``--against`` (``against``; by default ``rescue_after_neighbours=true``, the
+last resort after a start from the neighbours, which the config's chains skip). The cost of a
+way is the kernel's CPU count of its processes, so the other way's load does not enter it. Per
+case it reports the outcome, Newton iterations and solve CPU both ways, and the largest distance
+between the two answers.
 
 ``python -m studies.rescue_cost MESH --direction -90 0 --direction 91.8 -104.2 --c1 1.2 1.0 0.8
 [--against rescue_min_step=0.015625 ...] [--config config.yaml] [--out DIR]`` prints the table
@@ -41,7 +42,7 @@ from studies.results import Record, Result
 WAYS = {"config": 0, "against": 1}
 
 #: What the config's loading is compared against unless told otherwise: the stall test off.
-DEFAULT_AGAINST = {"stall_window": 0}
+DEFAULT_AGAINST = {"rescue_after_neighbours": True}
 
 
 @dataclass(frozen=True, slots=True)
@@ -195,7 +196,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="C1 values (kPa) of each chain, e.g. the case and two stiffer ones")
     parser.add_argument("--against", nargs="+", metavar="KEY=VALUE", default=None,
                         help="fe.loading settings the config's are compared against "
-                             "(default: stall_window=0)")
+                             "(default: rescue_after_neighbours=true)")
     parser.add_argument("--config", type=Path, default=Path("config.yaml"))
     parser.add_argument("--out", type=Path, default=Path("results/benchmarks/rescue_cost"))
     args = parser.parse_args(argv)

@@ -243,6 +243,8 @@ def test_the_last_resorts_answer_is_checked_against_the_load_path(coarse_mesh: P
 def test_a_last_resorts_answer_off_the_load_path_fails_the_case(coarse_mesh: Path) -> None:
     """A case whose last resort cannot be walked back to the first pass fails where that stopped.
 
+    And a chain's case, started from its neighbours, takes no last resort unless asked to.
+
     One Newton iteration passes no half of the load: the first pass, started from the half-load
     state, fails at once; the last resort's 60 converge the whole load from rest, and the walk
     back fails as the first pass did.
@@ -251,7 +253,8 @@ def test_a_last_resorts_answer_off_the_load_path_fails_the_case(coarse_mesh: Pat
 
     case = Case(1.0, 0.0)
     crippled = SolverSettings(petsc_options={"snes_max_it": 1},
-                              loading=Loading(min_step=0.5, rescue_min_step=1.0))
+                              loading=Loading(min_step=0.5, rescue_min_step=1.0,
+                                              rescue_after_neighbours=True))
     with CaseRunner(coarse_mesh) as runner:
         half = _half_load_state(runner, case)
     results = {}
@@ -269,6 +272,12 @@ def test_a_last_resorts_answer_off_the_load_path_fails_the_case(coarse_mesh: Pat
     assert checked.branch_check == {"fraction": 0.5, "distance_m": None}
     assert any(a.walk_back for a in checked.attempts)
     assert all(not a.rescue and not a.walk_back for a in checked.accepted)
+    # by default a case started from its neighbours (a chain's) has no last resort
+    settings = replace(crippled, loading=replace(crippled.loading, rescue_after_neighbours=False))
+    with CaseRunner(coarse_mesh, settings) as runner:
+        chained, _ = runner.solve(case, path=[(0.5, half)])
+    assert not chained.converged and not chained.rescued and chained.fraction == 0.5
+    assert "no last resort after a start from the neighbours' solutions" in chained.reason
 
 
 @pytest.mark.parametrize("window", [-1, 1.5, True])
