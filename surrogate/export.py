@@ -48,10 +48,11 @@ def export_web(model: Surrogate) -> dict[str, Any]:
     last layer of a ``gravity_linear`` model has nine outputs, the matrix that the page
     contracts with the query's gravity direction.
 
-    A ``separable`` model's parts carry their points' fields instead of layers
-    (``fields``: (n, 3, modes), gain and 1/√modes included, as :class:`Surrogate` precomputes
-    them), and the model its ``branch`` layers: the page evaluates the branch once per query
-    and weighs the fields with its outputs.
+    A ``separable`` model's point networks take the three coordinates alone and give
+    3 × ``modes`` outputs, and the model carries its ``branch`` layers: the page computes the
+    fields once per point, as :class:`Surrogate` does at load, and per query evaluates the branch
+    and weighs the fields with its outputs. The page carries weights, not fields, so its size
+    does not grow with the modes times the points.
     """
     config, norm = model.config, model.normalisation
     factor = np.ones(len(model.X)) if model.point_factor is None else model.point_factor
@@ -62,13 +63,11 @@ def export_web(model: Surrogate) -> dict[str, Any]:
         members["boundary"] = np.flatnonzero(model.boundary)
     separable = config.structure == "separable"
     for part, index in members.items():
-        parts[part] = {"points": encode_array(index, "int32")}
-        if separable:
-            parts[part]["fields"] = encode_array(model.fields(part), "float32")
-        else:
-            layers = model.params["domain" if part == "domain" else net]
-            parts[part]["gain"] = encode_array(factor[index] * norm.u_scale, "float32")
-            parts[part]["layers"] = _layers(layers)
+        parts[part] = {
+            "points": encode_array(index, "int32"),
+            "gain": encode_array(factor[index] * norm.u_scale, "float32"),
+            "layers": _layers(model.params["domain" if part == "domain" else net]),
+        }
     checks = model.range_checks()
     return {
         "format": FORMAT,

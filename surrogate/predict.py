@@ -150,20 +150,6 @@ class Surrogate:
         self._parts = parts
         self._run = jax.jit(run)
 
-    def fields(self, part: str) -> np.ndarray:
-        """A separable model's fields at the points of ``part`` (``domain`` or ``boundary``).
-
-        Shape (n, 3, modes), in the order of that part's points, the points' gains and the
-        1/√modes included: the displacement of a query is these fields weighted by the branch's
-        outputs times the query's gain.
-
-        Raises:
-            ValueError: if the model is not separable or has no such part.
-        """
-        if self.config.structure != "separable" or part not in self._parts:
-            raise ValueError(f"a {self.config.structure} model has no fields of part {part!r}")
-        return np.asarray(self._parts[part]["fields"]).reshape(-1, 3, self.config.modes)
-
     def _build_range_checks(self) -> None:
         rng = self.training_range or {}
         self._c1_range = tuple(rng.get("C1_kPa", (0.0, math.inf)))

@@ -39,14 +39,16 @@ class WebSurrogate {
     this.Xs = decode(model.points_standardised);
     this.separable = model.structure === 'separable';
     if (this.separable) {
-      // a separable model: each part's fields at its points, weighted per query by the branch
-      this.modes = model.modes;
-      this.branch = model.branch.map((layer) => {
+      // a separable model: its point networks give each point's fields once (evaluator), the
+      // branch weighs them per query
+      const plain = (layers) => layers.map((layer) => {
         const [nIn, nOut] = layer.W.shape;
         return { W: decode(layer.W), b: decode(layer.b), nIn, nOut };
       });
+      this.modes = model.modes;
+      this.branch = plain(model.branch);
       this.parts = Object.values(model.parts).map((part) => ({
-        points: decode(part.points), fields: decode(part.fields),
+        points: decode(part.points), gain: decode(part.gain), layers: plain(part.layers),
       }));
       this.range = model.training_range;
       return;
@@ -119,10 +121,16 @@ class WebSurrogate {
         if (where[point] >= 0) { rows.push(where[point]); local.push(i); }
       });
       if (!rows.length) continue;
-      if (this.separable) {
+      if (this.separable) {  // the fields of these points, gain and 1/√modes included
         const m = 3 * this.modes;
+        const scale = 1 / Math.sqrt(this.modes);
         const fields = new Float32Array(rows.length * m);
-        local.forEach((i, r) => fields.set(part.fields.subarray(i * m, (i + 1) * m), r * m));
+        local.forEach((i, r) => {
+          const point = part.points[i];
+          const out = WebSurrogate.dense(part.layers, this.Xs.subarray(3 * point, 3 * point + 3),
+            this.act);
+          for (let j = 0; j < m; j += 1) fields[r * m + j] = out[j] * part.gain[i] * scale;
+        });
         parts.push({ rows: Int32Array.from(rows), fields });
         continue;
       }
@@ -152,20 +160,26 @@ class WebSurrogate {
     return { n: indices.length, parts, out: new Float32Array(3 * indices.length) };
   }
 
-  // A separable model's weights of its fields for case features c, as surrogate.model's
-  // branch_weights: the branch network, its outputs contracted with ĝ in gravity_linear form.
-  weights(c) {
-    let h = c.slice(0, 4);
-    this.branch.forEach((layer, l) => {
+  // Dense layers ({W, b, nIn, nOut}, W row-major) on one input, the activation between them.
+  static dense(layers, input, act) {
+    let h = input;
+    layers.forEach((layer, l) => {
       const { W, b, nIn, nOut } = layer;
       const g = new Float64Array(nOut);
       for (let o = 0; o < nOut; o += 1) {
         let s = b[o];
         for (let k = 0; k < nIn; k += 1) s += h[k] * W[k * nOut + o];
-        g[o] = l < this.branch.length - 1 ? this.act(s) : s;
+        g[o] = l < layers.length - 1 ? act(s) : s;
       }
       h = g;
     });
+    return h;
+  }
+
+  // A separable model's weights of its fields for case features c, as surrogate.model's
+  // branch_weights: the branch network, its outputs contracted with ĝ in gravity_linear form.
+  weights(c) {
+    const h = WebSurrogate.dense(this.branch, c.slice(0, 4), this.act);
     if (this.model.output_form !== 'gravity_linear') return h;
     const w = new Float64Array(this.modes);
     for (let k = 0; k < this.modes; k += 1) {
