@@ -50,6 +50,13 @@ class SurrogateConfig:
             weights: u = Σ_k b_k(C1, ĝ) T_k(X); a query then costs the branch and one
             weighted sum, whatever the networks' size).
         modes: number of fields T_k of a ``separable`` model.
+        point_features: a ``separable`` model's point networks see, besides the point's
+            standardised coordinates X, ``sin`` and ``cos`` of 2π X·b for this many random
+            frequency vectors b (Fourier features: an MLP of X alone is slow to learn fields
+            that change over a few millimetres, such as the fold's where it rests on the
+            chest); 0, the coordinates alone.
+        point_frequency: standard deviation of the frequencies' components, in cycles per
+            unit of the standardised coordinates (about the body's size).
         learning_rate: Adam step size (paper 0.01).
         beta1: Adam β1 (paper 0.5).
         beta2: Adam β2 (paper 0.9).
@@ -77,6 +84,8 @@ class SurrogateConfig:
     output_form: str = "vector"
     structure: str = "pointwise"
     modes: int = 64
+    point_features: int = 0
+    point_frequency: float = 1.0
     learning_rate: float = 0.01
     beta1: float = 0.5
     beta2: float = 0.9
@@ -129,6 +138,19 @@ class SurrogateConfig:
                 raise SurrogateConfigError(f"surrogate.{name} must lie in [0, 1)")
         if not isinstance(self.seed, int) or self.seed < 0:
             raise SurrogateConfigError("surrogate.seed must be a non-negative integer")
+        if isinstance(self.point_features, bool) or not isinstance(self.point_features, int) \
+                or self.point_features < 0:
+            raise SurrogateConfigError(
+                f"surrogate.point_features must be a non-negative integer, got "
+                f"{self.point_features!r}")
+        if self.point_features and self.structure != "separable":
+            raise SurrogateConfigError(
+                "surrogate.point_features needs structure: separable (a pointwise network sees "
+                "the case beside the point)")
+        if not (isinstance(self.point_frequency, (int, float)) and math.isfinite(
+                self.point_frequency) and self.point_frequency > 0):
+            raise SurrogateConfigError(
+                f"surrogate.point_frequency must be positive, got {self.point_frequency!r}")
 
     @classmethod
     def from_mapping(cls, values: dict[str, Any]) -> SurrogateConfig:

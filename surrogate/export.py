@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from surrogate.model import boundary_network
+from surrogate.model import boundary_network, point_frequencies
 from surrogate.predict import Surrogate
 
 FORMAT = "breast-surrogate-web"
@@ -48,8 +48,9 @@ def export_web(model: Surrogate) -> dict[str, Any]:
     last layer of a ``gravity_linear`` model has nine outputs, the matrix that the page
     contracts with the query's gravity direction.
 
-    A ``separable`` model's point networks take the three coordinates alone and give
-    3 × ``modes`` outputs, and the model carries its ``branch`` layers: the page computes the
+    A ``separable`` model's point networks take the three coordinates alone (with their Fourier
+    features, ``point_frequencies``, where the model has them) and give 3 × ``modes`` outputs,
+    and the model carries its ``branch`` layers: the page computes the
     fields once per point, as :class:`Surrogate` does at load, and per query evaluates the branch
     and weighs the fields with its outputs. The page carries weights, not fields, so its size
     does not grow with the modes times the points.
@@ -62,6 +63,7 @@ def export_web(model: Surrogate) -> dict[str, Any]:
     if net is not None and model.boundary.any():
         members["boundary"] = np.flatnonzero(model.boundary)
     separable = config.structure == "separable"
+    frequencies = point_frequencies(config)
     for part, index in members.items():
         parts[part] = {
             "points": encode_array(index, "int32"),
@@ -79,6 +81,9 @@ def export_web(model: Surrogate) -> dict[str, Any]:
         "structure": config.structure,
         "modes": config.modes if separable else None,
         "branch": _layers(model.params["branch"]) if separable else None,
+        # (3, F) frequencies of the point networks' Fourier features, or null
+        "point_frequencies": None if frequencies is None else encode_array(frequencies,
+                                                                            "float32"),
         "n_points": int(len(model.X)),
         "X_m": encode_array(model.X, "float32"),
         "points_standardised": encode_array(norm.points(model.X), "float32"),

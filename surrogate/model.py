@@ -51,6 +51,8 @@ POINT_NETWORKS = ("domain", "boundary")
 NETWORKS = (*POINT_NETWORKS, "branch")
 POINT_INPUTS = 3
 """Leading columns of the inputs that hold the material point; the rest describe the case."""
+_FOURIER_STREAM = 7
+"""The stream of the seed that draws a model's Fourier frequencies (:func:`point_frequencies`)."""
 
 ACTIVATIONS: dict[str, Callable[[jax.Array], jax.Array]] = {
     "tanh": jnp.tanh,
@@ -85,6 +87,32 @@ def output_width(config: SurrogateConfig) -> int:
     return 9 if config.output_form == "gravity_linear" else 3
 
 
+def point_frequencies(config: SurrogateConfig) -> np.ndarray | None:
+    """A separable model's Fourier frequencies (3, ``point_features``), or None without them.
+
+    Drawn from the model's seed (NumPy's PCG64, the same on every platform), so that a saved
+    model rebuilds them from its hyperparameters.
+    """
+    if not config.point_features:
+        return None
+    rng = np.random.default_rng([config.seed, _FOURIER_STREAM])
+    b = config.point_frequency * rng.standard_normal((POINT_INPUTS, config.point_features))
+    return b.astype(np.float32)
+
+
+def point_inputs(points: jax.Array, config: SurrogateConfig) -> jax.Array:
+    """What a separable model's point networks see of standardised points (n, 3).
+
+    The coordinates, and with ``point_features`` their Fourier features sin(2π X·b) and
+    cos(2π X·b) (:func:`point_frequencies`).
+    """
+    b = point_frequencies(config)
+    if b is None:
+        return points
+    z = 2.0 * math.pi * (points @ b)
+    return jnp.concatenate([points, jnp.sin(z), jnp.cos(z)], axis=-1)
+
+
 def layer_sizes(config: SurrogateConfig, net: str = "domain") -> list[int]:
     """Input, hidden and output widths of one network (``net``: a point network or the branch).
 
@@ -98,7 +126,7 @@ def layer_sizes(config: SurrogateConfig, net: str = "domain") -> list[int]:
     if net == "branch":
         per_mode = 3 if config.output_form == "gravity_linear" else 1
         return [N_INPUTS - POINT_INPUTS, *hidden, per_mode * config.modes]
-    return [POINT_INPUTS, *hidden, output_width(config)]
+    return [POINT_INPUTS + 2 * config.point_features, *hidden, output_width(config)]
 
 
 def init_mlp(key: jax.Array, sizes: list[int]) -> Layers:
@@ -161,7 +189,7 @@ def network(params: Params, net: str, x: jax.Array, config: SurrogateConfig) -> 
     (i, j)). Separable: its fields at the points weighted by the branch at the cases.
     """
     if config.structure == "separable":
-        fields = mlp(params[net], x[:, :POINT_INPUTS], config.activation)
+        fields = mlp(params[net], point_inputs(x[:, :POINT_INPUTS], config), config.activation)
         weights = branch_weights(params["branch"], x[:, POINT_INPUTS:], config)
         return combine(fields, weights, config)
     out = mlp(params[net], x, config.activation)
@@ -180,7 +208,8 @@ def samples_network(
     few thousand points and a few hundred cases then costs about one pass over the points.
     """
     if config.structure == "separable" and tables is not None:
-        fields = mlp(params[net], tables.points, config.activation)[part[3]]
+        fields = mlp(params[net], point_inputs(tables.points, config),
+                     config.activation)[part[3]]
         weights = branch_weights(params["branch"], tables.cases, config)[part[4]]
         return combine(fields, weights, config)
     return network(params, net, part[0], config)
@@ -233,6 +262,7 @@ def point_fields(
     Rib points of an exact-Dirichlet model (no network of their own) get the domain network's
     fields, which their zero gain cancels.
     """
+    points = point_inputs(points, config)
     net = boundary_network(config)
     if net is None or net == "domain":
         return mlp(params["domain"], points, config.activation)

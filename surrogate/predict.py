@@ -33,7 +33,7 @@ import numpy as np
 from fem.dataset import gravity_direction
 from surrogate.checkpoint import Checkpoint, load_checkpoint
 from surrogate.exceptions import ExtrapolationWarning, ModelFileError
-from surrogate.model import ACTIVATIONS, boundary_network, branch_weights, mlp
+from surrogate.model import ACTIVATIONS, boundary_network, branch_weights, mlp, point_inputs
 
 DIRECTION_REACH = 1.5
 """A query off the plane whose direction is farther than this many of the training directions'
@@ -105,7 +105,8 @@ class Surrogate:
             # a separable model's fields at the points, once per mesh, gain and 1/√modes
             # included, as one (n · 3, modes) matrix: a query is then one matrix-vector product
             # (XLA's CPU backend runs a rank-3 contraction several times slower)
-            fields = np.asarray(mlp(layers, jnp.asarray(pts[idx]), config.activation))
+            fields = np.asarray(mlp(layers, point_inputs(jnp.asarray(pts[idx]), config),
+                                    config.activation))
             fields = fields.reshape(len(idx), 3, config.modes) / math.sqrt(config.modes)
             fields = fields * (gain * u_scale)[:, None, None]
             return {"fields": jnp.asarray(fields.reshape(-1, config.modes).astype(np.float32))}

@@ -51,6 +51,28 @@ def test_config_validation_names_the_key() -> None:
         SurrogateConfig(width=0)
     with pytest.raises(SurrogateConfigError, match="unknown surrogate parameter"):
         SurrogateConfig.from_mapping({"widht": 3})
+    with pytest.raises(SurrogateConfigError, match="point_features needs structure: separable"):
+        SurrogateConfig(point_features=4)
+    for bad in ({"point_features": -1}, {"point_features": True}, {"point_frequency": 0.0}):
+        with pytest.raises(SurrogateConfigError, match=f"surrogate.{next(iter(bad))}"):
+            SurrogateConfig(structure="separable", **bad)
+
+
+def test_fourier_features_are_the_points_sines_and_cosines() -> None:
+    """``point_inputs``: X, then sin and cos of 2π X·b, with b drawn from the seed alone."""
+    from surrogate.model import layer_sizes, point_frequencies, point_inputs
+
+    config = SurrogateConfig(structure="separable", point_features=5, point_frequency=3.0)
+    b = point_frequencies(config)
+    assert b.shape == (3, 5) and np.array_equal(b, point_frequencies(config))
+    assert not np.array_equal(b, point_frequencies(config.replace(seed=1)))
+    x = np.array([[0.1, -0.2, 0.3], [1.0, 0.0, -1.0]], np.float32)
+    z = 2 * np.pi * x @ b
+    expected = np.concatenate([x, np.sin(z), np.cos(z)], axis=1)
+    assert np.allclose(np.asarray(point_inputs(x, config)), expected, atol=1e-5)
+    assert layer_sizes(config)[0] == 13 and layer_sizes(config, "branch")[0] == 4
+    plain = config.replace(point_features=0)
+    assert point_frequencies(plain) is None and point_inputs(x, plain) is x
 
 
 def test_loss_is_eq2() -> None:
@@ -426,13 +448,15 @@ def test_train_command_line_trains_saves_and_names_bad_settings(
     assert "not KEY=VALUE" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize(("boundary", "output_form", "structure"), [
-    ("network", "vector", "pointwise"), ("shared", "vector", "pointwise"),
-    ("exact", "vector", "pointwise"), ("network", "gravity_linear", "pointwise"),
-    ("exact", "gravity_linear", "pointwise"), ("network", "gravity_linear", "separable"),
-    ("shared", "vector", "separable"), ("exact", "gravity_linear", "separable")])
+@pytest.mark.parametrize(("boundary", "output_form", "structure", "point_features"), [
+    ("network", "vector", "pointwise", 0), ("shared", "vector", "pointwise", 0),
+    ("exact", "vector", "pointwise", 0), ("network", "gravity_linear", "pointwise", 0),
+    ("exact", "gravity_linear", "pointwise", 0), ("network", "gravity_linear", "separable", 0),
+    ("shared", "vector", "separable", 0), ("exact", "gravity_linear", "separable", 0),
+    ("network", "gravity_linear", "separable", 6)])
 def test_fast_prediction_is_the_plain_network(
-    dataset_path: Path, tmp_path: Path, boundary: str, output_form: str, structure: str
+    dataset_path: Path, tmp_path: Path, boundary: str, output_form: str, structure: str,
+    point_features: int,
 ) -> None:
     """``Surrogate.predict`` gives the plain forward pass of the saved networks at every point.
 
@@ -465,6 +489,8 @@ def test_fast_prediction_is_the_plain_network(
         output_form=output_form,
         structure=structure,
         modes=5,
+        point_features=point_features,
+        point_frequency=2.0,
     )
     save_model(tmp_path / "m", train_and_evaluate(ds, config, progress=False), ds)
     model = Surrogate.load(tmp_path / "m")

@@ -47,6 +47,9 @@ class WebSurrogate {
       });
       this.modes = model.modes;
       this.branch = plain(model.branch);
+      // the point networks' Fourier frequencies (3 x F, row-major), as surrogate.model's
+      // point_inputs: [X, sin 2πX·b, cos 2πX·b]
+      this.frequencies = model.point_frequencies ? decode(model.point_frequencies) : null;
       this.parts = Object.values(model.parts).map((part) => ({
         points: decode(part.points), gain: decode(part.gain), layers: plain(part.layers),
       }));
@@ -127,8 +130,8 @@ class WebSurrogate {
         const fields = new Float32Array(rows.length * m);
         local.forEach((i, r) => {
           const point = part.points[i];
-          const out = WebSurrogate.dense(part.layers, this.Xs.subarray(3 * point, 3 * point + 3),
-            this.act);
+          const out = WebSurrogate.dense(part.layers,
+            this.pointInputs(this.Xs.subarray(3 * point, 3 * point + 3)), this.act);
           for (let j = 0; j < m; j += 1) fields[r * m + j] = out[j] * part.gain[i] * scale;
         });
         parts.push({ rows: Int32Array.from(rows), fields });
@@ -158,6 +161,22 @@ class WebSurrogate {
       });
     }
     return { n: indices.length, parts, out: new Float32Array(3 * indices.length) };
+  }
+
+  // What a separable model's point networks see of a standardised point x (3 numbers).
+  pointInputs(x) {
+    if (!this.frequencies) return x;
+    const f = this.frequencies.length / 3;
+    const input = new Float64Array(3 + 2 * f);
+    input.set(x);
+    for (let j = 0; j < f; j += 1) {
+      let z = 0;
+      for (let k = 0; k < 3; k += 1) z += x[k] * this.frequencies[k * f + j];
+      z *= 2 * Math.PI;
+      input[3 + j] = Math.sin(z);
+      input[3 + f + j] = Math.cos(z);
+    }
+    return input;
   }
 
   // Dense layers ({W, b, nIn, nOut}, W row-major) on one input, the activation between them.
