@@ -308,10 +308,10 @@ def solve_incrementally(
 
 
 #: The last resort's answer continues the load path when, walked back to where the first pass
-#: stopped, it lies within this fraction of the first pass's largest displacement of that
-#: pass's state. Two solves of one equilibrium to Newton's tolerance agreed to within 1e-8 of it
-#: (the coarse test mesh, supine, prone and lying on the side); the other equilibria that the
-#: last resort reached from rest on the default breast lay percents away.
+#: stopped, it lies within this fraction of the largest displacement of that pass's state there.
+#: Two solves of one equilibrium to Newton's tolerance agreed to within 1e-8 of it (the coarse
+#: test mesh, supine, prone and lying on the side); the other equilibria that the last resort
+#: reached from rest on the default breast lay percents away.
 BRANCH_TOLERANCE = 1e-3
 
 

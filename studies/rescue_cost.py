@@ -41,7 +41,8 @@ from studies.results import Record, Result
 #: The two ways, and the core each runs on.
 WAYS = {"config": 0, "against": 1}
 
-#: What the config's loading is compared against unless told otherwise: the stall test off.
+#: What the config's loading is compared against unless told otherwise: the last resort for a
+#: chain's cases too (the config's chains take none).
 DEFAULT_AGAINST = {"rescue_after_neighbours": True}
 
 

@@ -147,8 +147,9 @@ class SurrogateConfig:
             raise SurrogateConfigError(
                 "surrogate.point_features needs structure: separable (a pointwise network sees "
                 "the case beside the point)")
-        if not (isinstance(self.point_frequency, (int, float)) and math.isfinite(
-                self.point_frequency) and self.point_frequency > 0):
+        frequency = self.point_frequency
+        if isinstance(frequency, bool) or not isinstance(frequency, (int, float)) \
+                or not (math.isfinite(frequency) and frequency > 0):
             raise SurrogateConfigError(
                 f"surrogate.point_frequency must be positive, got {self.point_frequency!r}")
 

@@ -53,7 +53,8 @@ def test_config_validation_names_the_key() -> None:
         SurrogateConfig.from_mapping({"widht": 3})
     with pytest.raises(SurrogateConfigError, match="point_features needs structure: separable"):
         SurrogateConfig(point_features=4)
-    for bad in ({"point_features": -1}, {"point_features": True}, {"point_frequency": 0.0}):
+    for bad in ({"point_features": -1}, {"point_features": True}, {"point_frequency": 0.0},
+                {"point_frequency": True}):
         with pytest.raises(SurrogateConfigError, match=f"surrogate.{next(iter(bad))}"):
             SurrogateConfig(structure="separable", **bad)
 
