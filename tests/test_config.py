@@ -60,7 +60,7 @@ def test_the_default_config_parses_into_every_layer() -> None:
     study = config.surrogate_study
     assert study.architectures[0] == "2x32" and len(study.architectures) == 8
     assert {v.name for v in study.variants} == {"exact_bc", "paper_protocol", "vector_output",
-                                                "pointwise", "no_fourier"}
+                                                "pointwise"}
     # three extrapolation blocks: 6 x 2 + 2 x 6 + 2 x 1 cases, none of them in the sweep
     assert len(study.extrapolation) == 26 and not set(study.extrapolation) & set(config.cases)
     assert config.fe_study.reference.element == "p2p1"
@@ -95,14 +95,12 @@ def test_variants_override_the_surrogate_settings() -> None:
     assert protocol.settings.max_epochs == 200 and protocol.settings.width == config.surrogate.width
     assert protocol.settings.replace(activation="silu", c1_encoding="inverse",
                                      output_scaling="compliance", output_form="gravity_linear",
-                                     structure="separable", point_features=32,
-                                     lr_schedule="cosine", max_epochs=100) == config.surrogate
+                                     structure="separable", lr_schedule="cosine",
+                                     max_epochs=100) == config.surrogate
     vector = config.surrogate_study.variant("vector_output").settings
     assert vector == config.surrogate.replace(output_form="vector")
     pointwise = config.surrogate_study.variant("pointwise").settings
-    assert pointwise == config.surrogate.replace(structure="pointwise", point_features=0)
-    plain = config.surrogate_study.variant("no_fourier").settings
-    assert plain == config.surrogate.replace(point_features=0)
+    assert pointwise == config.surrogate.replace(structure="pointwise")
     assert config.held_out_splits == ("by_case", "by_direction", "by_c1")
     for split in config.held_out_splits:
         held_out = config.surrogate_held_out(split)

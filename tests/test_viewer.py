@@ -61,13 +61,15 @@ def test_the_page_predicts_what_python_predicts(viewer: Path, model: Surrogate) 
         assert not errors
 
 
-def test_the_page_predicts_a_pointwise_model_as_python_does(
-    small_run: Path, tmp_path: Path
+@pytest.mark.parametrize("structure", ["pointwise", "fourier"])
+def test_the_page_predicts_other_models_as_python_does(
+    small_run: Path, tmp_path: Path, structure: str
 ) -> None:
-    """A pointwise model's page predicts what Python does.
+    """The page of a pointwise model, or a separable one on Fourier features, predicts as Python.
 
-    The small run's model, whose page the other tests read, is separable; this one has the
-    paper's pointwise networks, in gravity_linear form (the last layer contracted with ĝ).
+    The small run's model, whose page the other tests read, is separable on the coordinates
+    alone; these have the paper's pointwise networks in gravity_linear form (the last layer
+    contracted with ĝ), or point networks that see the point's Fourier features.
     """
     from fem.dataset import read_dataset
     from report.viewer import build_viewer
@@ -79,6 +81,9 @@ def test_the_page_predicts_a_pointwise_model_as_python_does(
     config = SurrogateConfig(hidden_layers=2, width=8, activation="silu", max_epochs=2,
                              structure="pointwise", output_form="gravity_linear",
                              output_scaling="compliance")
+    if structure == "fourier":
+        config = config.replace(structure="separable", modes=6, point_features=5,
+                                point_frequency=2.0)
     ds = read_dataset(results / "dataset" / "dataset.h5")
     save_model(tmp_path / "model", train_and_evaluate(ds, config, progress=False), ds)
     page_path = tmp_path / "index.html"
