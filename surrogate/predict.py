@@ -189,8 +189,11 @@ class Surrogate:
         self._unconverged = [
             (float(c), float(p), float(t)) for c, p, t in rng.get("unconverged", [])
         ]
-        # the angles a query's neighbours are taken from: built once, not per prediction
+        # the angles a query's neighbours are taken from, and the failures' directions: built
+        # once, not per prediction
         self._sweep_angles = sorted(set(phis) | {p % 360.0 for _, p, _ in self._unconverged})
+        self._unconverged_directions = _unit_directions(
+            [(p, t) for _, p, t in self._unconverged] or np.zeros((0, 2)))
 
     def range_checks(self) -> dict[str, Any]:
         """What decides that a query is an extrapolation (for :mod:`surrogate.export`).
@@ -231,8 +234,8 @@ class Surrogate:
             return None
         if self._directions is not None:
             query = _unit_directions([(phi, theta)])[0]
-            failed = _unit_directions([(p, t) for _, p, t in self._unconverged])
-            angles = np.degrees(np.arccos(np.clip(failed @ query, -1.0, 1.0)))
+            cos = np.clip(self._unconverged_directions @ query, -1.0, 1.0)
+            angles = np.degrees(np.arccos(cos))
             beside = [case for case, angle in zip(self._unconverged, angles, strict=True)
                       if angle <= self._direction_spacing + 1e-9]
         else:
