@@ -129,20 +129,22 @@ def fe_shape(runner: Any, phi: float, theta: float = 0.0) -> Shape:
         StiffnessError: if a solve does not converge.
     """
     from fem.io import node_displacement
-    from fem.sweep import Case
+    from fem.parameters import Gravity, Material
     from meshes.io import nodes_in_file_order
 
     problem, settings = runner.problem, runner.settings
     X = runner.mesh.geometry.x.copy()
+    gravity = Gravity(phi=phi, theta=theta, unit="deg", magnitude=settings.gravity)
     last: dict[str, Any] = {}
 
     def shape(c1: float) -> np.ndarray:
-        case = Case(c1, phi, theta)
+        # C1 exactly as asked: a sweep Case rounds it to its folder name's 0.01 kPa, which is
+        # coarser than the confirmation's tolerance, and two nearby solves would be one
         guess = None
         if last:
             guess = last["w"] * (last["c1"] / c1)
-        ok, _, _ = runner.solve_from(case.material(settings.density),
-                                     case.gravity(settings.gravity), guess)
+        ok, _, _ = runner.solve_from(Material(C1=c1 * 1e3, density=settings.density), gravity,
+                                     guess)
         if not ok:
             raise StiffnessError(f"the FE solve at C1 = {c1:.4g} kPa, Φ = {phi:g}° did not "
                                  "converge")

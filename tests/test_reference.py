@@ -240,6 +240,22 @@ def test_points_seen_prone_are_tracked_to_supine_through_the_reference(runner: C
         runner.problem.set_geometry(X_true)
 
 
+def test_the_stiffness_confirmation_solves_the_c1_it_is_asked(runner: CaseRunner) -> None:
+    """``fe_shape`` solves C1 as given, not rounded to a case folder's 0.01 kPa.
+
+    The confirmation steps by less than that near its answer; two solves rounded to one C1
+    gave one field twice, and its secant between them was flat.
+    """
+    from surrogate.stiffness import fe_shape
+
+    shape = fe_shape(runner, 0.0)
+    a, b = shape(2.4854), shape(2.4945)
+    rest = shape(1000.0)  # about the unloaded shape: the sag scales as 1/C1
+    sag = np.linalg.norm(a - rest, axis=1).max()
+    moved = np.linalg.norm(a - b, axis=1).max()
+    assert 0.002 * sag < moved < 0.01 * sag  # 1 - 2.4854 / 2.4945 = 0.0036 of the sag
+
+
 @pytest.mark.workflow
 def test_the_tracking_command_carries_points_by_fe_and_by_the_surrogate(
     small_run: Path, tmp_path: Path
