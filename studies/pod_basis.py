@@ -1,0 +1,251 @@
+"""Benchmark: the sweep's own fields as the surrogate's basis, beside the trained models.
+
+    .venv/bin/python -m studies.pod_basis DATASET --model MODEL [--by-direction MODEL]
+        [--by-c1 MODEL] [--outside DIR] [--modes 64] [--width 128] [--layers 4]
+        [--steps 20000] [--seed 0] [--json OUT]
+
+A separable surrogate learns its fields T_k(X) with point networks, and at the soft caudal
+end of the sphere it misses its own training data where the mound rests on the chest (a few
+millimetres at single points, docs/surrogate.md). This benchmark measures how far a basis
+taken from the data itself would go instead: the leading right singular vectors (POD modes)
+of the training cases' fields, compliance-scaled (u · C1 / C1_min) as the model's outputs
+are, with a branch network of (C1, ĝ) giving their weights in the model's gravity-linear form
+(each weight a row of a modes x 3 matrix times ĝ). The branch is trained on the whole training
+set at once, with Adam on the squared error of the fields (the basis is orthonormal, so that
+is the weights' squared error plus a constant).
+
+Per the dataset's ``by_direction`` and ``by_c1`` splits, a basis and branch are fitted on the
+split's training and validation cases and measured on its test cases, with the model trained
+on that split (``--by-direction``, ``--by-c1``) beside; one fitted on every converged case is
+measured on them all, on the soft caudal ones (C1 ≤ 1 kPa, θ < -30°), and on each converged
+FE case of ``--outside`` (the postures' and extrapolation solves' case folders) inside the
+training range, with ``--model`` beside. Errors per case: mean, 95th percentile and largest
+point error (mm); over cases: their mean, the 95th percentile of the 95th percentiles and the
+largest (:class:`studies.held_out.ErrorSpread`). Points between the material points are not
+measured here: a basis given at the points needs the mesh's shape functions between them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from fem.dataset import Dataset, gravity_direction, read_dataset, read_points, read_summary
+from studies.held_out import CaseErrors, ErrorSpread
+from surrogate.data import Normalisation
+
+SOFT_C1_KPA = 1.0
+"""The soft caudal cases: C1 at most this (kPa) and θ below ``CAUDAL_THETA_DEG``."""
+CAUDAL_THETA_DEG = -30.0
+
+
+@dataclass(frozen=True)
+class PodModel:
+    """POD modes of the training fields and the branch that weighs them.
+
+    Attributes:
+        modes: (K, 3N) orthonormal rows, compliance-scaled displacement per unit weight (mm).
+        singular_values: the training fields' singular values (all of them, mm).
+        layers: the branch's weights: (C1 encoded, ĝ) to a K x 3 matrix, row by row.
+        scale: the weights' common unit (mm): their RMS over the training cases.
+        normalisation: inputs' and outputs' maps, as the surrogate's (inverse C1, compliance).
+        train_s: wall time of the branch's training.
+    """
+
+    modes: np.ndarray
+    singular_values: np.ndarray
+    layers: list
+    scale: float
+    normalisation: Normalisation
+    train_s: float
+
+    def predict(self, C1: float, phi: float, theta: float = 0.0) -> np.ndarray:
+        """Displacement (N, 3) in mm at the dataset's material points."""
+        import jax.numpy as jnp
+
+        g = gravity_direction(np.asarray([phi]), np.asarray([theta]))
+        features = self.normalisation.case(np.asarray([C1]), g)
+        weights = _weights(self.layers, jnp.asarray(features, jnp.float32))
+        field = (np.asarray(weights[0], dtype=np.float64) * self.scale) @ self.modes
+        return field.reshape(-1, 3) * float(self.normalisation.gain(C1))
+
+
+def _weights(layers: list, features):
+    """The branch's weights of the modes (M, K): its K x 3 matrix times ĝ."""
+    import jax.numpy as jnp
+
+    from surrogate.model import mlp
+
+    out = mlp(layers, features, "silu")
+    return jnp.einsum("mkj,mj->mk", out.reshape(features.shape[0], -1, 3), features[:, 1:])
+
+
+def fit(
+    ds: Dataset,
+    cases: Sequence[int],
+    modes: int = 64,
+    width: int = 128,
+    layers: int = 4,
+    steps: int = 20000,
+    learning_rate: float = 3e-3,
+    seed: int = 0,
+) -> PodModel:
+    """POD modes of ``cases``' fields and a branch trained on their weights.
+
+    Raises:
+        ValueError: if a case did not converge, or there are fewer cases than modes.
+    """
+    import jax
+    import jax.numpy as jnp
+    import optax
+
+    from surrogate.model import init_mlp
+
+    cases = np.asarray(cases, dtype=np.int64)
+    if not np.all(ds.converged[cases]):
+        raise ValueError("the POD basis needs converged cases only")
+    if len(cases) < modes:
+        raise ValueError(f"{modes} modes need at least as many cases ({len(cases)} given)")
+    norm = Normalisation.fit(ds, cases, c1_encoding="inverse", output_scaling="compliance")
+    fields = ds.displacement[cases] / norm.gain(ds.C1[cases])[:, None, None]
+    fields = fields.reshape(len(cases), -1)
+    _, singular, rows = np.linalg.svd(fields, full_matrices=False)
+    basis = rows[:modes]
+    weights = fields @ basis.T
+    scale = float(np.sqrt(np.mean(weights**2)))
+    features = jnp.asarray(norm.case(ds.C1[cases], ds.direction[cases]), jnp.float32)
+    target = jnp.asarray(weights / scale, jnp.float32)
+    params = init_mlp(jax.random.PRNGKey(seed), [4, *[width] * layers, 3 * modes])
+    optimiser = optax.adam(optax.cosine_decay_schedule(learning_rate, steps, 0.01))
+    state = optimiser.init(params)
+
+    @jax.jit
+    def step(params, state):
+        loss, grads = jax.value_and_grad(
+            lambda p: jnp.mean((_weights(p, features) - target) ** 2))(params)
+        updates, state = optimiser.update(grads, state, params)
+        return optax.apply_updates(params, updates), state, loss
+
+    start = time.perf_counter()
+    for _ in range(steps):
+        params, state, loss = step(params, state)
+    if not np.isfinite(float(loss)):
+        raise ValueError(f"the branch's training diverged (loss {float(loss)})")
+    return PodModel(basis, singular, params, scale, norm, time.perf_counter() - start)
+
+
+def spread(predict, ds: Dataset, cases: Sequence[int]) -> ErrorSpread:
+    """``predict(C1, phi, theta)``'s errors on dataset cases."""
+    rows = []
+    for i in cases:
+        C1, phi, theta = float(ds.C1[i]), float(ds.phi[i]), float(ds.theta[i])
+        rows.append(CaseErrors.between(predict(C1, phi, theta), ds.displacement[i],
+                                       str(ds.ids[i]), C1, phi, theta))
+    return ErrorSpread.over(rows)
+
+
+def outside_cases(ds: Dataset, folder: Path) -> list[tuple[str, float, float, float, np.ndarray]]:
+    """The converged FE cases under ``folder`` inside the dataset's C1 range, in its point order.
+
+    Raises:
+        ValueError: if a case's material points are not the dataset's.
+    """
+    lo, hi = float(ds.C1[ds.converged].min()), float(ds.C1[ds.converged].max())
+    found = []
+    for summary_path in sorted(folder.glob("*/summary.json")):
+        summary = read_summary(summary_path)
+        C1 = float(summary["C1"])
+        if summary["status"] != "converged" or not lo - 1e-9 <= C1 <= hi + 1e-9:
+            continue
+        points = read_points(summary_path.parent / "points.h5")
+        order = {int(n): r for r, n in enumerate(points["node_index"])}
+        try:
+            rows = [order[int(n)] for n in ds.node_index]
+        except KeyError:
+            raise ValueError(f"{summary_path.parent}: material points differ from the "
+                             "dataset's") from None
+        found.append((str(summary["case"]), C1, float(summary["phi"]), float(summary["theta"]),
+                      1e3 * points["u"][rows]))
+    return found
+
+
+def _quiet(model):
+    """A surrogate's predict with its extrapolation warnings silenced (cases near failures)."""
+    def predict(C1: float, phi: float, theta: float) -> np.ndarray:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return model.predict(C1, phi, theta)
+    return predict
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command line: see the module's docstring."""
+    from surrogate.predict import Surrogate
+
+    parser = argparse.ArgumentParser(prog="python -m studies.pod_basis",
+                                     description=__doc__.split("\n\n")[1].splitlines()[0])
+    parser.add_argument("dataset", type=Path)
+    parser.add_argument("--model", type=Path, required=True, help="the by-sample model")
+    parser.add_argument("--by-direction", type=Path, help="the model of the by_direction split")
+    parser.add_argument("--by-c1", type=Path, help="the model of the by_c1 split")
+    parser.add_argument("--outside", type=Path, help="folder of extra FE case folders")
+    parser.add_argument("--modes", type=int, default=64)
+    parser.add_argument("--width", type=int, default=128)
+    parser.add_argument("--layers", type=int, default=4)
+    parser.add_argument("--steps", type=int, default=20000)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--json", type=Path, help="write the figures here too")
+    args = parser.parse_args(argv)
+    ds = read_dataset(args.dataset)
+    if ds.node_index is None:
+        print(f"error: {args.dataset} has no node_index", file=sys.stderr)
+        return 2
+    fit_args = dict(modes=args.modes, width=args.width, layers=args.layers, steps=args.steps,
+                    seed=args.seed)
+    converged = np.flatnonzero(ds.converged)
+    figures: dict[str, dict] = {}
+
+    def row(name: str, pod: ErrorSpread, model: ErrorSpread | None) -> None:
+        figures[name] = {"pod": pod.to_json(), "model": model.to_json() if model else None}
+        text = f"{name:<34} {pod.cases:>4}  POD {_fmt(pod)}"
+        print(text + (f"  | model {_fmt(model)}" if model else ""), flush=True)
+
+    for split, path in (("by_direction", args.by_direction), ("by_c1", args.by_c1)):
+        parts = ds.splits[split]
+        train = np.intersect1d(np.concatenate([parts["train"], parts["validation"]]), converged)
+        test = np.intersect1d(parts["test"], converged)
+        pod = fit(ds, train, **fit_args)
+        other = spread(_quiet(Surrogate.load(path)), ds, test) if path else None
+        row(f"{split} held out ({pod.train_s:.0f} s)", spread(pod.predict, ds, test), other)
+    pod = fit(ds, converged, **fit_args)
+    model = _quiet(Surrogate.load(args.model))
+    soft = [i for i in converged
+            if ds.C1[i] <= SOFT_C1_KPA + 1e-9 and ds.theta[i] < CAUDAL_THETA_DEG]
+    row(f"every case, inside ({pod.train_s:.0f} s)", spread(pod.predict, ds, converged),
+        spread(model, ds, converged))
+    if soft:
+        row("soft caudal, inside", spread(pod.predict, ds, soft), spread(model, ds, soft))
+    for case, C1, phi, theta, fe in outside_cases(ds, args.outside) if args.outside else []:
+        errors = [ErrorSpread.over([CaseErrors.between(f(C1, phi, theta), fe, case, C1, phi,
+                                                       theta)]) for f in (pod.predict, model)]
+        row(case, *errors)
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps({"settings": fit_args, "figures": figures}, indent=1))
+    return 0
+
+
+def _fmt(s: ErrorSpread) -> str:
+    return f"{s.mean_mm:.3f} / {s.p95_mm:.3f} / {s.max_mm:.2f} mm"
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,45 @@
+"""The POD-basis benchmark's model: a basis of the training fields and a branch weighing it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fem.dataset import Dataset, gravity_direction
+from studies.pod_basis import fit
+
+pytestmark = pytest.mark.unit
+
+
+def _dataset(C1: np.ndarray, phi: np.ndarray) -> Dataset:
+    """Fields u = A(X) ĝ / C1 + B(X) ĝ / C1², a rank-6 family that is not linear in 1/C1."""
+    rng = np.random.default_rng(0)
+    X = rng.uniform(-0.05, 0.05, (40, 3))
+    A, B = rng.normal(size=(40, 3, 3)), 0.3 * rng.normal(size=(40, 3, 3))
+    g = gravity_direction(phi, np.zeros_like(phi))
+    u = (np.einsum("nij,mj->mni", A, g) / C1[:, None, None]
+         + np.einsum("nij,mj->mni", B, g) / C1[:, None, None] ** 2)
+    m = len(C1)
+    return Dataset(X=X, boundary=np.zeros(40, bool), C1=C1, phi=phi, theta=np.zeros(m),
+                   direction=g, displacement=u, converged=np.ones(m, bool), splits={},
+                   ids=np.array([f"c{i}" for i in range(m)]), node_index=np.arange(40))
+
+
+def test_the_basis_and_branch_recover_a_field_between_their_cases() -> None:
+    """Trained on a grid of C1 and Φ, it predicts a case between them to 2 % of its size."""
+    c1, phi = np.meshgrid([1.0, 1.5, 2.0, 3.0, 5.0], np.arange(-150.0, 181.0, 30.0))
+    ds = _dataset(c1.ravel(), phi.ravel())
+    model = fit(ds, np.arange(c1.size), modes=6, width=32, layers=2, steps=3000)
+    truth = _dataset(np.array([1.25]), np.array([75.0])).displacement[0]
+    error = np.linalg.norm(model.predict(1.25, 75.0) - truth, axis=1).max()
+    assert error < 0.02 * np.linalg.norm(truth, axis=1).max()
+    np.testing.assert_allclose(np.linalg.norm(model.modes, axis=1), 1.0, rtol=1e-6)
+
+
+def test_the_basis_refuses_failed_cases_and_too_few_cases() -> None:
+    ds = _dataset(np.array([1.0, 2.0, 3.0]), np.array([0.0, 90.0, 180.0]))
+    with pytest.raises(ValueError, match="at least as many cases"):
+        fit(ds, [0, 1, 2], modes=4, steps=1)
+    ds.converged[1] = False
+    with pytest.raises(ValueError, match="converged cases only"):
+        fit(ds, [0, 1, 2], modes=2, steps=1)
