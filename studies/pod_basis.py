@@ -191,7 +191,7 @@ def main(argv: list[str] | None = None) -> int:
     from surrogate.predict import Surrogate
 
     parser = argparse.ArgumentParser(prog="python -m studies.pod_basis",
-                                     description=__doc__.split("\n\n")[1].splitlines()[0])
+                                     description=__doc__.split("\n\n")[0])
     parser.add_argument("dataset", type=Path)
     parser.add_argument("--model", type=Path, required=True, help="the by-sample model")
     parser.add_argument("--by-direction", type=Path, help="the model of the by_direction split")
