@@ -204,6 +204,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--json", type=Path, help="write the figures here too")
     args = parser.parse_args(argv)
+    for path in (args.model, args.by_direction, args.by_c1, args.outside):
+        if path is not None and not path.is_dir():
+            print(f"error: {path} is not a folder", file=sys.stderr)
+            return 2
     ds = read_dataset(args.dataset)
     if ds.node_index is None:
         print(f"error: {args.dataset} has no node_index", file=sys.stderr)
