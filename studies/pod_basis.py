@@ -54,7 +54,7 @@ class PodModel:
     Attributes:
         modes: (K, 3N) orthonormal rows, compliance-scaled displacement per unit weight (mm).
         singular_values: the training fields' singular values (all of them, mm).
-        layers: the branch's weights: (C1 encoded, ĝ) to a K x 3 matrix, row by row.
+        layers: the branch's weights (NumPy): (C1 encoded, ĝ) to a K x 3 matrix, row by row.
         scale: the weights' common unit (mm): their RMS over the training cases.
         normalisation: inputs' and outputs' maps, as the surrogate's (inverse C1, compliance).
         train_s: wall time of the branch's training.
@@ -68,14 +68,16 @@ class PodModel:
     train_s: float
 
     def predict(self, C1: float, phi: float, theta: float = 0.0) -> np.ndarray:
-        """Displacement (N, 3) in mm at the dataset's material points."""
-        import jax.numpy as jnp
-
+        """Displacement (N, 3) in mm at the dataset's material points (NumPy, one case)."""
         g = gravity_direction(np.asarray([phi]), np.asarray([theta]))
-        features = self.normalisation.case(np.asarray([C1]), g)
-        weights = _weights(self.layers, jnp.asarray(features, jnp.float32))
-        field = (np.asarray(weights[0], dtype=np.float64) * self.scale) @ self.modes
-        return field.reshape(-1, 3) * float(self.normalisation.gain(C1))
+        h = self.normalisation.case(np.asarray([C1]), g)[0]
+        for W, b in self.layers[:-1]:
+            z = h @ W + b
+            h = z / (1.0 + np.exp(-z))  # silu
+        W, b = self.layers[-1]
+        weights = (h @ W + b).reshape(-1, 3) @ g[0]
+        field = (weights * (self.scale * float(self.normalisation.gain(C1)))) @ self.modes
+        return field.reshape(-1, 3)
 
 
 def _weights(layers: list, features):
@@ -139,7 +141,8 @@ def fit(
         params, state, loss = step(params, state)
     if not np.isfinite(float(loss)):
         raise ValueError(f"the branch's training diverged (loss {float(loss)})")
-    return PodModel(basis, singular, params, scale, norm, time.perf_counter() - start)
+    layers_np = [(np.asarray(W, np.float64), np.asarray(b, np.float64)) for W, b in params]
+    return PodModel(basis, singular, layers_np, scale, norm, time.perf_counter() - start)
 
 
 def spread(predict, ds: Dataset, cases: Sequence[int]) -> ErrorSpread:
@@ -241,10 +244,27 @@ def main(argv: list[str] | None = None) -> int:
         errors = [ErrorSpread.over([CaseErrors.between(f(C1, phi, theta), fe, case, C1, phi,
                                                        theta)]) for f in (pod.predict, model)]
         row(case, *errors)
+    queries = [(float(ds.C1[i]), float(ds.phi[i]), float(ds.theta[i])) for i in converged[:50]]
+    timing = {name: _median_ms(f, queries) for name, f in (("pod", pod.predict), ("model", model))}
+    figures["prediction_median_ms"] = timing
+    print(f"prediction, median of {len(queries) * 4} cases in this process: POD "
+          f"{timing['pod']:.3f} ms, model {timing['model']:.3f} ms")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps({"settings": fit_args, "figures": figures}, indent=1))
     return 0
+
+
+def _median_ms(predict, queries: Sequence[tuple[float, float, float]]) -> float:
+    """Median wall time of one whole-field prediction (ms), each query 4 times, warmed up."""
+    for q in queries[:5]:
+        predict(*q)
+    times = []
+    for q in queries * 4:
+        start = time.perf_counter()
+        predict(*q)
+        times.append(time.perf_counter() - start)
+    return 1e3 * float(np.median(times))
 
 
 def _fmt(s: ErrorSpread) -> str:
