@@ -21,8 +21,13 @@ measured on them all, on the soft caudal ones (C1 ≤ 1 kPa, θ < -30°), and on
 FE case of ``--outside`` (the postures' and extrapolation solves' case folders) inside the
 training range, with ``--model`` beside. Errors per case: mean, 95th percentile and largest
 point error (mm); over cases: their mean, the 95th percentile of the 95th percentiles and the
-largest (:class:`studies.held_out.ErrorSpread`). Points between the material points are not
-measured here: a basis given at the points needs the mesh's shape functions between them.
+largest (:class:`studies.held_out.ErrorSpread`).
+
+With ``--quadratic CASES`` (the sweep's case folders), the basis is taken at the FE's own
+quadratic nodes (each case's ``fields.h5``) and every error is measured at the mesh's cell
+centroids, between the nodes: the basis there by the 10-node tetrahedra's shape functions, FE
+by the same (exact: the FE field is quadratic), and the models by ``Surrogate.at``. Without it,
+errors are at the material points (the mesh's vertices) only.
 """
 
 from __future__ import annotations
@@ -145,18 +150,80 @@ def fit(
     return PodModel(basis, singular, layers_np, scale, norm, time.perf_counter() - start)
 
 
-def spread(predict, ds: Dataset, cases: Sequence[int]) -> ErrorSpread:
-    """``predict(C1, phi, theta)``'s errors on dataset cases."""
+def spread(predict, ds: Dataset, cases: Sequence[int], truth=None) -> ErrorSpread:
+    """``predict(C1, phi, theta)``'s errors on dataset cases.
+
+    Against ``truth(case)``, by default the dataset's displacement.
+    """
     rows = []
     for i in cases:
         C1, phi, theta = float(ds.C1[i]), float(ds.phi[i]), float(ds.theta[i])
-        rows.append(CaseErrors.between(predict(C1, phi, theta), ds.displacement[i],
-                                       str(ds.ids[i]), C1, phi, theta))
+        fe = ds.displacement[i] if truth is None else truth(i)
+        rows.append(CaseErrors.between(predict(C1, phi, theta), fe, str(ds.ids[i]), C1, phi,
+                                       theta))
     return ErrorSpread.over(rows)
 
 
-def outside_cases(ds: Dataset, folder: Path) -> list[tuple[str, float, float, float, np.ndarray]]:
+def read_fields(folder: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A case folder's FE displacement at the mesh's nodes (mm), its cells and nodes (m).
+
+    From the case's ``fields.h5`` (:mod:`fem.io`), where the displacement is given at every
+    node of the mesh's geometry: on the default quadratic mesh, the FE field's own nodes.
+
+    Raises:
+        ValueError: if the file is missing or its cells are not 10-node tetrahedra.
+    """
+    import h5py
+
+    path = folder / "fields.h5"
+    if not path.is_file():
+        raise ValueError(f"{path}: no such file (the case's fields)")
+    with h5py.File(path, "r") as h5:
+        u = 1e3 * np.asarray(h5["Function/displacement/0"], dtype=np.float64)
+        cells = np.asarray(h5["Mesh/mesh/topology"], dtype=np.int64)
+        nodes = np.asarray(h5["Mesh/mesh/geometry"], dtype=np.float64)
+    if cells.shape[1] != 10:
+        raise ValueError(f"{path}: cells of {cells.shape[1]} nodes; the centroids need the "
+                         "quadratic mesh's 10-node tetrahedra")
+    return u, cells, nodes
+
+
+def at_centroids(u: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """A quadratic field given at the nodes, at each cell's centroid: (..., cells, 3).
+
+    At the barycentre every vertex shape function of the 10-node tetrahedron is -1/8 and
+    every edge one 1/4, whatever the order of the edges.
+    """
+    return -0.125 * u[..., cells[:, :4], :].sum(-2) + 0.25 * u[..., cells[:, 4:], :].sum(-2)
+
+
+def quadratic_dataset(ds: Dataset, cases_dir: Path) -> tuple[Dataset, np.ndarray]:
+    """``ds`` with each converged case's field at the mesh's quadratic nodes, and the cells.
+
+    Raises:
+        ValueError: if a case's fields are missing, or its mesh is not the first case's.
+    """
+    converged = np.flatnonzero(ds.converged)
+    first, cells, nodes = read_fields(cases_dir / str(ds.ids[converged[0]]))
+    U = np.full((len(ds.ids), *first.shape), np.nan)
+    for i in converged:
+        u, c, x = read_fields(cases_dir / str(ds.ids[i]))
+        if not (np.array_equal(c, cells) and np.array_equal(x, nodes)):
+            raise ValueError(f"{cases_dir / str(ds.ids[i])}: another mesh than the first case's")
+        U[i] = u
+    quadratic = Dataset(X=nodes, boundary=np.zeros(len(nodes), dtype=bool), C1=ds.C1,
+                        phi=ds.phi, theta=ds.theta, direction=ds.direction, displacement=U,
+                        converged=ds.converged, splits=ds.splits, ids=ds.ids,
+                        node_index=np.arange(len(nodes)))
+    return quadratic, cells
+
+
+def outside_cases(
+    ds: Dataset, folder: Path, cells: np.ndarray | None = None
+) -> list[tuple[str, float, float, float, np.ndarray]]:
     """The converged FE cases under ``folder`` inside the dataset's C1 range, in its point order.
+
+    With ``cells`` (the quadratic mesh's), each case's field at those cells' centroids instead.
 
     Raises:
         ValueError: if a case's material points are not the dataset's.
@@ -167,6 +234,13 @@ def outside_cases(ds: Dataset, folder: Path) -> list[tuple[str, float, float, fl
         summary = read_summary(summary_path)
         C1 = float(summary["C1"])
         if summary["status"] != "converged" or not lo - 1e-9 <= C1 <= hi + 1e-9:
+            continue
+        if cells is not None:
+            u, c, _ = read_fields(summary_path.parent)
+            if not np.array_equal(c, cells):
+                raise ValueError(f"{summary_path.parent}: another mesh than the dataset's")
+            found.append((str(summary["case"]), C1, float(summary["phi"]),
+                          float(summary["theta"]), at_centroids(u, cells)))
             continue
         points = read_points(summary_path.parent / "points.h5")
         order = {int(n): r for r, n in enumerate(points["node_index"])}
@@ -205,9 +279,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--layers", type=int, default=4)
     parser.add_argument("--steps", type=int, default=20000)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--quadratic", type=Path, metavar="CASES",
+                        help="the sweep's case folders: take the basis at the FE's quadratic "
+                             "nodes (each case's fields.h5) and measure every error at the "
+                             "cells' centroids, between the nodes (the models by Surrogate.at)")
     parser.add_argument("--json", type=Path, help="write the figures here too")
     args = parser.parse_args(argv)
-    for path in (args.model, args.by_direction, args.by_c1, args.outside):
+    for path in (args.model, args.by_direction, args.by_c1, args.outside, args.quadratic):
         if path is not None and not path.is_dir():
             print(f"error: {path} is not a folder", file=sys.stderr)
             return 2
@@ -219,6 +297,26 @@ def main(argv: list[str] | None = None) -> int:
                     seed=args.seed)
     converged = np.flatnonzero(ds.converged)
     figures: dict[str, dict] = {}
+    basis, cells, truth = ds, None, None
+    if args.quadratic:
+        try:
+            basis, cells = quadratic_dataset(ds, args.quadratic)
+        except ValueError as error:
+            print(f"error: {error}", file=sys.stderr)
+            return 2
+        centroid_x = at_centroids(basis.X, cells)
+
+        def truth(i: int) -> np.ndarray:
+            return at_centroids(basis.displacement[i], cells)
+
+    def load(path: Path):
+        model = Surrogate.load(path)
+        return _quiet(model if cells is None else model.at(centroid_x))
+
+    def pod_predict(pod: PodModel):
+        if cells is None:
+            return pod.predict
+        return lambda C1, phi, theta: at_centroids(pod.predict(C1, phi, theta), cells)
 
     def row(name: str, pod: ErrorSpread, model: ErrorSpread | None) -> None:
         figures[name] = {"pod": pod.to_json(), "model": model.to_json() if model else None}
@@ -229,25 +327,30 @@ def main(argv: list[str] | None = None) -> int:
         parts = ds.splits[split]
         train = np.intersect1d(np.concatenate([parts["train"], parts["validation"]]), converged)
         test = np.intersect1d(parts["test"], converged)
-        pod = fit(ds, train, **fit_args)
-        other = spread(_quiet(Surrogate.load(path)), ds, test) if path else None
-        row(f"{split} held out ({pod.train_s:.0f} s)", spread(pod.predict, ds, test), other)
-    pod = fit(ds, converged, **fit_args)
-    model = _quiet(Surrogate.load(args.model))
+        pod = fit(basis, train, **fit_args)
+        other = spread(load(path), ds, test, truth) if path else None
+        row(f"{split} held out ({pod.train_s:.0f} s)",
+            spread(pod_predict(pod), ds, test, truth), other)
+    pod = fit(basis, converged, **fit_args)
+    model = load(args.model)
     soft = [i for i in converged
             if ds.C1[i] <= SOFT_C1_KPA + 1e-9 and ds.theta[i] < CAUDAL_THETA_DEG]
-    row(f"every case, inside ({pod.train_s:.0f} s)", spread(pod.predict, ds, converged),
-        spread(model, ds, converged))
+    row(f"every case, inside ({pod.train_s:.0f} s)",
+        spread(pod_predict(pod), ds, converged, truth), spread(model, ds, converged, truth))
     if soft:
-        row("soft caudal, inside", spread(pod.predict, ds, soft), spread(model, ds, soft))
-    for case, C1, phi, theta, fe in outside_cases(ds, args.outside) if args.outside else []:
+        row("soft caudal, inside", spread(pod_predict(pod), ds, soft, truth),
+            spread(model, ds, soft, truth))
+    for case, C1, phi, theta, fe in outside_cases(ds, args.outside, cells) if args.outside \
+            else []:
         errors = [ErrorSpread.over([CaseErrors.between(f(C1, phi, theta), fe, case, C1, phi,
-                                                       theta)]) for f in (pod.predict, model)]
+                                                       theta)])
+                  for f in (pod_predict(pod), model)]
         row(case, *errors)
     queries = [(float(ds.C1[i]), float(ds.phi[i]), float(ds.theta[i])) for i in converged[:50]]
     timing = {name: _median_ms(f, queries) for name, f in (("pod", pod.predict), ("model", model))}
     figures["prediction_median_ms"] = timing
-    print(f"prediction, median of {len(queries) * 4} cases in this process: POD "
+    where = "the material points" if cells is None else f"the {len(basis.X)} quadratic nodes"
+    print(f"prediction at {where}, median of {len(queries) * 4} cases in this process: POD "
           f"{timing['pod']:.3f} ms, model {timing['model']:.3f} ms")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)

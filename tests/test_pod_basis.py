@@ -8,8 +8,6 @@ import pytest
 from fem.dataset import Dataset, gravity_direction
 from studies.pod_basis import fit
 
-pytestmark = pytest.mark.unit
-
 
 def _dataset(C1: np.ndarray, phi: np.ndarray) -> Dataset:
     """Fields u = A(X) ĝ / C1 + B(X) ĝ / C1², a rank-6 family that is not linear in 1/C1."""
@@ -25,6 +23,7 @@ def _dataset(C1: np.ndarray, phi: np.ndarray) -> Dataset:
                    ids=np.array([f"c{i}" for i in range(m)]), node_index=np.arange(40))
 
 
+@pytest.mark.unit
 def test_the_basis_and_branch_recover_a_field_between_their_cases() -> None:
     """Trained on a grid of C1 and Φ, it predicts a case between them to 2 % of its size."""
     c1, phi = np.meshgrid([1.0, 1.5, 2.0, 3.0, 5.0], np.arange(-150.0, 181.0, 30.0))
@@ -36,6 +35,7 @@ def test_the_basis_and_branch_recover_a_field_between_their_cases() -> None:
     np.testing.assert_allclose(np.linalg.norm(model.modes, axis=1), 1.0, rtol=1e-6)
 
 
+@pytest.mark.unit
 def test_the_basis_refuses_failed_cases_and_too_few_cases() -> None:
     ds = _dataset(np.array([1.0, 2.0, 3.0]), np.array([0.0, 90.0, 180.0]))
     with pytest.raises(ValueError, match="at least as many cases"):
@@ -43,3 +43,38 @@ def test_the_basis_refuses_failed_cases_and_too_few_cases() -> None:
     ds.converged[1] = False
     with pytest.raises(ValueError, match="converged cases only"):
         fit(ds, [0, 1, 2], modes=2, steps=1)
+
+
+@pytest.mark.unit
+def test_a_quadratic_field_is_exact_at_a_cells_centroid_whatever_the_edge_order() -> None:
+    """The 10-node tetrahedron's shape functions at its barycentre: -1/8 and 1/4."""
+    from studies.pod_basis import at_centroids
+
+    vertices = np.array([[0.0, 0.0, 0.0], [1.0, 0.1, 0.0], [0.2, 1.0, 0.1], [0.1, 0.3, 1.2]])
+    edges = [(2, 3), (0, 1), (1, 3), (0, 2), (1, 2), (0, 3)]  # any order
+    nodes = np.vstack([vertices, [(vertices[a] + vertices[b]) / 2 for a, b in edges]])
+
+    def field(x: np.ndarray) -> np.ndarray:
+        return np.stack([x[..., 0] ** 2 + x[..., 1] * x[..., 2], 3 * x[..., 1] ** 2 - x[..., 0],
+                         x[..., 2] * x[..., 0] + 0.5], axis=-1)
+
+    cells = np.arange(10)[None, :]
+    centroid = vertices.mean(axis=0)
+    np.testing.assert_allclose(at_centroids(field(nodes), cells)[0], field(centroid),
+                               atol=1e-12)
+    np.testing.assert_allclose(at_centroids(nodes, cells)[0], centroid, atol=1e-12)
+    assert not np.allclose(field(vertices).mean(axis=0), field(centroid))  # linear would miss
+
+
+@pytest.mark.workflow
+def test_the_benchmark_refuses_a_linear_mesh_for_the_centroids(
+    small_run, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The tests' small run has a linear mesh: ``--quadratic`` names the problem, fits nothing."""
+    from studies.pod_basis import main
+
+    results = small_run / "results"
+    code = main([str(results / "dataset/dataset.h5"), "--model", str(results / "surrogate/model"),
+                 "--quadratic", str(results / "cases"), "--steps", "1", "--modes", "2"])
+    assert code == 2
+    assert "10-node tetrahedra" in capsys.readouterr().err
