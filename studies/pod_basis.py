@@ -349,9 +349,10 @@ def main(argv: list[str] | None = None) -> int:
     queries = [(float(ds.C1[i]), float(ds.phi[i]), float(ds.theta[i])) for i in converged[:50]]
     timing = {name: _median_ms(f, queries) for name, f in (("pod", pod.predict), ("model", model))}
     figures["prediction_median_ms"] = timing
-    where = "the material points" if cells is None else f"the {len(basis.X)} quadratic nodes"
-    print(f"prediction at {where}, median of {len(queries) * 4} cases in this process: POD "
-          f"{timing['pod']:.3f} ms, model {timing['model']:.3f} ms")
+    pod_at, model_at = (("the material points",) * 2 if cells is None else
+                        (f"its {len(basis.X)} quadratic nodes", f"the {len(cells)} centroids"))
+    print(f"prediction, median of {len(queries) * 4} cases in this process: POD "
+          f"{timing['pod']:.3f} ms at {pod_at}, model {timing['model']:.3f} ms at {model_at}")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps({"settings": fit_args, "figures": figures}, indent=1))
