@@ -43,9 +43,12 @@ from pathlib import Path
 
 import numpy as np
 
-from fem.dataset import Dataset, gravity_direction, read_dataset, read_points, read_summary
+from fem.dataset import Dataset, gravity_direction, read_dataset, read_summary
 from studies.held_out import CaseErrors, ErrorSpread
+from studies.surrogate_evaluation import fe_in_model_order
 from surrogate.data import Normalisation
+from surrogate.exceptions import ExtrapolationWarning
+from surrogate.predict import Surrogate
 
 SOFT_C1_KPA = 1.0
 """The soft caudal cases: C1 at most this (kPa) and θ below ``CAUDAL_THETA_DEG``."""
@@ -219,14 +222,15 @@ def quadratic_dataset(ds: Dataset, cases_dir: Path) -> tuple[Dataset, np.ndarray
 
 
 def outside_cases(
-    ds: Dataset, folder: Path, cells: np.ndarray | None = None
+    ds: Dataset, folder: Path, model: Surrogate, cells: np.ndarray | None = None
 ) -> list[tuple[str, float, float, float, np.ndarray]]:
-    """The converged FE cases under ``folder`` inside the dataset's C1 range, in its point order.
+    """The converged FE cases under ``folder`` inside the dataset's C1 range.
 
-    With ``cells`` (the quadratic mesh's), each case's field at those cells' centroids instead.
+    Each case's field at ``model``'s material points, in its order (the model trained on
+    ``ds``); with ``cells`` (the quadratic mesh's), at those cells' centroids instead.
 
     Raises:
-        ValueError: if a case's material points are not the dataset's.
+        ValueError: if a case's material points, or its mesh, are not the model's.
     """
     lo, hi = float(ds.C1[ds.converged].min()), float(ds.C1[ds.converged].max())
     found = []
@@ -242,31 +246,23 @@ def outside_cases(
             found.append((str(summary["case"]), C1, float(summary["phi"]),
                           float(summary["theta"]), at_centroids(u, cells)))
             continue
-        points = read_points(summary_path.parent / "points.h5")
-        order = {int(n): r for r, n in enumerate(points["node_index"])}
-        try:
-            rows = [order[int(n)] for n in ds.node_index]
-        except KeyError:
-            raise ValueError(f"{summary_path.parent}: material points differ from the "
-                             "dataset's") from None
+        fe, _ = fe_in_model_order(model, summary_path.parent / "points.h5")
         found.append((str(summary["case"]), C1, float(summary["phi"]), float(summary["theta"]),
-                      1e3 * points["u"][rows]))
+                      fe))
     return found
 
 
-def _quiet(model):
+def _quiet(model: Surrogate):
     """A surrogate's predict with its extrapolation warnings silenced (cases near failures)."""
     def predict(C1: float, phi: float, theta: float) -> np.ndarray:
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+            warnings.simplefilter("ignore", ExtrapolationWarning)
             return model.predict(C1, phi, theta)
     return predict
 
 
 def main(argv: list[str] | None = None) -> int:
     """Command line: see the module's docstring."""
-    from surrogate.predict import Surrogate
-
     parser = argparse.ArgumentParser(prog="python -m studies.pod_basis",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("dataset", type=Path)
@@ -309,8 +305,7 @@ def main(argv: list[str] | None = None) -> int:
         def truth(i: int) -> np.ndarray:
             return at_centroids(basis.displacement[i], cells)
 
-    def load(path: Path):
-        model = Surrogate.load(path)
+    def where(model: Surrogate):  # the model's predict at the points the errors are taken
         return _quiet(model if cells is None else model.at(centroid_x))
 
     def pod_predict(pod: PodModel):
@@ -328,11 +323,12 @@ def main(argv: list[str] | None = None) -> int:
         train = np.intersect1d(np.concatenate([parts["train"], parts["validation"]]), converged)
         test = np.intersect1d(parts["test"], converged)
         pod = fit(basis, train, **fit_args)
-        other = spread(load(path), ds, test, truth) if path else None
+        other = spread(where(Surrogate.load(path)), ds, test, truth) if path else None
         row(f"{split} held out ({pod.train_s:.0f} s)",
             spread(pod_predict(pod), ds, test, truth), other)
     pod = fit(basis, converged, **fit_args)
-    model = load(args.model)
+    surrogate = Surrogate.load(args.model)
+    model = where(surrogate)
     soft = [i for i in converged
             if ds.C1[i] <= SOFT_C1_KPA + 1e-9 and ds.theta[i] < CAUDAL_THETA_DEG]
     row(f"every case, inside ({pod.train_s:.0f} s)",
@@ -340,8 +336,8 @@ def main(argv: list[str] | None = None) -> int:
     if soft:
         row("soft caudal, inside", spread(pod_predict(pod), ds, soft, truth),
             spread(model, ds, soft, truth))
-    for case, C1, phi, theta, fe in outside_cases(ds, args.outside, cells) if args.outside \
-            else []:
+    outside = outside_cases(ds, args.outside, surrogate, cells) if args.outside else []
+    for case, C1, phi, theta, fe in outside:
         errors = [ErrorSpread.over([CaseErrors.between(f(C1, phi, theta), fe, case, C1, phi,
                                                        theta)])
                   for f in (pod_predict(pod), model)]
