@@ -5,6 +5,9 @@ Layout (units in attributes; M cases, N material points)::
     /points/X            (N, 3) float64   reference coordinates, m
     /points/node_index   (N,)   int64     index of the point in the mesh file
     /points/kind         (N,)   int8      0 domain, 1 boundary (on a fully clamped surface)
+    /points/cells        (C, 4) int64     the mesh's tetrahedra, as rows of the points (their
+                                          corners; written when the dataset is built with its
+                                          mesh, e.g. for a surrogate queried between the points)
     /cases/id            (M,)   str       case folder name
     /cases/C1            (M,)   float64   kPa
     /cases/phi, theta    (M,)   float64   degrees
@@ -277,6 +280,7 @@ def build_dataset(
     seed: int = 0,
     config: dict[str, Any] | None = None,
     test_cases: Sequence[tuple[float, float, float]] = (),
+    mesh: str | Path | None = None,
 ) -> dict[str, Any]:
     """Gather case files into one HDF5 dataset, written atomically.
 
@@ -292,6 +296,7 @@ def build_dataset(
             the other converged cases are partitioned by ``split``. The by-direction and
             by-C1 splits partition whole directions and whole C1 values by the same
             fractions (:func:`group_partition`).
+        mesh: the cases' mesh (XDMF): its tetrahedra are written as ``/points/cells``.
 
     Raises:
         DatasetError: naming the case whose files are missing, truncated or whose
@@ -398,6 +403,9 @@ def build_dataset(
         "contact_force_N": "N",
     }
     kind = np.where(reference["fixed"], BOUNDARY, DOMAIN).astype(np.int8)
+    if mesh is not None:
+        reference = {**reference, "cells": mesh_cells(mesh, reference["node_index"],
+                                                       reference["X"])}
     _write_atomically(
         Path(output),
         reference,
@@ -447,6 +455,9 @@ def _write_atomically(
             pts = h5.create_group("points")
             pts.create_dataset("X", data=reference["X"]).attrs["units"] = "m"
             pts.create_dataset("node_index", data=reference["node_index"])
+            if "cells" in reference:
+                pts.create_dataset("cells", data=reference["cells"]).attrs["description"] = (
+                    "the mesh's tetrahedra as rows of /points (their corner vertices)")
             k = pts.create_dataset("kind", data=kind)
             k.attrs["legend"] = json.dumps({"domain": DOMAIN, "boundary": BOUNDARY})
             cases = h5.create_group("cases")
@@ -489,6 +500,38 @@ def _write_atomically(
         raise
 
 
+def mesh_cells(mesh_xdmf: str | Path, node_index: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """The mesh's tetrahedra as rows of the material points ``X`` (C, 4): their corners.
+
+    The material points are the mesh's vertices, listed by ``node_index`` into the mesh file's
+    geometry; a quadratic mesh's other nodes are dropped.
+
+    Raises:
+        DatasetError: if the mesh cannot be read, or is not the one the points come from.
+    """
+    import h5py
+
+    from meshes.tags import MESH_NAME
+
+    mesh_h5 = Path(mesh_xdmf).with_suffix(".h5")
+    try:
+        with h5py.File(mesh_h5, "r") as h5:
+            geometry = h5[f"Mesh/{MESH_NAME}/geometry"][...]
+            topology = h5[f"Mesh/{MESH_NAME}/topology"][...]
+    except (OSError, KeyError) as err:
+        raise DatasetError(f"cannot read the mesh {mesh_h5}: {err}") from None
+    node_index = np.asarray(node_index)
+    if node_index.max() >= geometry.shape[0] or not np.allclose(geometry[node_index], X,
+                                                                 atol=1e-9):
+        raise DatasetError(f"{mesh_xdmf} is not the mesh of these material points")
+    lookup = np.full(geometry.shape[0], -1, np.int64)
+    lookup[node_index] = np.arange(node_index.size)
+    cells = lookup[topology[:, :4]]
+    if np.any(cells < 0):
+        raise DatasetError(f"{mesh_xdmf}: a tetrahedron's corner is not a material point")
+    return cells
+
+
 # -- reading -----------------------------------------------------------------------------
 @dataclass
 class Dataset:
@@ -507,6 +550,7 @@ class Dataset:
             every kind of :data:`SPLIT_KINDS`.
         ids: case identifiers (M,).
         node_index: index of each point in the mesh file (N,), for writing fields.
+        cells: the mesh's tetrahedra as rows of ``X`` (C, 4), or None if not recorded.
     """
 
     X: np.ndarray
@@ -520,6 +564,7 @@ class Dataset:
     splits: dict[str, dict[str, np.ndarray]]
     ids: np.ndarray
     node_index: np.ndarray | None = None
+    cells: np.ndarray | None = None
 
     @property
     def n_points(self) -> int:
@@ -594,6 +639,7 @@ def read_dataset(path: str | Path) -> Dataset:
                 splits=splits,
                 ids=h5["cases/id"].asstr()[...],
                 node_index=h5["points/node_index"][...] if "points/node_index" in h5 else None,
+                cells=h5["points/cells"][...] if "points/cells" in h5 else None,
             )
     except OSError as err:
         raise DatasetError(f"dataset {path} is unreadable ({err})") from None
@@ -604,6 +650,9 @@ def read_dataset(path: str | Path) -> Dataset:
             f"dataset {path}: /displacement has shape {ds.displacement.shape}, expected "
             f"({ds.C1.shape[0]}, {ds.X.shape[0]}, 3)"
         )
+    if ds.cells is not None and (ds.cells.ndim != 2 or ds.cells.shape[1] != 4 or (
+            ds.cells.size and (ds.cells.min() < 0 or ds.cells.max() >= ds.X.shape[0]))):
+        raise DatasetError(f"dataset {path}: /points/cells are not tetrahedra of its points")
     if not ds.converged.any():
         raise DatasetError(f"dataset {path} has no converged case")
     if not np.all(np.isfinite(ds.displacement[ds.converged])):

@@ -2,7 +2,8 @@
 
 A model folder holds ``model.json`` (format version, hyperparameters, normalisation,
 training range, metrics), ``params.npz`` (weights as named arrays, plus the material
-points, their boundary flags, mesh node indices and, in the exact Dirichlet mode, the
+points, their boundary flags, mesh node indices, the mesh's tetrahedra on them where the
+dataset has them, a ``pod`` model's modes at them and, in the exact Dirichlet mode, the
 factor φ) and ``history.json`` (the training history). Nothing is pickled; loading
 rebuilds the network skeleton from the JSON first and checks every array against it.
 This module is the format's one owner: the workflow and the studies read model folders
@@ -77,6 +78,10 @@ def save_model(folder: str | Path, result: TrainResult, ds: Dataset) -> Path:
     extra = {}
     if result.point_factor is not None:
         extra["points_factor"] = result.point_factor
+    if result.basis is not None:
+        extra["points_basis"] = result.basis
+    if ds.cells is not None:
+        extra["mesh_cells"] = ds.cells
     node_index = ds.node_index if ds.node_index is not None else np.arange(ds.n_points)
     np.savez(
         folder / PARAMS_NPZ,
@@ -121,6 +126,8 @@ class Checkpoint:
         node_index: index of each point in the mesh file (N,), or None.
         metrics: training metrics as saved.
         held_out: ids of cases kept out of its training and validation.
+        basis: a ``pod`` model's modes at the points (N, 3, modes), else None.
+        cells: the mesh's tetrahedra as rows of ``X`` (C, 4), where its dataset had them.
     """
 
     config: SurrogateConfig
@@ -133,6 +140,8 @@ class Checkpoint:
     node_index: np.ndarray | None = None
     metrics: dict[str, Any] = field(default_factory=dict)
     held_out: list[str] = field(default_factory=list)
+    basis: np.ndarray | None = None
+    cells: np.ndarray | None = None
 
 
 def load_checkpoint(folder: str | Path) -> Checkpoint:
@@ -152,7 +161,7 @@ def load_checkpoint(folder: str | Path) -> Checkpoint:
         raise ModelFileError(f"cannot read a surrogate model from {folder}: {err}") from None
     try:
         config = SurrogateConfig.from_mapping(meta["config"])
-        points = {k: arrays.pop(k) for k in list(arrays) if k.startswith("points_")}
+        points = {k: arrays.pop(k) for k in list(arrays) if k.startswith(("points_", "mesh_"))}
         params = from_arrays(arrays, config)
         norm = Normalisation.from_dict(meta["normalisation"])
         X, boundary = points["points_X"], points["points_boundary"]
@@ -160,6 +169,14 @@ def load_checkpoint(folder: str | Path) -> Checkpoint:
         raise ModelFileError(f"{folder}: {err}") from None
     if X.shape != (meta.get("n_points", X.shape[0]), 3) or boundary.shape != (X.shape[0],):
         raise ModelFileError(f"{folder}: material points do not match n_points")
+    basis, cells = points.get("points_basis"), points.get("mesh_cells")
+    if config.structure == "pod" and (basis is None or basis.shape != (len(X), 3, config.modes)
+                                      or not np.all(np.isfinite(basis))):
+        raise ModelFileError(f"{folder}: a pod model needs its modes as points_basis, finite, "
+                             f"of shape {(len(X), 3, config.modes)}")
+    if cells is not None and (cells.ndim != 2 or cells.shape[1] != 4 or cells.min() < 0
+                              or cells.max() >= len(X)):
+        raise ModelFileError(f"{folder}: mesh_cells are not tetrahedra of its points")
     return Checkpoint(
         config,
         params,
@@ -171,6 +188,8 @@ def load_checkpoint(folder: str | Path) -> Checkpoint:
         node_index=points.get("points_node_index"),
         metrics=meta.get("metrics") or {},
         held_out=list(meta.get("held_out_cases") or []),
+        basis=basis,
+        cells=cells,
     )
 
 

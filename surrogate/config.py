@@ -15,7 +15,7 @@ LR_SCHEDULES = ("constant", "cosine", "exponential")
 C1_ENCODINGS = ("linear", "log", "inverse")
 OUTPUT_SCALINGS = ("none", "compliance")
 OUTPUT_FORMS = ("vector", "gravity_linear")
-STRUCTURES = ("pointwise", "separable")
+STRUCTURES = ("pointwise", "separable", "pod")
 
 
 @dataclass(frozen=True, slots=True)
@@ -48,8 +48,15 @@ class SurrogateConfig:
             the paper) or ``separable`` (each network maps the point alone to ``modes``
             displacement fields, and a third network, the branch, maps the case to their
             weights: u = Σ_k b_k(C1, ĝ) T_k(X); a query then costs the branch and one
-            weighted sum, whatever the networks' size).
-        modes: number of fields T_k of a ``separable`` model.
+            weighted sum, whatever the networks' size), or ``pod`` (the fields T_k are not learnt
+            but taken from the data: the leading POD modes, right singular vectors, of the
+            training cases' compliance-scaled fields, and one network, the branch, of
+            ``hidden_layers`` x ``width``, maps the case to their weights; the modes vanish on the
+            rib as every FE field does, so ``boundary`` and ``alpha`` do not apply. Its unit of
+            data is a whole case: with ``split: by_sample`` it trains on the ``by_case`` split's
+            cases. It is trained by full-batch Adam on the weights' squared error, an epoch being
+            :data:`surrogate.pod.STEPS_PER_EPOCH` steps).
+        modes: number of fields T_k of a ``separable`` or ``pod`` model.
         point_features: a ``separable`` model's point networks see, besides the point's
             standardised coordinates X, ``sin`` and ``cos`` of 2π X·b for this many random
             frequency vectors b (Fourier features: an MLP of X alone is slow to learn fields
@@ -143,6 +150,10 @@ class SurrogateConfig:
             raise SurrogateConfigError(
                 f"surrogate.point_features must be a non-negative integer, got "
                 f"{self.point_features!r}")
+        if self.structure == "pod" and self.boundary == "exact":
+            raise SurrogateConfigError(
+                "surrogate.boundary: exact does not apply to structure: pod (its modes vanish on "
+                "the rib as the FE fields do); leave boundary at network")
         if self.point_features and self.structure != "separable":
             raise SurrogateConfigError(
                 "surrogate.point_features needs structure: separable (a pointwise network sees "

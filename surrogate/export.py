@@ -54,6 +54,10 @@ def export_web(model: Surrogate) -> dict[str, Any]:
     fields once per point, as :class:`Surrogate` does at load, and per query evaluates the branch
     and weighs the fields with its outputs. The page carries weights, not fields, so its size
     does not grow with the modes times the points.
+
+    A ``pod`` model has no point networks: its one part carries its ``modes`` at the points
+    instead of layers, (points, 3, ``modes``), and the page weighs them as a separable model's
+    fields (without the 1/√modes of a separable model's sum). Its rib points are zero.
     """
     config, norm = model.config, model.normalisation
     factor = np.ones(len(model.X)) if model.point_factor is None else model.point_factor
@@ -62,14 +66,17 @@ def export_web(model: Surrogate) -> dict[str, Any]:
     net = boundary_network(config)
     if net is not None and model.boundary.any():
         members["boundary"] = np.flatnonzero(model.boundary)
-    separable = config.structure == "separable"
+    separable = config.structure in ("separable", "pod")
     frequencies = point_frequencies(config)
     for part, index in members.items():
         parts[part] = {
             "points": encode_array(index, "int32"),
             "gain": encode_array(factor[index] * norm.u_scale, "float32"),
-            "layers": _layers(model.params["domain" if part == "domain" else net]),
         }
+        if config.structure == "pod":
+            parts[part]["modes"] = encode_array(model.basis[index], "float32")
+        else:
+            parts[part]["layers"] = _layers(model.params["domain" if part == "domain" else net])
     checks = model.range_checks()
     return {
         "format": FORMAT,

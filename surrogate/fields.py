@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fem.dataset import DatasetError, mesh_cells
 from surrogate.exceptions import ModelFileError
 from surrogate.predict import Surrogate
 
@@ -25,24 +26,10 @@ def read_mesh_vertices(
     Raises:
         ModelFileError: if the mesh is not the one the points come from.
     """
-    import h5py
-
-    from meshes.tags import MESH_NAME
-
-    mesh_h5 = Path(mesh_xdmf).with_suffix(".h5")
     try:
-        with h5py.File(mesh_h5, "r") as h5:
-            geometry = h5[f"Mesh/{MESH_NAME}/geometry"][...]
-            topology = h5[f"Mesh/{MESH_NAME}/topology"][...]
-    except (OSError, KeyError) as err:
-        raise ModelFileError(f"cannot read the mesh {mesh_h5}: {err}") from None
-    if node_index.max() >= geometry.shape[0] or not np.allclose(geometry[node_index], X, atol=1e-9):
-        raise ModelFileError(f"{mesh_xdmf} is not the mesh the surrogate was trained on")
-    lookup = np.full(geometry.shape[0], -1, np.int64)
-    lookup[node_index] = np.arange(node_index.size)
-    cells = lookup[topology[:, :4]]
-    if np.any(cells < 0):
-        raise ModelFileError(f"{mesh_xdmf}: a tetrahedron vertex is not a material point")
+        cells = mesh_cells(mesh_xdmf, node_index, X)
+    except DatasetError as err:
+        raise ModelFileError(f"{err} (the surrogate's training points)") from None
     return X, cells
 
 

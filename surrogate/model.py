@@ -28,6 +28,9 @@ and give ``modes`` displacement fields T_k(X); a third network, ``branch``, maps
 (C1, ĝ) to their weights b_k, and ``network(x) = Σ_k b_k T_k(X) / √modes``: the point networks
 keep the paper's domain/boundary pair and Eq. 2 is the loss, but a query no longer passes the
 points through a network (:mod:`surrogate.predict` computes the fields once per model).
+
+A ``pod`` model has the branch alone: its fields are the training data's own POD modes
+(:mod:`surrogate.pod`, which fits them and trains the branch), so this module only sizes it.
 """
 
 from __future__ import annotations
@@ -67,12 +70,19 @@ def network_names(config: SurrogateConfig) -> tuple[str, ...]:
 
     Both point networks in ``network`` mode, only ``domain`` otherwise.
     """
+    if config.structure == "pod":
+        return ("branch",)
     points = POINT_NETWORKS if config.boundary == "network" else ("domain",)
     return (*points, "branch") if config.structure == "separable" else points
 
 
 def boundary_network(config: SurrogateConfig) -> str | None:
-    """Network that predicts the clamped points (None: they are exactly zero)."""
+    """Network that predicts the clamped points (None: they are exactly zero).
+
+    A ``pod`` model's rib points are exactly zero: its modes are the FE fields', zero there.
+    """
+    if config.structure == "pod":
+        return None
     return {"network": "boundary", "shared": "domain", "exact": None}[config.boundary]
 
 
@@ -116,12 +126,12 @@ def point_inputs(points: jax.Array, config: SurrogateConfig) -> jax.Array:
 def layer_sizes(config: SurrogateConfig, net: str = "domain") -> list[int]:
     """Input, hidden and output widths of one network (``net``: a point network or the branch).
 
-    A separable model's point networks see the point alone (3 inputs); its branch sees the case
+    A ``pod`` model has the branch alone. A separable model's point networks see the point alone (3 inputs); its branch sees the case
     (4) and gives the fields' weights: ``modes``, or a ``modes`` x 3 matrix contracted with ĝ in
     ``gravity_linear`` form.
     """
     hidden = [config.width] * config.hidden_layers
-    if config.structure != "separable":
+    if config.structure == "pointwise":
         return [N_INPUTS, *hidden, output_width(config)]
     if net == "branch":
         per_mode = 3 if config.output_form == "gravity_linear" else 1

@@ -6,10 +6,10 @@ rank-one update, the remaining layers and one gather, in one jitted float32 call
 with static shapes. A ``gravity_linear`` model's last layer is contracted with the query's
 gravity direction first, so its nine outputs cost what three do. A ``separable`` model's point
 networks are evaluated once per model: a query costs its branch network and one weighted sum of
-the fields. Points on the rib go
-through the boundary network (``network`` mode), the shared network (``shared``) or are
-exactly zero (``exact``). A model folder is read by :mod:`surrogate.checkpoint`; the
-command line is :mod:`surrogate.cli`.
+the fields. A ``pod`` model's fields are its stored modes, weighed the same way. Points on the
+rib go through the boundary network (``network`` mode), the shared network (``shared``) or are
+exactly zero (``exact``, and every ``pod`` model). A model folder is read by
+:mod:`surrogate.checkpoint`; the command line is :mod:`surrogate.cli`.
 
 Example::
 
@@ -71,6 +71,7 @@ class Surrogate:
         self.boundary = np.asarray(c.boundary, dtype=bool)
         self.training_range = c.training_range
         self.point_factor = c.point_factor
+        self.basis = c.basis
         self.node_index = np.arange(len(c.X)) if c.node_index is None else np.asarray(c.node_index)
         self.metrics = c.metrics
         self.held_out = list(c.held_out)
@@ -111,9 +112,14 @@ class Surrogate:
             fields = fields * (gain * u_scale)[:, None, None]
             return {"fields": jnp.asarray(fields.reshape(-1, config.modes).astype(np.float32))}
 
-        separable = config.structure == "separable"
-        prepare = fields_of if separable else split_first
-        parts = {"domain": prepare(self.params["domain"], domain, factor[domain])}
+        def modes_of(_, idx, gain):
+            # a pod model's modes at the points, gain included, as fields_of lays them out
+            modes = self._checkpoint.basis[idx] * (gain * u_scale)[:, None, None]
+            return {"fields": jnp.asarray(modes.reshape(-1, config.modes).astype(np.float32))}
+
+        separable = config.structure in ("separable", "pod")
+        prepare = {"separable": fields_of, "pod": modes_of}.get(config.structure, split_first)
+        parts = {"domain": prepare(self.params.get("domain"), domain, factor[domain])}
         net = boundary_network(config)
         if net is not None and bound.size:
             parts["boundary"] = prepare(self.params[net], bound, factor[bound])
@@ -266,14 +272,16 @@ class Surrogate:
         """The same model queried at other material points ``points`` (M, 3), in m.
 
         The network is a function of the reference position, so it answers between the
-        material points it was trained on: a tumour's material position, found from the imaged
+        material points it was trained on (a ``pod`` model by its modes' linear interpolation in
+        the mesh's tetrahedra, :mod:`surrogate.interpolation`): a tumour's material position, found from the imaged
         shape (:func:`fem.tracking.to_reference`), is predicted directly, without the mesh. Every
         point goes through the domain network (points strictly inside the body); an
         exact-Dirichlet model's factor is evaluated at them with the model's own length scale.
         Each query of the returned model costs in proportion to M.
 
         Raises:
-            ValueError: if ``points`` is not a finite (M, 3) array.
+            ValueError: if ``points`` is not a finite (M, 3) array; for a ``pod`` model, also if
+                its dataset had no mesh cells, or a point lies outside the mesh.
         """
         points = np.asarray(points, dtype=float)
         if points.ndim != 2 or points.shape[1] != 3 or not points.size:
@@ -286,10 +294,20 @@ class Surrogate:
             from surrogate.data import dirichlet_factor
 
             factor = dirichlet_factor(self.X, self.boundary, c.config.bc_length, at=points)
+        basis = None
+        if c.config.structure == "pod":
+            from surrogate.interpolation import interpolate, locate
+
+            if c.cells is None:
+                raise ValueError(
+                    "this pod model answers at its material points only: its dataset has no "
+                    "mesh cells to interpolate its modes in (rebuild the dataset with its mesh, "
+                    "snakemake --forcerun aggregate, and train again)")
+            basis = interpolate(c.basis, *locate(self.X, c.cells, points)).astype(np.float32)
         return Surrogate(replace(
             c, X=points, boundary=np.zeros(len(points), dtype=bool),
             point_factor=None if factor is None else factor.astype(np.float32),
-            node_index=None,
+            node_index=None, basis=basis, cells=None,
         ))
 
     # -- queries ----------------------------------------------------------------------

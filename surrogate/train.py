@@ -62,6 +62,8 @@ class TrainResult:
         compile_s: wall time of compiling the epoch.
         train_cases: case indices the normalisation and training range come from.
         held_out_cases: case indices excluded from training and validation.
+        basis: a ``pod`` model's modes at the points (N, 3, modes), in units of the
+            displacement scale per unit weight (:mod:`surrogate.pod`); None for the others.
     """
 
     params: Params
@@ -77,6 +79,7 @@ class TrainResult:
     compile_s: float = 0.0
     train_cases: np.ndarray | None = None
     held_out_cases: np.ndarray | None = None
+    basis: np.ndarray | None = None
 
     def summary(self) -> dict[str, Any]:
         """JSON-friendly metrics."""
@@ -359,9 +362,15 @@ def train_and_evaluate(
         progress: show a progress bar with the epoch losses.
         holdout: case indices kept out of training and validation.
 
+    A ``pod`` model is fitted by :func:`surrogate.pod.train_pod`.
+
     Raises:
         ValueError: if the chosen split has no training or validation samples.
     """
+    if config.structure == "pod":
+        from surrogate.pod import train_pod  # it builds on this module
+
+        return train_pod(ds, config, progress, holdout)
     start = time.perf_counter()
     norm, phi, train, val, train_cases = prepare(ds, config, holdout)
     inputs = Tables(*(jnp.asarray(a) for a in tables(ds, norm)))

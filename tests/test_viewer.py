@@ -61,15 +61,16 @@ def test_the_page_predicts_what_python_predicts(viewer: Path, model: Surrogate) 
         assert not errors
 
 
-@pytest.mark.parametrize("structure", ["pointwise", "fourier"])
+@pytest.mark.parametrize("structure", ["pointwise", "fourier", "pod"])
 def test_the_page_predicts_other_models_as_python_does(
     small_run: Path, tmp_path: Path, structure: str
 ) -> None:
-    """The page of a pointwise model, or a separable one on Fourier features, predicts as Python.
+    """The page of a pointwise, a Fourier-featured separable or a pod model predicts as Python.
 
     The small run's model, whose page the other tests read, is separable on the coordinates
     alone; these have the paper's pointwise networks in gravity_linear form (the last layer
-    contracted with ĝ), or point networks that see the point's Fourier features.
+    contracted with ĝ), point networks that see the point's Fourier features, or no point
+    networks but the data's own modes (carried by the page).
     """
     from fem.dataset import read_dataset
     from report.viewer import build_viewer
@@ -84,6 +85,8 @@ def test_the_page_predicts_other_models_as_python_does(
     if structure == "fourier":
         config = config.replace(structure="separable", modes=6, point_features=5,
                                 point_frequency=2.0)
+    if structure == "pod":
+        config = config.replace(structure="pod", modes=6)
     ds = read_dataset(results / "dataset" / "dataset.h5")
     save_model(tmp_path / "model", train_and_evaluate(ds, config, progress=False), ds)
     page_path = tmp_path / "index.html"

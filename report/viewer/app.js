@@ -37,10 +37,10 @@ class WebSurrogate {
     this.act = ACTIVATIONS[model.activation];
     this.X = decode(model.X_m);
     this.Xs = decode(model.points_standardised);
-    this.separable = model.structure === 'separable';
+    this.separable = model.structure === 'separable' || model.structure === 'pod';
     if (this.separable) {
       // a separable model: its point networks give each point's fields once (evaluator), the
-      // branch weighs them per query
+      // branch weighs them per query; a pod model carries its fields (modes) themselves
       const plain = (layers) => layers.map((layer) => {
         const [nIn, nOut] = layer.W.shape;
         return { W: decode(layer.W), b: decode(layer.b), nIn, nOut };
@@ -51,7 +51,10 @@ class WebSurrogate {
       // point_inputs: [X, sin 2πX·b, cos 2πX·b]
       this.frequencies = model.point_frequencies ? decode(model.point_frequencies) : null;
       this.parts = Object.values(model.parts).map((part) => ({
-        points: decode(part.points), gain: decode(part.gain), layers: plain(part.layers),
+        points: decode(part.points),
+        gain: decode(part.gain),
+        layers: part.layers ? plain(part.layers) : null,
+        modes: part.modes ? decode(part.modes) : null,
       }));
       this.range = model.training_range;
       return;
@@ -126,12 +129,13 @@ class WebSurrogate {
       if (!rows.length) continue;
       if (this.separable) {  // the fields of these points, gain and 1/√modes included
         const m = 3 * this.modes;
-        const scale = 1 / Math.sqrt(this.modes);
+        const scale = part.modes ? 1 : 1 / Math.sqrt(this.modes);  // a pod model's: its modes
         const fields = new Float32Array(rows.length * m);
         local.forEach((i, r) => {
           const point = part.points[i];
-          const out = WebSurrogate.dense(part.layers,
-            this.pointInputs(this.Xs.subarray(3 * point, 3 * point + 3)), this.act);
+          const out = part.modes ? part.modes.subarray(i * m, (i + 1) * m)
+            : WebSurrogate.dense(part.layers,
+              this.pointInputs(this.Xs.subarray(3 * point, 3 * point + 3)), this.act);
           for (let j = 0; j < m; j += 1) fields[r * m + j] = out[j] * part.gain[i] * scale;
         });
         parts.push({ rows: Int32Array.from(rows), fields });

@@ -14,4 +14,5 @@ build_dataset(
     seed=int(cfg.get("seed", 0)),
     config=snakemake.params.provenance,
     test_cases=[(c["C1"], c["phi"], c.get("theta", 0.0)) for c in snakemake.params.clinical],
+    mesh=snakemake.input.mesh,
 )

@@ -1,0 +1,223 @@
+"""A ``pod`` surrogate: the training data's own fields as its basis, a branch for their weights.
+
+A separable model learns its fields T_k(X) with point networks, which cannot resolve the
+fields that change over a few millimetres (where the mound rests on the chest, at the soft
+caudal end of the sphere; docs/surrogate.md). A ``pod`` model takes them from the data: the
+leading right singular vectors (POD modes) of the training cases' displacement fields, each
+divided by its case's compliance gain and by the displacement unit, as the other models' outputs
+are. One network, the branch, maps the case (C1 encoded, ĝ) to the modes' weights, in the
+model's ``output_form`` (in ``gravity_linear`` form each weight is a row of a modes x 3 matrix
+times ĝ, :func:`surrogate.model.branch_weights`).
+
+Training is on whole cases: the basis is orthonormal, so a field's squared error is its weights'
+squared error plus what the basis cannot hold (a constant of the training). The branch is
+trained by Adam on the whole training set at once (the config's learning rate, moments and
+schedule), one epoch being :data:`STEPS_PER_EPOCH` steps, with early stopping on the validation
+cases' loss as for the other models. The validation error in mm is the full field's: weights
+and basis together.
+
+The modes are stored scaled by the weights' RMS over the training cases, so that the branch's
+outputs are of order one: the displacement of a case is ``gain(C1) · u_scale · (b(C1, ĝ) ·
+modes)``.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from fem.dataset import Dataset
+from surrogate.config import SurrogateConfig
+from surrogate.data import Normalisation
+from surrogate.model import Layers, branch_weights, init_params
+from surrogate.train import TrainResult, _progress, learning_rate_schedule, make_optimizer
+
+log = logging.getLogger(__name__)
+
+STEPS_PER_EPOCH = 100
+"""Full-batch Adam steps in one epoch of a ``pod`` model's training."""
+
+
+def case_split(
+    ds: Dataset, config: SurrogateConfig, holdout: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Training and validation cases of a ``pod`` model.
+
+    A case-level split's own parts; the ``by_case`` split's for ``by_sample`` (a POD needs whole
+    fields). Cases in ``holdout`` are left out of both.
+
+    Raises:
+        ValueError: if no training or validation case is left, or fewer training cases than
+            modes.
+    """
+    split = "by_case" if config.split == "by_sample" else config.split
+    parts = ds.splits[split]
+    drop = np.asarray([] if holdout is None else holdout, dtype=np.int64)
+    train, val = (np.setdiff1d(parts[p], drop) for p in ("train", "validation"))
+    if train.size == 0 or val.size == 0:
+        raise ValueError(f"split {split!r} has no training or validation cases")
+    if train.size < config.modes:
+        raise ValueError(
+            f"surrogate.modes = {config.modes} POD modes need at least as many training cases; "
+            f"split {split!r} has {train.size}"
+        )
+    return train, val
+
+
+def scaled_fields(ds: Dataset, cases: np.ndarray, norm: Normalisation) -> np.ndarray:
+    """The cases' fields as the model predicts them, (cases, 3N): u / (gain(C1) · u_scale)."""
+    u = ds.displacement[cases] / (norm.gain(ds.C1[cases]) * norm.u_scale)[:, None, None]
+    return u.reshape(len(cases), -1)
+
+
+def fit_basis(fields: np.ndarray, modes: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """POD modes of the rows of ``fields``, scaled so that their weights are of order one.
+
+    Returns:
+        ``(basis (modes, 3N), singular values (all), scale)``: ``basis`` is the leading right
+        singular vectors times ``scale``, the RMS of the fields' weights on them, so that a
+        field is approximately ``weights @ basis`` with weights of RMS one.
+    """
+    _, singular, rows = np.linalg.svd(fields, full_matrices=False)
+    basis = rows[:modes]
+    scale = float(np.sqrt(np.mean((fields @ basis.T) ** 2)))
+    return basis * scale, singular, scale
+
+
+def _clamped(modes: np.ndarray, rib: np.ndarray) -> np.ndarray:
+    """The modes (N, 3, K) as float32, exactly zero on the rib.
+
+    The training fields vanish there, so the modes that hold them do; modes beyond the fields'
+    rank (singular values at round-off) need not, and the model answers between the points
+    (:meth:`surrogate.predict.Surrogate.at`) by its modes, not by its rib flags.
+    """
+    modes = modes.astype(np.float32)
+    modes[rib] = 0.0
+    return modes
+
+
+def _fit_step(config: SurrogateConfig, optimizer: optax.GradientTransformation):
+    """One jitted epoch: ``STEPS_PER_EPOCH`` full-batch Adam steps on the weights' squared error."""
+
+    def loss(layers: Layers, features: jax.Array, target: jax.Array) -> jax.Array:
+        return jnp.mean((branch_weights(layers, features, config) - target) ** 2)
+
+    @jax.jit
+    def epoch(layers, state, features, target):
+        def step(carry, _):
+            layers, state = carry
+            value, grads = jax.value_and_grad(loss)(layers, features, target)
+            updates, state = optimizer.update(grads, state, layers)
+            return (optax.apply_updates(layers, updates), state), value
+
+        (layers, state), values = jax.lax.scan(step, (layers, state), None,
+                                               length=STEPS_PER_EPOCH)
+        return layers, state, jnp.mean(values)
+
+    return epoch, jax.jit(loss)
+
+
+def train_pod(
+    ds: Dataset, config: SurrogateConfig, progress: bool = True,
+    holdout: np.ndarray | None = None,
+) -> TrainResult:
+    """Fit a ``pod`` model's basis and train its branch (see the module docstring).
+
+    Raises:
+        ValueError: if the split leaves no training or validation cases, or too few for the
+            modes.
+    """
+    start = time.perf_counter()
+    train_cases, val_cases = case_split(ds, config, holdout)
+    norm = Normalisation.fit(ds, train_cases, config.c1_encoding, config.output_scaling)
+    basis, singular, scale = fit_basis(scaled_fields(ds, train_cases, norm), config.modes)
+    unit = basis / scale**2  # projects a field onto the scaled basis: weights of RMS one
+    modes = _clamped(basis.T.reshape(ds.n_points, 3, config.modes), ds.boundary)
+    basis_j = jnp.asarray(modes.reshape(-1, config.modes).T)
+
+    def data(cases: np.ndarray) -> tuple[jax.Array, jax.Array, jax.Array]:
+        fields = scaled_fields(ds, cases, norm)
+        features = norm.case(ds.C1[cases], ds.direction[cases])
+        return (jnp.asarray(features, jnp.float32), jnp.asarray(fields @ unit.T, jnp.float32),
+                jnp.asarray(fields, jnp.float32))
+
+    train_x, train_w, _ = data(train_cases)
+    val_x, val_w, val_fields = data(val_cases)
+    val_gain = jnp.asarray(norm.gain(ds.C1[val_cases]) * norm.u_scale, jnp.float32)
+    off_rib = jnp.asarray(~ds.boundary, jnp.float32)
+    n, n_off = ds.n_points, max(int(np.sum(~ds.boundary)), 1)
+
+    @jax.jit
+    def field_errors(layers: Layers) -> tuple[jax.Array, jax.Array]:
+        pred = branch_weights(layers, val_x, config) @ basis_j
+        err = jnp.linalg.norm((pred - val_fields).reshape(len(val_cases), n, 3), axis=-1)
+        err = err * val_gain[:, None]  # mm
+        return jnp.mean(err), jnp.sum(err * off_rib[None, :]) / (len(val_cases) * n_off)
+
+    key = jax.random.PRNGKey(config.seed)
+    _, init_key = jax.random.split(key)
+    layers = init_params(init_key, config)["branch"]
+    optimizer = make_optimizer(config, STEPS_PER_EPOCH)
+    schedule = learning_rate_schedule(config, STEPS_PER_EPOCH)
+    state = optimizer.init(layers)
+    epoch_fn, loss_fn = _fit_step(config, optimizer)
+    t0 = time.perf_counter()
+    epoch_fn = epoch_fn.lower(layers, state, train_x, train_w).compile()
+    result = TrainResult(
+        params={"branch": layers}, config=config, normalisation=norm,
+        train_cases=train_cases, held_out_cases=None if holdout is None else np.asarray(holdout),
+        basis=modes,
+    )
+    result.compile_s = time.perf_counter() - t0
+    left = float(np.sum(singular[config.modes:] ** 2) / np.sum(singular**2))
+    log.info("%s pod: %d training cases, %d validation cases on %d points, %d modes leaving "
+             "%.2e of the training fields' energy out, compiled in %.1f s", config.architecture,
+             len(train_cases), len(val_cases), n, config.modes, left, result.compile_s)
+
+    best: dict[str, Any] = {"loss": float("inf"), "layers": layers, "epoch": 0}
+    since_best = 0
+    bar = _progress(config.max_epochs, progress, config.architecture)
+    for epoch in range(1, config.max_epochs + 1):
+        t0 = time.perf_counter()
+        layers, state, train_loss = epoch_fn(layers, state, train_x, train_w)
+        train_loss = float(train_loss)
+        val_loss = float(loss_fn(layers, val_x, val_w))
+        error_mm = float(field_errors(layers)[0])
+        result.history.append({
+            "epoch": epoch, "train_loss": train_loss, "validation_loss": val_loss,
+            "validation_error_mm": error_mm,
+            "learning_rate": float(schedule((epoch - 1) * STEPS_PER_EPOCH)),
+            "epoch_s": time.perf_counter() - t0,
+        })
+        if bar is not None:
+            bar.set_postfix(train=f"{train_loss:.4g}", val=f"{val_loss:.4g}",
+                            err_mm=f"{error_mm:.4f}")
+            bar.update(1)
+        if not np.isfinite(train_loss):
+            log.warning("training diverged at epoch %d (loss %s)", epoch, train_loss)
+            break
+        if val_loss < best["loss"]:
+            best = {"loss": val_loss, "layers": layers, "epoch": epoch}
+            since_best = 0
+        else:
+            since_best += 1
+            if since_best >= config.patience:
+                log.info("early stop at epoch %d (best %d)", epoch, best["epoch"])
+                break
+    if bar is not None:
+        bar.close()
+    result.params = {"branch": best["layers"]}
+    result.best_validation_loss, result.best_epoch = best["loss"], best["epoch"]
+    error, domain = field_errors(best["layers"])
+    result.validation_error_mm, result.validation_error_domain_mm = float(error), float(domain)
+    result.train_s = time.perf_counter() - start
+    log.info("%s pod: best epoch %d of %d, validation error %.4f mm (%.4f mm off the rib), "
+             "%.1f s", config.architecture, result.best_epoch, len(result.history),
+             result.validation_error_mm, result.validation_error_domain_mm, result.train_s)
+    return result

@@ -1,0 +1,176 @@
+"""A ``pod`` surrogate: the data's own modes, a branch for their weights, answers between points."""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from fem.dataset import build_dataset, gravity_direction, read_dataset, write_points
+from fem.sweep import Case
+from surrogate.config import SurrogateConfig, SurrogateConfigError
+from surrogate.exceptions import ExtrapolationWarning, ModelFileError
+
+pytestmark = pytest.mark.unit
+
+CONFIG = SurrogateConfig(structure="pod", modes=6, hidden_layers=2, width=32, activation="silu",
+                         c1_encoding="inverse", output_scaling="compliance",
+                         output_form="gravity_linear", learning_rate=0.003, beta1=0.9,
+                         beta2=0.999, lr_schedule="cosine", max_epochs=30, patience=30)
+
+
+def _field(X: np.ndarray, C1: float, phi: float, theta: float) -> np.ndarray:
+    """A displacement (m) linear in ĝ, scaled as 1/C1, zero on the 'rib' x = 0."""
+    g = gravity_direction(np.asarray(phi), np.asarray(theta))
+    M = np.array([[1.0, 0.2, 0.0], [0.0, 1.0, 0.3], [0.1, 0.0, 1.0]])
+    A = (X[:, 0] * (1.0 + X[:, 1] ** 2))[:, None, None] * M  # (N, 3, 3)
+    return 0.01 / C1 * (A @ g)
+
+
+@pytest.fixture(scope="module")
+def cube(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """A dataset on a unit cube's tetrahedra (its mesh recorded), and one without them."""
+    from scipy.spatial import Delaunay
+
+    from meshes.tags import MESH_NAME
+
+    folder = tmp_path_factory.mktemp("pod")
+    axis = np.linspace(0.0, 1.0, 5)
+    X = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1).reshape(-1, 3)
+    cells = Delaunay(X).simplices
+    with h5py.File(folder / "mesh.h5", "w") as h5:
+        h5[f"Mesh/{MESH_NAME}/geometry"] = X
+        h5[f"Mesh/{MESH_NAME}/topology"] = cells
+    fixed = X[:, 0] == 0.0
+    summaries, points = [], []
+    for C1 in (1.0, 2.0, 3.0, 4.0, 5.0):
+        for phi, theta in ((0.0, 0.0), (60.0, 0.0), (120.0, 0.0), (180.0, 0.0), (-60.0, 0.0),
+                           (-120.0, 0.0), (90.0, 90.0), (90.0, -90.0)):
+            case = folder / Case(C1, phi, theta).id
+            case.mkdir()
+            write_points(case / "points.h5", np.arange(len(X)), X, _field(X, C1, phi, theta),
+                         fixed, case.name)
+            (case / "summary.json").write_text(json.dumps({
+                "status": "converged", "case": case.name, "C1": C1, "phi": phi, "theta": theta,
+                "gravity_vector": [0, 0, 0], "load_fraction": 1.0}))
+            summaries.append(case / "summary.json")
+            points.append(case / "points.h5")
+    build_dataset(summaries, points, folder / "with.h5", mesh=folder / "mesh.xdmf")
+    build_dataset(summaries, points, folder / "without.h5")
+    return folder / "with.h5", folder / "without.h5"
+
+
+@pytest.fixture(scope="module")
+def trained(cube: tuple[Path, Path], tmp_path_factory: pytest.TempPathFactory):
+    from surrogate.checkpoint import save_model
+    from surrogate.train import train_and_evaluate
+
+    ds = read_dataset(cube[0])
+    result = train_and_evaluate(ds, CONFIG, progress=False)
+    folder = tmp_path_factory.mktemp("pod_model")
+    save_model(folder, result, ds)
+    return ds, result, folder
+
+
+def test_the_dataset_keeps_its_meshs_tetrahedra(cube: tuple[Path, Path]) -> None:
+    with_cells, without = (read_dataset(p) for p in cube)
+    assert with_cells.cells is not None and with_cells.cells.shape[1] == 4
+    assert without.cells is None
+    # each tetrahedron's corners are material points with a positive volume between them
+    corners = with_cells.X[with_cells.cells]
+    volume = np.abs(np.linalg.det(corners[:, 1:] - corners[:, :1])).sum() / 6.0
+    assert volume == pytest.approx(1.0)
+
+
+def test_the_basis_holds_fields_in_its_span_exactly() -> None:
+    from surrogate.pod import fit_basis
+
+    rng = np.random.default_rng(0)
+    span = rng.normal(size=(3, 30))
+    fields = rng.normal(size=(40, 3)) @ span
+    basis, singular, scale = fit_basis(fields, 4)
+    weights = fields @ basis.T / scale**2
+    assert np.sqrt(np.mean(weights**2)) == pytest.approx(1.0)
+    assert np.allclose(weights @ basis, fields, atol=1e-9)
+    assert singular[3] < 1e-9 * singular[0]
+
+
+def test_a_pod_model_predicts_cases_it_did_not_train_on(trained) -> None:
+    """The by_case split's validation cases, never in the basis nor the branch's training."""
+    from surrogate.predict import Surrogate
+
+    ds, result, folder = trained
+    model = Surrogate.load(folder)
+    validation = ds.splits["by_case"]["validation"]
+    assert validation.size and not np.isin(validation, result.train_cases).any()
+    for i in validation:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ExtrapolationWarning)
+            u = model.predict(float(ds.C1[i]), float(ds.phi[i]), float(ds.theta[i]))
+        fe = ds.displacement[i]
+        assert np.abs(u - fe).max() <= 0.02 * np.abs(fe).max(), ds.ids[i]
+        assert np.all(u[ds.boundary] == 0.0)  # the rib is clamped exactly
+    assert result.validation_error_mm <= 0.02 * np.sqrt(np.mean(ds.displacement**2))
+    assert result.basis.shape == (ds.n_points, 3, CONFIG.modes)
+
+
+def test_between_the_points_a_pod_model_interpolates_in_the_tetrahedra(trained) -> None:
+    from surrogate.predict import Surrogate
+
+    ds, _, folder = trained
+    model = Surrogate.load(folder)
+    query = (2.0, 60.0, 0.0)
+    at_vertices = model.predict(*query)
+    corners = ds.X[ds.cells]
+    solid = np.abs(np.linalg.det(corners[:, 1:] - corners[:, :1])) > 1e-9  # not a flat sliver
+    cells = ds.cells[solid][:7]
+    centroids = ds.X[cells].mean(axis=1)
+    inside = model.at(np.vstack([centroids, ds.X[:3]])).predict(*query)
+    assert np.allclose(inside[:7], at_vertices[cells].mean(axis=1), atol=1e-6)
+    assert np.allclose(inside[7:], at_vertices[:3], atol=1e-6)
+    with pytest.raises(ValueError, match="outside the mesh by more than 1 mm"):
+        model.at(np.array([[0.5, 0.5, 0.5], [0.5, 0.5, 1.1]]))
+
+
+def test_a_pod_model_without_the_meshs_cells_answers_at_its_points_only(
+    cube: tuple[Path, Path], tmp_path: Path
+) -> None:
+    from surrogate.checkpoint import save_model
+    from surrogate.predict import Surrogate
+    from surrogate.train import train_and_evaluate
+
+    ds = read_dataset(cube[1])
+    save_model(tmp_path, train_and_evaluate(ds, CONFIG.replace(max_epochs=1), progress=False), ds)
+    model = Surrogate.load(tmp_path)
+    assert model.predict(2.0, 60.0).shape == (ds.n_points, 3)
+    with pytest.raises(ValueError, match="no mesh cells"):
+        model.at(ds.X[:2] * 0.5)
+
+
+def test_a_pod_model_file_without_its_modes_is_refused(trained, tmp_path: Path) -> None:
+    from surrogate.checkpoint import PARAMS_NPZ, load_checkpoint
+
+    _, _, folder = trained
+    for name in ("model.json", "history.json"):
+        (tmp_path / name).write_text((folder / name).read_text())
+    with np.load(folder / PARAMS_NPZ) as npz:
+        arrays = {k: npz[k] for k in npz.files if k != "points_basis"}
+    np.savez(tmp_path / PARAMS_NPZ, **arrays)
+    with pytest.raises(ModelFileError, match="a pod model needs its modes"):
+        load_checkpoint(tmp_path)
+
+
+def test_pod_settings_that_do_not_apply_are_refused(cube: tuple[Path, Path]) -> None:
+    from surrogate.pod import case_split
+
+    with pytest.raises(SurrogateConfigError, match="exact does not apply to structure: pod"):
+        CONFIG.replace(boundary="exact")
+    ds = read_dataset(cube[0])
+    train, val = case_split(ds, CONFIG)  # by_sample: whole cases of the by_case split
+    assert np.array_equal(train, ds.splits["by_case"]["train"])
+    with pytest.raises(ValueError, match="POD modes need at least as many training cases"):
+        case_split(ds, CONFIG.replace(modes=64))
