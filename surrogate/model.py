@@ -126,9 +126,9 @@ def point_inputs(points: jax.Array, config: SurrogateConfig) -> jax.Array:
 def layer_sizes(config: SurrogateConfig, net: str = "domain") -> list[int]:
     """Input, hidden and output widths of one network (``net``: a point network or the branch).
 
-    A ``pod`` model has the branch alone. A separable model's point networks see the point alone (3 inputs); its branch sees the case
-    (4) and gives the fields' weights: ``modes``, or a ``modes`` x 3 matrix contracted with ĝ in
-    ``gravity_linear`` form.
+    A ``pod`` model has the branch alone. A separable model's point networks see the point alone
+    (3 inputs); its branch sees the case (4) and gives the fields' weights: ``modes``, or a
+    ``modes`` x 3 matrix contracted with ĝ in ``gravity_linear`` form.
     """
     hidden = [config.width] * config.hidden_layers
     if config.structure == "pointwise":

@@ -273,9 +273,9 @@ class Surrogate:
 
         The network is a function of the reference position, so it answers between the
         material points it was trained on (a ``pod`` model by its modes' linear interpolation in
-        the mesh's tetrahedra, :mod:`surrogate.interpolation`): a tumour's material position, found from the imaged
-        shape (:func:`fem.tracking.to_reference`), is predicted directly, without the mesh. Every
-        point goes through the domain network (points strictly inside the body); an
+        the mesh's tetrahedra, :mod:`surrogate.interpolation`): a tumour's material position,
+        found from the imaged shape (:func:`fem.tracking.to_reference`), is predicted directly.
+        Every point goes through the domain network (points strictly inside the body); an
         exact-Dirichlet model's factor is evaluated at them with the model's own length scale.
         Each query of the returned model costs in proportion to M.
 

@@ -58,8 +58,8 @@ def test_the_default_config_parses_into_every_layer() -> None:
     assert config.solver.discretisation.element == "taylor-hood" and config.solver.contact
     assert config.surrogate.activation == "silu"  # the file's, not the dataclass default
     study = config.surrogate_study
-    assert study.architectures[0] == "2x32" and len(study.architectures) == 8
-    assert {v.name for v in study.variants} == {"exact_bc", "paper_protocol", "vector_output",
+    assert study.architectures[0] == "2x32" and len(study.architectures) == 9
+    assert {v.name for v in study.variants} == {"paper_protocol", "vector_output", "separable",
                                                 "pointwise"}
     # three extrapolation blocks: 6 x 2 + 2 x 6 + 2 x 1 cases, none of them in the sweep
     assert len(study.extrapolation) == 26 and not set(study.extrapolation) & set(config.cases)
@@ -93,14 +93,17 @@ def test_variants_override_the_surrogate_settings() -> None:
     protocol = config.surrogate_study.variant("paper_protocol")
     assert protocol.overrides["activation"] == "tanh" and protocol.settings.activation == "tanh"
     assert protocol.settings.max_epochs == 200 and protocol.settings.width == config.surrogate.width
+    paper_optimiser = dict(learning_rate=0.01, beta1=0.5, beta2=0.9)
     assert protocol.settings.replace(activation="silu", c1_encoding="inverse",
                                      output_scaling="compliance", output_form="gravity_linear",
-                                     structure="separable", lr_schedule="cosine",
-                                     max_epochs=100) == config.surrogate
+                                     structure="pod", lr_schedule="cosine", learning_rate=0.003,
+                                     beta1=0.9, beta2=0.999) == config.surrogate
     vector = config.surrogate_study.variant("vector_output").settings
     assert vector == config.surrogate.replace(output_form="vector")
-    pointwise = config.surrogate_study.variant("pointwise").settings
-    assert pointwise == config.surrogate.replace(structure="pointwise")
+    for structure in ("separable", "pointwise"):
+        settings = config.surrogate_study.variant(structure).settings
+        assert settings == config.surrogate.replace(structure=structure, max_epochs=100,
+                                                    **paper_optimiser)
     assert config.held_out_splits == ("by_case", "by_direction", "by_c1")
     for split in config.held_out_splits:
         held_out = config.surrogate_held_out(split)
