@@ -1,33 +1,30 @@
-"""Benchmark: the sweep's own fields as the surrogate's basis, beside the trained models.
+"""Benchmark: a ``pod`` surrogate on the held-out splits and between the mesh's nodes.
 
     .venv/bin/python -m studies.pod_basis DATASET --model MODEL [--by-direction MODEL]
-        [--by-c1 MODEL] [--outside DIR] [--modes 64] [--width 128] [--layers 4]
-        [--steps 20000] [--seed 0] [--json OUT]
+        [--by-c1 MODEL] [--outside DIR] [--quadratic CASES] [--config config.yaml]
+        [--set KEY=VALUE ...] [--json OUT]
 
-A separable surrogate learns its fields T_k(X) with point networks, and at the soft caudal
-end of the sphere it misses its own training data where the mound rests on the chest (a few
-millimetres at single points, docs/surrogate.md). This benchmark measures how far a basis
-taken from the data itself would go instead: the leading right singular vectors (POD modes)
-of the training cases' fields, compliance-scaled (u · C1 / C1_min) as the model's outputs
-are, with a branch network of (C1, ĝ) giving their weights in the model's gravity-linear form
-(each weight a row of a modes x 3 matrix times ĝ). The branch is trained on the whole training
-set at once, with Adam on the squared error of the fields (the basis is orthonormal, so that
-is the weights' squared error plus a constant).
+A ``pod`` surrogate (:mod:`surrogate.pod`) takes the leading POD modes of the training cases'
+fields as its basis and trains a branch network of (C1, ĝ) for their weights. This benchmark
+fits such models with the ``surrogate`` settings of ``--config`` (structure forced to ``pod``,
+``--set`` overriding any) and measures them beside trained models of any structure:
 
-Per the dataset's ``by_direction`` and ``by_c1`` splits, a basis and branch are fitted on the
-split's training and validation cases and measured on its test cases, with the model trained
-on that split (``--by-direction``, ``--by-c1``) beside; one fitted on every converged case is
-measured on them all, on the soft caudal ones (C1 ≤ 1 kPa, θ < -30°), and on each converged
-FE case of ``--outside`` (the postures' and extrapolation solves' case folders) inside the
-training range, with ``--model`` beside. Errors per case: mean, 95th percentile and largest
-point error (mm); over cases: their mean, the 95th percentile of the 95th percentiles and the
-largest (:class:`studies.held_out.ErrorSpread`).
+* per the dataset's ``by_direction`` and ``by_c1`` splits, one fitted on the split's training
+  cases (stopping early on its validation cases) and measured on its test cases, with the model
+  trained on that split (``--by-direction``, ``--by-c1``) beside;
+* one fitted on every converged case, measured on them all, on the soft caudal ones (C1 ≤ 1 kPa,
+  θ < -30°), and on each converged FE case of ``--outside`` (the postures' and extrapolation
+  solves' case folders) inside the training range, with ``--model`` beside.
+
+Errors per case: mean, 95th percentile and largest point error (mm); over cases: their mean, the
+95th percentile of the 95th percentiles and the largest (:class:`studies.held_out.ErrorSpread`).
 
 With ``--quadratic CASES`` (the sweep's case folders), the basis is taken at the FE's own
 quadratic nodes (each case's ``fields.h5``) and every error is measured at the mesh's cell
 centroids, between the nodes: the basis there by the 10-node tetrahedra's shape functions, FE
-by the same (exact: the FE field is quadratic), and the models by ``Surrogate.at``. Without it,
-errors are at the material points (the mesh's vertices) only.
+by the same (exact: the FE field is quadratic), and the models by ``Surrogate.at`` (a ``pod``
+model by linear interpolation of its modes between the vertices). Without it, errors are at the
+material points (the mesh's vertices) only.
 """
 
 from __future__ import annotations
@@ -38,15 +35,14 @@ import sys
 import time
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from fem.dataset import Dataset, gravity_direction, read_dataset, read_summary
+from fem.dataset import Dataset, read_dataset, read_summary
 from studies.held_out import CaseErrors, ErrorSpread
 from studies.surrogate_evaluation import fe_in_model_order
-from surrogate.data import Normalisation
+from surrogate.config import SurrogateConfig
 from surrogate.exceptions import ExtrapolationWarning
 from surrogate.predict import Surrogate
 
@@ -55,102 +51,19 @@ SOFT_C1_KPA = 1.0
 CAUDAL_THETA_DEG = -30.0
 
 
-@dataclass(frozen=True)
-class PodModel:
-    """POD modes of the training fields and the branch that weighs them.
-
-    Attributes:
-        modes: (K, 3N) orthonormal rows, compliance-scaled displacement per unit weight (mm).
-        singular_values: the training fields' singular values (all of them, mm).
-        layers: the branch's weights (NumPy): (C1 encoded, ĝ) to a K x 3 matrix, row by row.
-        scale: the weights' common unit (mm): their RMS over the training cases.
-        normalisation: inputs' and outputs' maps, as the surrogate's (inverse C1, compliance).
-        train_s: wall time of the branch's training.
-    """
-
-    modes: np.ndarray
-    singular_values: np.ndarray
-    layers: list
-    scale: float
-    normalisation: Normalisation
-    train_s: float
-
-    def predict(self, C1: float, phi: float, theta: float = 0.0) -> np.ndarray:
-        """Displacement (N, 3) in mm at the dataset's material points (NumPy, one case)."""
-        g = gravity_direction(np.asarray([phi]), np.asarray([theta]))
-        h = self.normalisation.case(np.asarray([C1]), g)[0]
-        for W, b in self.layers[:-1]:
-            z = h @ W + b
-            h = z / (1.0 + np.exp(-z))  # silu
-        W, b = self.layers[-1]
-        weights = (h @ W + b).reshape(-1, 3) @ g[0]
-        field = (weights * (self.scale * float(self.normalisation.gain(C1)))) @ self.modes
-        return field.reshape(-1, 3)
-
-
-def _weights(layers: list, features):
-    """The branch's weights of the modes (M, K): its K x 3 matrix times ĝ."""
-    import jax.numpy as jnp
-
-    from surrogate.model import mlp
-
-    out = mlp(layers, features, "silu")
-    return jnp.einsum("mkj,mj->mk", out.reshape(features.shape[0], -1, 3), features[:, 1:])
-
-
-def fit(
-    ds: Dataset,
-    cases: Sequence[int],
-    modes: int = 64,
-    width: int = 128,
-    layers: int = 4,
-    steps: int = 20000,
-    learning_rate: float = 3e-3,
-    seed: int = 0,
-) -> PodModel:
-    """POD modes of ``cases``' fields and a branch trained on their weights.
+def fit(ds: Dataset, train: Sequence[int], validation: Sequence[int],
+        config: SurrogateConfig) -> tuple[Surrogate, float]:
+    """A ``pod`` model fitted on ``train`` (early stopping on ``validation``), and its fit time (s).
 
     Raises:
-        ValueError: if a case did not converge, or there are fewer cases than modes.
+        ValueError: if a case did not converge, or there are fewer training cases than modes.
     """
-    import jax
-    import jax.numpy as jnp
-    import optax
+    from surrogate.checkpoint import in_memory
+    from surrogate.pod import fit as fit_pod
 
-    from surrogate.model import init_mlp
-
-    cases = np.asarray(cases, dtype=np.int64)
-    if not np.all(ds.converged[cases]):
-        raise ValueError("the POD basis needs converged cases only")
-    if len(cases) < modes:
-        raise ValueError(f"{modes} modes need at least as many cases ({len(cases)} given)")
-    norm = Normalisation.fit(ds, cases, c1_encoding="inverse", output_scaling="compliance")
-    fields = ds.displacement[cases] / norm.gain(ds.C1[cases])[:, None, None]
-    fields = fields.reshape(len(cases), -1)
-    _, singular, rows = np.linalg.svd(fields, full_matrices=False)
-    basis = rows[:modes]
-    weights = fields @ basis.T
-    scale = float(np.sqrt(np.mean(weights**2)))
-    features = jnp.asarray(norm.case(ds.C1[cases], ds.direction[cases]), jnp.float32)
-    target = jnp.asarray(weights / scale, jnp.float32)
-    params = init_mlp(jax.random.PRNGKey(seed), [4, *[width] * layers, 3 * modes])
-    optimiser = optax.adam(optax.cosine_decay_schedule(learning_rate, steps, 0.01))
-    state = optimiser.init(params)
-
-    @jax.jit
-    def step(params, state):
-        loss, grads = jax.value_and_grad(
-            lambda p: jnp.mean((_weights(p, features) - target) ** 2))(params)
-        updates, state = optimiser.update(grads, state, params)
-        return optax.apply_updates(params, updates), state, loss
-
-    start = time.perf_counter()
-    for _ in range(steps):
-        params, state, loss = step(params, state)
-    if not np.isfinite(float(loss)):
-        raise ValueError(f"the branch's training diverged (loss {float(loss)})")
-    layers_np = [(np.asarray(W, np.float64), np.asarray(b, np.float64)) for W, b in params]
-    return PodModel(basis, singular, layers_np, scale, norm, time.perf_counter() - start)
+    result = fit_pod(ds, config.replace(structure="pod"), np.asarray(train),
+                     np.asarray(validation))
+    return Surrogate(in_memory(result, ds)), result.train_s
 
 
 def spread(predict, ds: Dataset, cases: Sequence[int], truth=None) -> ErrorSpread:
@@ -270,11 +183,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--by-direction", type=Path, help="the model of the by_direction split")
     parser.add_argument("--by-c1", type=Path, help="the model of the by_c1 split")
     parser.add_argument("--outside", type=Path, help="folder of extra FE case folders")
-    parser.add_argument("--modes", type=int, default=64)
-    parser.add_argument("--width", type=int, default=128)
-    parser.add_argument("--layers", type=int, default=4)
-    parser.add_argument("--steps", type=int, default=20000)
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--config", type=Path, default=Path("config.yaml"),
+                        help="config whose `surrogate` section the pod models take")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="override one surrogate setting (YAML value), e.g. modes=32")
     parser.add_argument("--quadratic", type=Path, metavar="CASES",
                         help="the sweep's case folders: take the basis at the FE's quadratic "
                              "nodes (each case's fields.h5) and measure every error at the "
@@ -285,12 +197,18 @@ def main(argv: list[str] | None = None) -> int:
         if path is not None and not path.is_dir():
             print(f"error: {path} is not a folder", file=sys.stderr)
             return 2
+    from surrogate.cli import settings
+    from surrogate.exceptions import SurrogateError
+
+    try:
+        config = settings(args.config, args.set)[0].replace(structure="pod")
+    except (OSError, SurrogateError) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
     ds = read_dataset(args.dataset)
     if ds.node_index is None:
         print(f"error: {args.dataset} has no node_index", file=sys.stderr)
         return 2
-    fit_args = dict(modes=args.modes, width=args.width, layers=args.layers, steps=args.steps,
-                    seed=args.seed)
     converged = np.flatnonzero(ds.converged)
     figures: dict[str, dict] = {}
     basis, cells, truth = ds, None, None
@@ -308,10 +226,10 @@ def main(argv: list[str] | None = None) -> int:
     def where(model: Surrogate):  # the model's predict at the points the errors are taken
         return _quiet(model if cells is None else model.at(centroid_x))
 
-    def pod_predict(pod: PodModel):
+    def pod_predict(pod: Surrogate):  # at the nodes, then between them
         if cells is None:
-            return pod.predict
-        return lambda C1, phi, theta: at_centroids(pod.predict(C1, phi, theta), cells)
+            return _quiet(pod)
+        return lambda C1, phi, theta: at_centroids(_quiet(pod)(C1, phi, theta), cells)
 
     def row(name: str, pod: ErrorSpread, model: ErrorSpread | None) -> None:
         figures[name] = {"pod": pod.to_json(), "model": model.to_json() if model else None}
@@ -320,18 +238,17 @@ def main(argv: list[str] | None = None) -> int:
 
     for split, path in (("by_direction", args.by_direction), ("by_c1", args.by_c1)):
         parts = ds.splits[split]
-        train = np.intersect1d(np.concatenate([parts["train"], parts["validation"]]), converged)
         test = np.intersect1d(parts["test"], converged)
-        pod = fit(basis, train, **fit_args)
+        pod, seconds = fit(basis, parts["train"], parts["validation"], config)
         other = spread(where(Surrogate.load(path)), ds, test, truth) if path else None
-        row(f"{split} held out ({pod.train_s:.0f} s)",
+        row(f"{split} held out ({seconds:.0f} s)",
             spread(pod_predict(pod), ds, test, truth), other)
-    pod = fit(basis, converged, **fit_args)
+    pod, seconds = fit(basis, converged, converged, config)
     surrogate = Surrogate.load(args.model)
     model = where(surrogate)
     soft = [i for i in converged
             if ds.C1[i] <= SOFT_C1_KPA + 1e-9 and ds.theta[i] < CAUDAL_THETA_DEG]
-    row(f"every case, inside ({pod.train_s:.0f} s)",
+    row(f"every case, inside ({seconds:.0f} s)",
         spread(pod_predict(pod), ds, converged, truth), spread(model, ds, converged, truth))
     if soft:
         row("soft caudal, inside", spread(pod_predict(pod), ds, soft, truth),
@@ -343,7 +260,7 @@ def main(argv: list[str] | None = None) -> int:
                   for f in (pod_predict(pod), model)]
         row(case, *errors)
     queries = [(float(ds.C1[i]), float(ds.phi[i]), float(ds.theta[i])) for i in converged[:50]]
-    timing = {name: _median_ms(f, queries) for name, f in (("pod", pod.predict), ("model", model))}
+    timing = {name: _median_ms(f, queries) for name, f in (("pod", _quiet(pod)), ("model", model))}
     figures["prediction_median_ms"] = timing
     pod_at, model_at = (("the material points",) * 2 if cells is None else
                         (f"its {len(basis.X)} quadratic nodes", f"the {len(cells)} centroids"))
@@ -351,7 +268,8 @@ def main(argv: list[str] | None = None) -> int:
           f"{timing['pod']:.3f} ms at {pod_at}, model {timing['model']:.3f} ms at {model_at}")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps({"settings": fit_args, "figures": figures}, indent=1))
+        args.json.write_text(json.dumps({"settings": config.as_dict(), "figures": figures},
+                                        indent=1))
     return 0
 
 

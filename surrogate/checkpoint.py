@@ -144,6 +144,19 @@ class Checkpoint:
     cells: np.ndarray | None = None
 
 
+def in_memory(result: TrainResult, ds: Dataset) -> Checkpoint:
+    """What :func:`save_model` would write, without writing it: a model to query at once.
+
+    For a study that fits models it does not keep (:mod:`studies.pod_basis`).
+    """
+    cases = result.train_cases if result.train_cases is not None else np.flatnonzero(ds.converged)
+    return Checkpoint(
+        result.config, result.params, result.normalisation, ds.X, ds.boundary,
+        training_range(ds, cases), point_factor=result.point_factor, node_index=ds.node_index,
+        metrics=result.summary(), basis=result.basis, cells=ds.cells,
+    )
+
+
 def load_checkpoint(folder: str | Path) -> Checkpoint:
     """Load a model folder written by :func:`save_model` (or the path of its ``model.json``).
 

@@ -19,15 +19,17 @@ import json
 import logging
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from fem.dataset import DatasetError
+from surrogate.config import SurrogateConfig
+from surrogate.exceptions import SurrogateError
 
 
 def predict(args: argparse.Namespace) -> int:
     """``predict``: one whole-field prediction, printed and optionally written."""
-    from surrogate.exceptions import SurrogateError
     from surrogate.fields import write_prediction_xdmf
     from surrogate.predict import Surrogate
 
@@ -55,29 +57,40 @@ def predict(args: argparse.Namespace) -> int:
     return 0
 
 
-def train(args: argparse.Namespace) -> int:
-    """``train``: one model with the config's settings and the overrides, on one core."""
+def settings(path: str | Path, items: list[str]) -> tuple[SurrogateConfig, dict[str, Any]]:
+    """The ``surrogate`` section of the config at ``path`` with ``KEY=VALUE`` overrides (YAML).
+
+    Returns:
+        The settings, and the overrides as parsed.
+
+    Raises:
+        SurrogateError: if an override is not ``KEY=VALUE`` or a setting is invalid.
+        OSError: if the config cannot be read.
+    """
     import yaml
 
+    overrides = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise SurrogateError(f"--set {item!r} is not KEY=VALUE")
+        overrides[key.strip()] = yaml.safe_load(value)
+    with open(path) as fh:
+        base = (yaml.safe_load(fh) or {}).get("surrogate") or {}
+    return SurrogateConfig.from_mapping({**base, **overrides}), overrides
+
+
+def train(args: argparse.Namespace) -> int:
+    """``train``: one model with the config's settings and the overrides, on one core."""
     from surrogate.runtime import configure_cpu
 
     configure_cpu(single_thread=True)  # before JAX's first computation: one core
     from fem.dataset import read_dataset
     from surrogate.checkpoint import save_model
-    from surrogate.config import SurrogateConfig
-    from surrogate.exceptions import SurrogateError
     from surrogate.train import train_and_evaluate
 
     try:
-        overrides = {}
-        for item in args.set:
-            key, sep, value = item.partition("=")
-            if not sep:
-                raise SurrogateError(f"--set {item!r} is not KEY=VALUE")
-            overrides[key.strip()] = yaml.safe_load(value)
-        with open(args.config) as fh:
-            base = (yaml.safe_load(fh) or {}).get("surrogate") or {}
-        config = SurrogateConfig.from_mapping({**base, **overrides})
+        config, overrides = settings(args.config, args.set)
         dataset = read_dataset(args.dataset)
         result = train_and_evaluate(dataset, config, progress=args.progress)
     except (OSError, SurrogateError, DatasetError, ValueError) as err:

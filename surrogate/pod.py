@@ -53,8 +53,7 @@ def case_split(
     fields). Cases in ``holdout`` are left out of both.
 
     Raises:
-        ValueError: if no training or validation case is left, or fewer training cases than
-            modes.
+        ValueError: if no training or validation case is left.
     """
     split = "by_case" if config.split == "by_sample" else config.split
     parts = ds.splits[split]
@@ -62,11 +61,6 @@ def case_split(
     train, val = (np.setdiff1d(parts[p], drop) for p in ("train", "validation"))
     if train.size == 0 or val.size == 0:
         raise ValueError(f"split {split!r} has no training or validation cases")
-    if train.size < config.modes:
-        raise ValueError(
-            f"surrogate.modes = {config.modes} POD modes need at least as many training cases; "
-            f"split {split!r} has {train.size}"
-        )
     return train, val
 
 
@@ -127,14 +121,35 @@ def train_pod(
     ds: Dataset, config: SurrogateConfig, progress: bool = True,
     holdout: np.ndarray | None = None,
 ) -> TrainResult:
-    """Fit a ``pod`` model's basis and train its branch (see the module docstring).
+    """Fit a ``pod`` model on its split's training cases (see the module docstring).
 
     Raises:
         ValueError: if the split leaves no training or validation cases, or too few for the
             modes.
     """
-    start = time.perf_counter()
     train_cases, val_cases = case_split(ds, config, holdout)
+    return fit(ds, config, train_cases, val_cases, progress, holdout)
+
+
+def fit(
+    ds: Dataset, config: SurrogateConfig, train_cases: np.ndarray, val_cases: np.ndarray,
+    progress: bool = False, holdout: np.ndarray | None = None,
+) -> TrainResult:
+    """Fit the basis on ``train_cases`` and train the branch, stopping early on ``val_cases``.
+
+    ``holdout`` is recorded as the cases kept out. Any point set will do: a dataset whose points
+    are the mesh's quadratic nodes gives the basis there (:mod:`studies.pod_basis`).
+
+    Raises:
+        ValueError: if a case did not converge, or there are fewer training cases than modes.
+    """
+    start = time.perf_counter()
+    train_cases, val_cases = (np.asarray(c, dtype=np.int64) for c in (train_cases, val_cases))
+    if not (np.all(ds.converged[train_cases]) and np.all(ds.converged[val_cases])):
+        raise ValueError("a pod model is fitted on converged cases only")
+    if len(train_cases) < config.modes or not len(val_cases):
+        raise ValueError(f"surrogate.modes = {config.modes} POD modes need at least as many "
+                         f"training cases ({len(train_cases)} given) and a validation case")
     norm = Normalisation.fit(ds, train_cases, config.c1_encoding, config.output_scaling)
     basis, singular, scale = fit_basis(scaled_fields(ds, train_cases, norm), config.modes)
     unit = basis / scale**2  # projects a field onto the scaled basis: weights of RMS one

@@ -165,7 +165,7 @@ def test_a_pod_model_file_without_its_modes_is_refused(trained, tmp_path: Path) 
 
 
 def test_pod_settings_that_do_not_apply_are_refused(cube: tuple[Path, Path]) -> None:
-    from surrogate.pod import case_split
+    from surrogate.pod import case_split, train_pod
 
     with pytest.raises(SurrogateConfigError, match="exact does not apply to structure: pod"):
         CONFIG.replace(boundary="exact")
@@ -173,4 +173,4 @@ def test_pod_settings_that_do_not_apply_are_refused(cube: tuple[Path, Path]) -> 
     train, val = case_split(ds, CONFIG)  # by_sample: whole cases of the by_case split
     assert np.array_equal(train, ds.splits["by_case"]["train"])
     with pytest.raises(ValueError, match="POD modes need at least as many training cases"):
-        case_split(ds, CONFIG.replace(modes=64))
+        train_pod(ds, CONFIG.replace(modes=64))

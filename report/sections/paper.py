@@ -14,6 +14,15 @@ from studies import paper
 from studies.figures import surrogate as surrogate_plots
 from surrogate.config import parse_architecture
 
+STRUCTURE_WORDS = {
+    "pod": ("; our architecture is that of the one network that weighs the training cases' own "
+            "POD modes (structure: pod), the paper's that of its Siamese pair, and our "
+            "validation points are those of whole validation cases"),
+    "separable": ("; our architecture is that of the pair's point networks and of the branch "
+                  "that weighs their fields (structure: separable)"),
+}
+"""How the architecture of a model of each structure reads beside the paper's Siamese pair."""
+
 
 def _table2(ctx: Context) -> str:
     study = ctx.results.get("table2")
@@ -49,12 +58,15 @@ def _table2(ctx: Context) -> str:
                      fmt(row.epochs.mean, ".0f"),
                      fmt(1e3 * predict if predict is not None else None, ".3g"),
                      "; ".join(mark)])
+    card = ctx.results.get("model") or {}
+    structure = (card.get("config") or {}).get("structure")
+    ours_are = STRUCTURE_WORDS.get(structure, "")
     return "".join([
         h3("Table 2: architecture study"),
         para("Validation error (mean |u − û| over the validation points, mean ± SD over the "
            "repeats) and training time per architecture (hidden layers × width), ours beside "
-           "the paper's (trained on an NVIDIA V100). Our prediction time is one whole-field "
-           "prediction on one CPU core. The highlighted row is our selection: "
+           f"the paper's (trained on an NVIDIA V100){ours_are}. Our prediction time is one "
+           "whole-field prediction on one CPU core. The highlighted row is our selection: "
            f"{study.rule}.", "caption"),
         table(["architecture", "parameters", "runs", "validation error (mm)",
                 "paper: validation error (mm)", "training time (s)", "paper: training time (s)",
