@@ -53,9 +53,9 @@ class SurrogateConfig:
             training cases' compliance-scaled fields, and one network, the branch, of
             ``hidden_layers`` x ``width``, maps the case to their weights; the modes vanish on the
             rib as every FE field does, so ``boundary`` and ``alpha`` do not apply. Its unit of
-            data is a whole case: with ``split: by_sample`` it trains on the ``by_case`` split's
-            cases. It is trained by full-batch Adam on the weights' squared error, an epoch being
-            :data:`surrogate.pod.STEPS_PER_EPOCH` steps).
+            data is a whole case: with ``split: by_sample`` the ``by_case`` split's validation
+            cases validate and every other case trains. It is trained by full-batch Adam on the
+            weights' squared error, an epoch being :data:`surrogate.pod.STEPS_PER_EPOCH` steps).
         modes: number of fields T_k of a ``separable`` or ``pod`` model.
         point_features: a ``separable`` model's point networks see, besides the point's
             standardised coordinates X, ``sin`` and ``cos`` of 2π X·b for this many random

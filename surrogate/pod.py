@@ -49,18 +49,25 @@ def case_split(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Training and validation cases of a ``pod`` model.
 
-    A case-level split's own parts; the ``by_case`` split's for ``by_sample`` (a POD needs whole
-    fields). Cases in ``holdout`` are left out of both.
+    A case-level split's own parts. For ``by_sample`` (the paper's random points, which would
+    leave holes in the fields), the ``by_case`` split's validation cases validate and every other
+    case trains, its test cases included: as the paper's by-sample model sees every case, this
+    one sees every case but the few that stop its training. Cases in ``holdout`` are left out of
+    both.
 
     Raises:
         ValueError: if no training or validation case is left.
     """
-    split = "by_case" if config.split == "by_sample" else config.split
-    parts = ds.splits[split]
+    if config.split == "by_sample":
+        parts = ds.splits["by_case"]
+        train = np.union1d(parts["train"], parts["test"])
+    else:
+        parts = ds.splits[config.split]
+        train = parts["train"]
     drop = np.asarray([] if holdout is None else holdout, dtype=np.int64)
-    train, val = (np.setdiff1d(parts[p], drop) for p in ("train", "validation"))
+    train, val = np.setdiff1d(train, drop), np.setdiff1d(parts["validation"], drop)
     if train.size == 0 or val.size == 0:
-        raise ValueError(f"split {split!r} has no training or validation cases")
+        raise ValueError(f"split {config.split!r} has no training or validation cases")
     return train, val
 
 

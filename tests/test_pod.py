@@ -100,7 +100,7 @@ def test_the_basis_holds_fields_in_its_span_exactly() -> None:
 
 
 def test_a_pod_model_predicts_cases_it_did_not_train_on(trained) -> None:
-    """The by_case split's validation cases, never in the basis nor the branch's training."""
+    """The validation cases (the by_case split's), never in the basis nor the branch's training."""
     from surrogate.predict import Surrogate
 
     ds, result, folder = trained
@@ -170,7 +170,11 @@ def test_pod_settings_that_do_not_apply_are_refused(cube: tuple[Path, Path]) -> 
     with pytest.raises(SurrogateConfigError, match="exact does not apply to structure: pod"):
         CONFIG.replace(boundary="exact")
     ds = read_dataset(cube[0])
-    train, val = case_split(ds, CONFIG)  # by_sample: whole cases of the by_case split
-    assert np.array_equal(train, ds.splits["by_case"]["train"])
+    train, val = case_split(ds, CONFIG)  # by_sample: whole cases, all but by_case's validation
+    parts = ds.splits["by_case"]
+    assert np.array_equal(val, parts["validation"])
+    assert np.array_equal(train, np.union1d(parts["train"], parts["test"]))
+    train, val = case_split(ds, CONFIG.replace(split="by_case"))
+    assert np.array_equal(train, parts["train"]) and np.array_equal(val, parts["validation"])
     with pytest.raises(ValueError, match="POD modes need at least as many training cases"):
         train_pod(ds, CONFIG.replace(modes=64))
