@@ -178,3 +178,44 @@ def test_pod_settings_that_do_not_apply_are_refused(cube: tuple[Path, Path]) -> 
     assert np.array_equal(train, parts["train"]) and np.array_equal(val, parts["validation"])
     with pytest.raises(ValueError, match="POD modes need at least as many training cases"):
         train_pod(ds, CONFIG.replace(modes=64))
+
+
+def test_a_dataset_refuses_a_mesh_that_is_not_its_points(
+    cube: tuple[Path, Path], tmp_path: Path
+) -> None:
+    """The cells come from the cases' own mesh; another one is named and nothing is written."""
+    from fem.dataset import DatasetError
+    from meshes.tags import MESH_NAME
+
+    folder = cube[0].parent
+    with h5py.File(folder / "mesh.h5") as h5, h5py.File(tmp_path / "other.h5", "w") as other:
+        other[f"Mesh/{MESH_NAME}/geometry"] = 2.0 * h5[f"Mesh/{MESH_NAME}/geometry"][...]
+        other[f"Mesh/{MESH_NAME}/topology"] = h5[f"Mesh/{MESH_NAME}/topology"][...]
+    summaries = sorted(folder.glob("*/summary.json"))
+    points = [s.parent / "points.h5" for s in summaries]
+    with pytest.raises(DatasetError, match="other.xdmf is not the mesh of these material points"):
+        build_dataset(summaries, points, tmp_path / "ds.h5", mesh=tmp_path / "other.xdmf")
+    assert not (tmp_path / "ds.h5").exists()
+
+
+def test_a_pod_models_fast_prediction_is_its_plain_sum(trained) -> None:
+    """``Surrogate.predict``: gain · u_scale · Σ_k b_k(C1, ĝ) T_k, the rib zero, in float32."""
+    import jax.numpy as jnp
+
+    from surrogate.model import branch_weights
+    from surrogate.predict import Surrogate
+
+    ds, _, folder = trained
+    model = Surrogate.load(folder)
+    norm = model.normalisation
+    for C1, phi, theta in ((1.3, 20.0, 0.0), (4.2, -100.0, 0.0), (2.5, 90.0, -90.0)):
+        case = norm.case(np.array([C1]), gravity_direction(np.array([phi]), np.array([theta])))
+        weights = np.asarray(branch_weights(model.params["branch"],
+                                            jnp.asarray(case, jnp.float32), model.config))[0]
+        plain = float(norm.gain(C1)) * norm.u_scale * (model.basis @ weights)
+        plain[model.boundary] = 0.0
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ExtrapolationWarning)
+            fast = model.predict(C1, phi, theta)
+        assert np.abs(plain).max() > 0
+        np.testing.assert_allclose(fast, plain, rtol=0, atol=1e-5 * np.abs(plain).max())
