@@ -36,7 +36,7 @@ from fem.dataset import Dataset
 from surrogate.config import SurrogateConfig
 from surrogate.data import Normalisation
 from surrogate.model import Layers, branch_weights, init_params
-from surrogate.train import TrainResult, _progress, learning_rate_schedule, make_optimizer
+from surrogate.train import TrainResult, learning_rate_schedule, make_optimizer, progress_bar
 
 log = logging.getLogger(__name__)
 
@@ -104,7 +104,10 @@ def _clamped(modes: np.ndarray, rib: np.ndarray) -> np.ndarray:
 
 
 def _fit_step(config: SurrogateConfig, optimizer: optax.GradientTransformation):
-    """One jitted epoch: ``STEPS_PER_EPOCH`` full-batch Adam steps on the weights' squared error."""
+    """The jitted epoch (``STEPS_PER_EPOCH`` full-batch Adam steps) and the loss it lowers.
+
+    The loss is the weights' mean squared error.
+    """
 
     def loss(layers: Layers, features: jax.Array, target: jax.Array) -> jax.Array:
         return jnp.mean((branch_weights(layers, features, config) - target) ** 2)
@@ -204,7 +207,7 @@ def fit(
 
     best: dict[str, Any] = {"loss": float("inf"), "layers": layers, "epoch": 0}
     since_best = 0
-    bar = _progress(config.max_epochs, progress, config.architecture)
+    bar = progress_bar(config.max_epochs, progress, config.architecture)
     for epoch in range(1, config.max_epochs + 1):
         t0 = time.perf_counter()
         layers, state, train_loss = epoch_fn(layers, state, train_x, train_w)

@@ -425,7 +425,7 @@ def train_and_evaluate(
     )
 
     best_loss, best_params, best_epoch, since_best = float("inf"), params, 0, 0
-    bar = _progress(config.max_epochs, progress, config.architecture)
+    bar = progress_bar(config.max_epochs, progress, config.architecture)
     for epoch in range(1, config.max_epochs + 1):
         t0 = time.perf_counter()
         key, epoch_key = jax.random.split(key)
@@ -482,7 +482,8 @@ def train_and_evaluate(
     return result
 
 
-def _progress(total: int, enabled: bool, label: str) -> Any:
+def progress_bar(total: int, enabled: bool, label: str) -> Any:
+    """A tqdm bar over the epochs, or None when not ``enabled``."""
     if not enabled:
         return None
     from tqdm import tqdm
