@@ -83,8 +83,8 @@ def _table3(ctx: Context) -> str:
         "Mean displacement and displacement range of the FE and the surrogate, and the "
         "surrogate's error as the paper's Eq. 3 (mean over the points of |u − û|, ± SD), "
         "ours beside the paper's, for each clinical case. The by-sample model trained on "
-        "points of every case (the paper's split); the by-case model never saw the clinical "
-        "cases.", "caption"))
+        "points of every case (the paper's split; a pod model, on every case but its "
+        "validation cases); the by-case model never saw the clinical cases.", "caption"))
     for split in ("by_sample", "by_case"):
         block = getattr(clinical, split)
         if block is None or not block.rows:
