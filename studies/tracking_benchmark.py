@@ -1,7 +1,7 @@
 """Benchmark: points tracked from prone to supine by FE and by the surrogate.
 
     .venv/bin/python -m studies.tracking_benchmark MESH --model MODEL [--config config.yaml]
-        [--c1 1.0] [--points 100] [--observed 180] [--target 0] [--seed 0]
+        [--c1 1.0] [--points 100] [--observed 180] [--target 0] [--target-theta 0] [--seed 0]
 
 ``MESH`` is the reference the surrogate was trained on (the sweep's mesh). The imaged shape is
 its FE solve in the observed posture; ``--points`` material points inside the breast (cell
@@ -41,6 +41,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--points", type=int, default=100)
     parser.add_argument("--observed", type=float, default=180.0, help="imaged posture Φ")
     parser.add_argument("--target", type=float, default=0.0, help="target posture Φ")
+    parser.add_argument("--target-theta", type=float, default=0.0,
+                        help="target posture θ (e.g. standing: --target 90 --target-theta -90)")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
     values = (yaml.safe_load(args.config.read_text()) or {}) if args.config else {}
@@ -65,13 +67,15 @@ def main(argv: list[str] | None = None) -> int:
             # the truth's nodes in the imaged runner's order (the files share their numbering)
             X_imaged = from_file_order(runner.mesh, nodes_in_file_order(truth.mesh, X))
             tracked = track_both(runner, X_imaged, model, names, seen,
-                                 Case(args.c1, args.target), settings.density, settings.gravity)
+                                 Case(args.c1, args.target, args.target_theta), settings.density,
+                                 settings.gravity)
     truth.close()
     d = np.asarray(tracked.difference_mm)
     moved = 1e3 * np.linalg.norm(np.asarray(tracked.fe) - np.asarray(tracked.observed), axis=1)
     t = tracked.surrogate_ms
     print(f"machine: {machine_state().to_json()}")
-    print(f"{args.points} points, C1 = {args.c1:g} kPa, Φ {args.observed:g}° → {args.target:g}°: "
+    to = f"Φ {args.target:g}°" + (f", θ {args.target_theta:g}°" if args.target_theta else "")
+    print(f"{args.points} points, C1 = {args.c1:g} kPa, Φ {args.observed:g}° → {to}: "
           f"moved {moved.mean():.2f} mm on average (max {moved.max():.2f}); FE against "
           f"surrogate max {d.max():.3f} mm, mean {d.mean():.3f} mm, p95 "
           f"{np.percentile(d, 95):.3f} mm")
