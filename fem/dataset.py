@@ -511,13 +511,13 @@ def mesh_cells(mesh_xdmf: str | Path, node_index: np.ndarray, X: np.ndarray) -> 
     """
     import h5py
 
-    from meshes.tags import MESH_NAME
+    from meshes.io import GEOMETRY_DATASET, TOPOLOGY_DATASET
 
     mesh_h5 = Path(mesh_xdmf).with_suffix(".h5")
     try:
         with h5py.File(mesh_h5, "r") as h5:
-            geometry = h5[f"Mesh/{MESH_NAME}/geometry"][...]
-            topology = h5[f"Mesh/{MESH_NAME}/topology"][...]
+            geometry = h5[GEOMETRY_DATASET][...]
+            topology = h5[TOPOLOGY_DATASET][...]
     except (OSError, KeyError) as err:
         raise DatasetError(f"cannot read the mesh {mesh_h5}: {err}") from None
     node_index = np.asarray(node_index)

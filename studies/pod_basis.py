@@ -91,13 +91,15 @@ def read_fields(folder: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
     import h5py
 
+    from meshes.io import GEOMETRY_DATASET, TOPOLOGY_DATASET
+
     path = folder / "fields.h5"
     if not path.is_file():
         raise ValueError(f"{path}: no such file (the case's fields)")
     with h5py.File(path, "r") as h5:
         u = 1e3 * np.asarray(h5["Function/displacement/0"], dtype=np.float64)
-        cells = np.asarray(h5["Mesh/mesh/topology"], dtype=np.int64)
-        nodes = np.asarray(h5["Mesh/mesh/geometry"], dtype=np.float64)
+        cells = np.asarray(h5[TOPOLOGY_DATASET], dtype=np.int64)
+        nodes = np.asarray(h5[GEOMETRY_DATASET], dtype=np.float64)
     if cells.shape[1] != 10:
         raise ValueError(f"{path}: cells of {cells.shape[1]} nodes; the centroids need the "
                          "quadratic mesh's 10-node tetrahedra")
