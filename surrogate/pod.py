@@ -161,19 +161,19 @@ def fit(
         raise ValueError(f"surrogate.modes = {config.modes} POD modes need at least as many "
                          f"training cases ({len(train_cases)} given) and a validation case")
     norm = Normalisation.fit(ds, train_cases, config.c1_encoding, config.output_scaling)
-    basis, singular, scale = fit_basis(scaled_fields(ds, train_cases, norm), config.modes)
+    train_fields = scaled_fields(ds, train_cases, norm)
+    basis, singular, scale = fit_basis(train_fields, config.modes)
     unit = basis / scale**2  # projects a field onto the scaled basis: weights of RMS one
     modes = _clamped(basis.T.reshape(ds.n_points, 3, config.modes), ds.boundary)
     basis_j = jnp.asarray(modes.reshape(-1, config.modes).T)
 
-    def data(cases: np.ndarray) -> tuple[jax.Array, jax.Array, jax.Array]:
-        fields = scaled_fields(ds, cases, norm)
+    def data(cases: np.ndarray, fields: np.ndarray) -> tuple[jax.Array, jax.Array, jax.Array]:
         features = norm.case(ds.C1[cases], ds.direction[cases])
         return (jnp.asarray(features, jnp.float32), jnp.asarray(fields @ unit.T, jnp.float32),
                 jnp.asarray(fields, jnp.float32))
 
-    train_x, train_w, _ = data(train_cases)
-    val_x, val_w, val_fields = data(val_cases)
+    train_x, train_w, _ = data(train_cases, train_fields)
+    val_x, val_w, val_fields = data(val_cases, scaled_fields(ds, val_cases, norm))
     val_gain = jnp.asarray(norm.gain(ds.C1[val_cases]) * norm.u_scale, jnp.float32)
     off_rib = jnp.asarray(~ds.boundary, jnp.float32)
     n, n_off = ds.n_points, max(int(np.sum(~ds.boundary)), 1)
