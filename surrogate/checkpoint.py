@@ -74,14 +74,11 @@ def save_model(folder: str | Path, result: TrainResult, ds: Dataset) -> Path:
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    cases = result.train_cases if result.train_cases is not None else np.flatnonzero(ds.converged)
-    extra = {}
-    if result.point_factor is not None:
-        extra["points_factor"] = result.point_factor
-    if result.basis is not None:
-        extra["points_basis"] = result.basis
-    if ds.cells is not None:
-        extra["mesh_cells"] = ds.cells
+    checkpoint = in_memory(result, ds)
+    extra = {name: value for name, value in (("points_factor", checkpoint.point_factor),
+                                             ("points_basis", checkpoint.basis),
+                                             ("mesh_cells", checkpoint.cells))
+             if value is not None}
     node_index = ds.node_index if ds.node_index is not None else np.arange(ds.n_points)
     np.savez(
         folder / PARAMS_NPZ,
@@ -96,12 +93,9 @@ def save_model(folder: str | Path, result: TrainResult, ds: Dataset) -> Path:
         "config": result.config.as_dict(),
         "normalisation": result.normalisation.as_dict(),
         "n_points": int(ds.n_points),
-        "training_range": training_range(ds, cases),
-        "held_out_cases": [
-            str(ds.ids[c])
-            for c in (result.held_out_cases if result.held_out_cases is not None else [])
-        ],
-        "metrics": result.summary(),
+        "training_range": checkpoint.training_range,
+        "held_out_cases": checkpoint.held_out,
+        "metrics": checkpoint.metrics,
         "inputs": ["x", "y", "z", "C1 (encoded, scaled)", "g_x/|g|", "g_y/|g|", "g_z/|g|"],
         "outputs": ["u_x", "u_y", "u_z (mm)"],
     }
@@ -145,15 +139,17 @@ class Checkpoint:
 
 
 def in_memory(result: TrainResult, ds: Dataset) -> Checkpoint:
-    """What :func:`save_model` would write, without writing it: a model to query at once.
+    """A trained surrogate's checkpoint in memory: what :func:`save_model` writes.
 
-    For a study that fits models it does not keep (:mod:`studies.pod_basis`).
+    A study that fits models it does not keep (:mod:`studies.pod_basis`) queries it directly.
     """
     cases = result.train_cases if result.train_cases is not None else np.flatnonzero(ds.converged)
+    held_out = result.held_out_cases if result.held_out_cases is not None else []
     return Checkpoint(
         result.config, result.params, result.normalisation, ds.X, ds.boundary,
         training_range(ds, cases), point_factor=result.point_factor, node_index=ds.node_index,
-        metrics=result.summary(), basis=result.basis, cells=ds.cells,
+        metrics=result.summary(), held_out=[str(ds.ids[c]) for c in held_out],
+        basis=result.basis, cells=ds.cells,
     )
 
 
