@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from surrogate.model import boundary_network, point_frequencies
+from surrogate.model import boundary_network, point_frequencies, weighs_fields
 from surrogate.predict import Surrogate
 
 FORMAT = "breast-surrogate-web"
@@ -66,7 +66,7 @@ def export_web(model: Surrogate) -> dict[str, Any]:
     net = boundary_network(config)
     if net is not None and model.boundary.any():
         members["boundary"] = np.flatnonzero(model.boundary)
-    separable = config.structure in ("separable", "pod")
+    separable = weighs_fields(config)
     frequencies = point_frequencies(config)
     for part, index in members.items():
         parts[part] = {

@@ -76,6 +76,14 @@ def network_names(config: SurrogateConfig) -> tuple[str, ...]:
     return (*points, "branch") if config.structure == "separable" else points
 
 
+def weighs_fields(config: SurrogateConfig) -> bool:
+    """Whether a query weighs per-point fields by the branch's outputs (separable and pod).
+
+    A pointwise model passes the points through its networks instead.
+    """
+    return config.structure in ("separable", "pod")
+
+
 def boundary_network(config: SurrogateConfig) -> str | None:
     """Network that predicts the clamped points (None: they are exactly zero).
 

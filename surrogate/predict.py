@@ -33,7 +33,14 @@ import numpy as np
 from fem.dataset import gravity_direction
 from surrogate.checkpoint import Checkpoint, load_checkpoint
 from surrogate.exceptions import ExtrapolationWarning, ModelFileError
-from surrogate.model import ACTIVATIONS, boundary_network, branch_weights, mlp, point_inputs
+from surrogate.model import (
+    ACTIVATIONS,
+    boundary_network,
+    branch_weights,
+    mlp,
+    point_inputs,
+    weighs_fields,
+)
 
 DIRECTION_REACH = 1.5
 """A query off the plane whose direction is farther than this many of the training directions'
@@ -117,7 +124,7 @@ class Surrogate:
             modes = self._checkpoint.basis[idx] * (gain * u_scale)[:, None, None]
             return {"fields": jnp.asarray(modes.reshape(-1, config.modes).astype(np.float32))}
 
-        separable = config.structure in ("separable", "pod")
+        separable = weighs_fields(config)
         prepare = {"separable": fields_of, "pod": modes_of}.get(config.structure, split_first)
         parts = {"domain": prepare(self.params.get("domain"), domain, factor[domain])}
         net = boundary_network(config)
