@@ -36,15 +36,15 @@ def cube(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     """A dataset on a unit cube's tetrahedra (its mesh recorded), and one without them."""
     from scipy.spatial import Delaunay
 
-    from meshes.tags import MESH_NAME
+    from meshes.io import GEOMETRY_DATASET, TOPOLOGY_DATASET
 
     folder = tmp_path_factory.mktemp("pod")
     axis = np.linspace(0.0, 1.0, 5)
     X = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1).reshape(-1, 3)
     cells = Delaunay(X).simplices
     with h5py.File(folder / "mesh.h5", "w") as h5:
-        h5[f"Mesh/{MESH_NAME}/geometry"] = X
-        h5[f"Mesh/{MESH_NAME}/topology"] = cells
+        h5[GEOMETRY_DATASET] = X
+        h5[TOPOLOGY_DATASET] = cells
     fixed = X[:, 0] == 0.0
     summaries, points = [], []
     for C1 in (1.0, 2.0, 3.0, 4.0, 5.0):
@@ -185,12 +185,12 @@ def test_a_dataset_refuses_a_mesh_that_is_not_its_points(
 ) -> None:
     """The cells come from the cases' own mesh; another one is named and nothing is written."""
     from fem.dataset import DatasetError
-    from meshes.tags import MESH_NAME
+    from meshes.io import GEOMETRY_DATASET, TOPOLOGY_DATASET
 
     folder = cube[0].parent
     with h5py.File(folder / "mesh.h5") as h5, h5py.File(tmp_path / "other.h5", "w") as other:
-        other[f"Mesh/{MESH_NAME}/geometry"] = 2.0 * h5[f"Mesh/{MESH_NAME}/geometry"][...]
-        other[f"Mesh/{MESH_NAME}/topology"] = h5[f"Mesh/{MESH_NAME}/topology"][...]
+        other[GEOMETRY_DATASET] = 2.0 * h5[GEOMETRY_DATASET][...]
+        other[TOPOLOGY_DATASET] = h5[TOPOLOGY_DATASET][...]
     summaries = sorted(folder.glob("*/summary.json"))
     points = [s.parent / "points.h5" for s in summaries]
     with pytest.raises(DatasetError, match="other.xdmf is not the mesh of these material points"):
