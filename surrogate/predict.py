@@ -121,7 +121,7 @@ class Surrogate:
 
         def modes_of(_, idx, gain):
             # a pod model's modes at the points, gain included, as fields_of lays them out
-            modes = self._checkpoint.basis[idx] * (gain * u_scale)[:, None, None]
+            modes = self.basis[idx] * (gain * u_scale)[:, None, None]
             return {"fields": jnp.asarray(modes.reshape(-1, config.modes).astype(np.float32))}
 
         separable = weighs_fields(config)
