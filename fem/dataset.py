@@ -8,6 +8,13 @@ Layout (units in attributes; M cases, N material points)::
     /points/cells        (C, 4) int64     the mesh's tetrahedra, as rows of the points (their
                                           corners; written when the dataset is built with its
                                           mesh, e.g. for a surrogate queried between the points)
+    /nodes/X             (K, 3) float64   every node of a quadratic mesh (its vertices and edge
+                                          nodes), m: where the FE field is known exactly
+    /nodes/cells         (C, 10) int64    the mesh's 10-node tetrahedra as rows of /nodes
+    /nodes/vertex        (N,)   int64     the row of /nodes of each material point
+    /nodes/displacement  (M, K, 3) float32  m; NaN for failed cases (the /nodes group is
+                                          written when the cases' fields are quadratic and the
+                                          dataset is built with them)
     /cases/id            (M,)   str       case folder name
     /cases/C1            (M,)   float64   kPa
     /cases/phi, theta    (M,)   float64   degrees
@@ -76,6 +83,94 @@ STATUSES = ("converged", "failed")
 
 class DatasetError(ValueError):
     """A case file or the dataset is missing, truncated or inconsistent (the message names it)."""
+
+
+FIELD_DATASET = "Function/displacement/0"
+"""Where a case's ``fields.h5`` (:mod:`fem.io`) holds the displacement at the mesh's nodes."""
+
+
+def read_node_displacement(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A case's displacement at every node of its mesh (m), its cells and its nodes (m).
+
+    From the case's ``fields.h5``, where the displacement is given at every node of the mesh's
+    geometry: on a quadratic mesh, the FE field's own nodes, so that its shape functions give
+    the field anywhere in a cell.
+
+    Raises:
+        DatasetError: if the file is missing, unreadable or lacks the displacement or mesh.
+    """
+    import h5py
+
+    from meshes.io import GEOMETRY_DATASET, TOPOLOGY_DATASET
+
+    try:
+        with h5py.File(path, "r") as h5:
+            u = np.asarray(h5[FIELD_DATASET], dtype=np.float64)
+            cells = np.asarray(h5[TOPOLOGY_DATASET], dtype=np.int64)
+            nodes = np.asarray(h5[GEOMETRY_DATASET], dtype=np.float64)
+    except (OSError, KeyError) as err:
+        raise DatasetError(f"{path}: not a case's fields ({err})") from None
+    if u.shape != nodes.shape:
+        raise DatasetError(f"{path}: {len(u)} displacement values for {len(nodes)} nodes")
+    return u, cells, nodes
+
+
+@dataclass(frozen=True)
+class Nodes:
+    """Every node of a quadratic mesh and the cases' displacement there (``/nodes``).
+
+    Attributes:
+        X: the nodes (K, 3), m: the vertices and the edge nodes.
+        cells: the 10-node tetrahedra as rows of ``X`` (C, 10), corners first.
+        vertex: the row of ``X`` of each material point (N,).
+        displacement: (M, K, 3) in mm (float32), NaN rows for failed cases; None where the
+            dataset was read without it.
+    """
+
+    X: np.ndarray
+    cells: np.ndarray
+    vertex: np.ndarray
+    displacement: np.ndarray | None = None
+
+
+def gather_nodes(
+    fields_paths: Sequence[str | Path], converged: np.ndarray, X: np.ndarray
+) -> dict[str, np.ndarray] | None:
+    """The converged cases' fields at a quadratic mesh's nodes, for ``/nodes``.
+
+    Args:
+        fields_paths: each case's ``fields.h5``.
+        converged: which cases converged (the others' rows stay NaN).
+        X: the material points, which must be nodes of the mesh.
+
+    Returns:
+        ``{"X", "cells", "vertex", "displacement" (m)}``, or None where the cells are not
+        10-node tetrahedra (a linear mesh: its vertices are all its nodes).
+
+    Raises:
+        DatasetError: naming a case whose fields are on another mesh, or a material point that
+            is no node.
+    """
+    from scipy.spatial import cKDTree
+
+    first = int(np.flatnonzero(converged)[0])
+    u, cells, nodes = read_node_displacement(fields_paths[first])
+    if cells.ndim != 2 or cells.shape[1] != 10:
+        return None
+    distance, vertex = cKDTree(nodes).query(X)
+    if np.any(distance > 1e-9):
+        raise DatasetError(f"{fields_paths[first]}: a material point is not a node of its mesh "
+                           f"(off by {distance.max():.3g} m)")
+    displacement = np.full((len(fields_paths), *nodes.shape), np.nan, dtype=np.float32)
+    for i in np.flatnonzero(converged):
+        u, c, x = read_node_displacement(fields_paths[i])
+        if not (np.array_equal(c, cells) and np.array_equal(x, nodes)):
+            raise DatasetError(f"{fields_paths[i]}: another mesh than {fields_paths[first]}'s")
+        if not np.all(np.isfinite(u)):
+            raise DatasetError(f"{fields_paths[i]}: a converged case's field has NaN/inf")
+        displacement[i] = u
+    return {"X": nodes, "cells": cells, "vertex": vertex.astype(np.int64),
+            "displacement": displacement}
 
 
 def write_points(
@@ -281,6 +376,7 @@ def build_dataset(
     config: dict[str, Any] | None = None,
     test_cases: Sequence[tuple[float, float, float]] = (),
     mesh: str | Path | None = None,
+    fields_paths: Sequence[str | Path] | None = None,
 ) -> dict[str, Any]:
     """Gather case files into one HDF5 dataset, written atomically.
 
@@ -297,6 +393,8 @@ def build_dataset(
             by-C1 splits partition whole directions and whole C1 values by the same
             fractions (:func:`group_partition`).
         mesh: the cases' mesh (XDMF): its tetrahedra are written as ``/points/cells``.
+        fields_paths: each case's ``fields.h5``, in the same order: on a quadratic mesh, the
+            fields at every node are written as ``/nodes`` (:func:`gather_nodes`).
 
     Raises:
         DatasetError: naming the case whose files are missing, truncated or whose
@@ -406,6 +504,12 @@ def build_dataset(
     if mesh is not None:
         reference = {**reference, "cells": mesh_cells(mesh, reference["node_index"],
                                                        reference["X"])}
+    nodes = None
+    if fields_paths is not None:
+        if len(fields_paths) != len(summary_paths):
+            raise DatasetError("need one fields file per summary")
+        if converged.any():
+            nodes = gather_nodes(fields_paths, converged, reference["X"])
     _write_atomically(
         Path(output),
         reference,
@@ -416,6 +520,7 @@ def build_dataset(
         {"by_sample": by_sample, "by_case": by_case, **held_out},
         {"seed": seed, "fractions": [split.train, split.validation, split.test]},
         provenance(config),
+        nodes,
     )
     failed = [s["case"] for s in summaries if s["status"] != "converged"]
     log.info("dataset: %d cases (%d failed), %d points", len(summaries), len(failed), n_points)
@@ -432,6 +537,7 @@ def _write_atomically(
     splits: dict[str, dict[str, np.ndarray]],
     split_info: dict[str, Any],
     prov: dict[str, Any],
+    nodes: dict[str, np.ndarray] | None = None,
 ) -> None:
     import h5py
 
@@ -458,6 +564,19 @@ def _write_atomically(
             if "cells" in reference:
                 pts.create_dataset("cells", data=reference["cells"]).attrs["description"] = (
                     "the mesh's tetrahedra as rows of /points (their corner vertices)")
+            if nodes is not None:
+                group = h5.create_group("nodes")
+                group.create_dataset("X", data=nodes["X"]).attrs["units"] = "m"
+                group.create_dataset("cells", data=nodes["cells"]).attrs["description"] = (
+                    "the mesh's 10-node tetrahedra as rows of /nodes/X, corners first")
+                group.create_dataset("vertex", data=nodes["vertex"]).attrs["description"] = (
+                    "the row of /nodes/X of each material point")
+                d = group.create_dataset(
+                    "displacement", data=nodes["displacement"],
+                    chunks=(1, *nodes["displacement"].shape[1:]), compression="gzip",
+                    compression_opts=4, shuffle=True)
+                d.attrs["units"] = "m"
+                d.attrs["description"] = "displacement at every node per case; NaN if failed"
             k = pts.create_dataset("kind", data=kind)
             k.attrs["legend"] = json.dumps({"domain": DOMAIN, "boundary": BOUNDARY})
             cases = h5.create_group("cases")
@@ -551,6 +670,8 @@ class Dataset:
         ids: case identifiers (M,).
         node_index: index of each point in the mesh file (N,), for writing fields.
         cells: the mesh's tetrahedra as rows of ``X`` (C, 4), or None if not recorded.
+        nodes: every node of a quadratic mesh and the fields there (``/nodes``), where the
+            dataset has them and was read with them.
     """
 
     X: np.ndarray
@@ -565,6 +686,7 @@ class Dataset:
     ids: np.ndarray
     node_index: np.ndarray | None = None
     cells: np.ndarray | None = None
+    nodes: Nodes | None = None
 
     @property
     def n_points(self) -> int:
@@ -600,8 +722,11 @@ def gravity_direction(phi_deg: np.ndarray, theta_deg: np.ndarray) -> np.ndarray:
     )
 
 
-def read_dataset(path: str | Path) -> Dataset:
+def read_dataset(path: str | Path, nodes: bool = False) -> Dataset:
     """Read and check the HDF5 dataset written by :func:`build_dataset`.
+
+    With ``nodes``, the fields at every node of a quadratic mesh too (``/nodes``, where the
+    dataset has them: about seven times the material points' size).
 
     Raises:
         DatasetError: if the file is missing, empty, has NaN in a converged
@@ -640,6 +765,7 @@ def read_dataset(path: str | Path) -> Dataset:
                 ids=h5["cases/id"].asstr()[...],
                 node_index=h5["points/node_index"][...] if "points/node_index" in h5 else None,
                 cells=h5["points/cells"][...] if "points/cells" in h5 else None,
+                nodes=_read_nodes(h5, path) if nodes and "nodes" in h5 else None,
             )
     except OSError as err:
         raise DatasetError(f"dataset {path} is unreadable ({err})") from None
@@ -657,6 +783,9 @@ def read_dataset(path: str | Path) -> Dataset:
         raise DatasetError(f"dataset {path} has no converged case")
     if not np.all(np.isfinite(ds.displacement[ds.converged])):
         raise DatasetError(f"dataset {path} has NaN or inf displacements in converged cases")
+    if ds.nodes is not None and not np.all(np.isfinite(ds.nodes.displacement[ds.converged])):
+        raise DatasetError(f"dataset {path} has NaN or inf /nodes displacements in converged "
+                           "cases")
     n_samples = {kind: ds.C1.shape[0] for kind in SPLIT_KINDS}
     n_samples["by_sample"] = ds.C1.shape[0] * ds.X.shape[0]
     for kind, parts in splits.items():
@@ -672,6 +801,24 @@ def read_dataset(path: str | Path) -> Dataset:
             if idx.size and not ds.converged[cases].all():
                 raise DatasetError(f"dataset {path}: split {kind}/{part} includes failed cases")
     return ds
+
+
+def _read_nodes(h5: Any, path: Path) -> Nodes:
+    """The ``/nodes`` group, checked; the displacement in mm (float32)."""
+    group = h5["nodes"]
+    X, cells, vertex = (group[k][...] for k in ("X", "cells", "vertex"))
+    displacement = group["displacement"][...]
+    displacement *= np.float32(1e3)
+    n_cases, n_points = h5["cases/C1"].shape[0], h5["points/X"].shape[0]
+    if (X.ndim != 2 or X.shape[1] != 3 or cells.ndim != 2 or cells.shape[1] != 10
+            or cells.min() < 0 or cells.max() >= len(X) or vertex.shape != (n_points,)
+            or vertex.min() < 0 or vertex.max() >= len(X)
+            or displacement.shape != (n_cases, len(X), 3)):
+        raise DatasetError(f"dataset {path}: /nodes is not a quadratic mesh of its points and "
+                           "cases")
+    if not np.allclose(X[vertex], h5["points/X"][...], rtol=0, atol=1e-9):
+        raise DatasetError(f"dataset {path}: /nodes/vertex does not list the material points")
+    return Nodes(X=X, cells=cells, vertex=vertex, displacement=displacement)
 
 
 def read_case_columns(path: str | Path) -> dict[str, np.ndarray]:

@@ -1,7 +1,7 @@
 """Benchmark: a ``pod`` surrogate on the held-out splits and between the mesh's nodes.
 
     .venv/bin/python -m studies.pod_basis DATASET --model MODEL [--by-direction MODEL]
-        [--by-c1 MODEL] [--outside DIR] [--quadratic CASES] [--config config.yaml]
+        [--by-c1 MODEL] [--outside DIR] [--centroids] [--config config.yaml]
         [--set KEY=VALUE ...] [--json OUT]
 
 A ``pod`` surrogate (:mod:`surrogate.pod`) takes the leading POD modes of the training cases'
@@ -19,12 +19,11 @@ fits such models with the ``surrogate`` settings of ``--config`` (structure forc
 Errors per case: mean, 95th percentile and largest point error (mm); over cases: their mean, the
 95th percentile of the 95th percentiles and the largest (:class:`studies.held_out.ErrorSpread`).
 
-With ``--quadratic CASES`` (the sweep's case folders), the basis is taken at the FE's own
-quadratic nodes (each case's ``fields.h5``) and every error is measured at the mesh's cell
-centroids, between the nodes: the basis there by the 10-node tetrahedra's shape functions, FE
-by the same (exact: the FE field is quadratic), and the models by ``Surrogate.at`` (a ``pod``
-model by linear interpolation of its modes between the vertices). Without it, errors are at the
-material points (the mesh's vertices) only.
+The pod models are fitted as the workflow fits them: at every node of a quadratic mesh where
+the dataset holds the fields there (``/nodes``). With ``--centroids`` (such a dataset), every
+error is measured at the mesh's cell centroids, between the nodes: FE by the 10-node
+tetrahedra's shape functions (exact: the FE field is quadratic), the models by
+``Surrogate.at``. Without it, errors are at the material points (the mesh's vertices) only.
 """
 
 from __future__ import annotations
@@ -39,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fem.dataset import Dataset, read_dataset, read_summary
+from fem.dataset import Dataset, read_dataset, read_node_displacement, read_summary
 from studies.held_out import CaseErrors, ErrorSpread
 from studies.surrogate_evaluation import fe_in_model_order
 from surrogate.config import SurrogateConfig
@@ -80,32 +79,6 @@ def spread(predict, ds: Dataset, cases: Sequence[int], truth=None) -> ErrorSprea
     return ErrorSpread.over(rows)
 
 
-def read_fields(folder: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A case folder's FE displacement at the mesh's nodes (mm), its cells and nodes (m).
-
-    From the case's ``fields.h5`` (:mod:`fem.io`), where the displacement is given at every
-    node of the mesh's geometry: on the default quadratic mesh, the FE field's own nodes.
-
-    Raises:
-        ValueError: if the file is missing or its cells are not 10-node tetrahedra.
-    """
-    import h5py
-
-    from meshes.io import GEOMETRY_DATASET, TOPOLOGY_DATASET
-
-    path = folder / "fields.h5"
-    if not path.is_file():
-        raise ValueError(f"{path}: no such file (the case's fields)")
-    with h5py.File(path, "r") as h5:
-        u = 1e3 * np.asarray(h5["Function/displacement/0"], dtype=np.float64)
-        cells = np.asarray(h5[TOPOLOGY_DATASET], dtype=np.int64)
-        nodes = np.asarray(h5[GEOMETRY_DATASET], dtype=np.float64)
-    if cells.shape[1] != 10:
-        raise ValueError(f"{path}: cells of {cells.shape[1]} nodes; the centroids need the "
-                         "quadratic mesh's 10-node tetrahedra")
-    return u, cells, nodes
-
-
 def at_centroids(u: np.ndarray, cells: np.ndarray) -> np.ndarray:
     """A quadratic field given at the nodes, at each cell's centroid: (..., cells, 3).
 
@@ -113,27 +86,6 @@ def at_centroids(u: np.ndarray, cells: np.ndarray) -> np.ndarray:
     every edge one 1/4, whatever the order of the edges.
     """
     return -0.125 * u[..., cells[:, :4], :].sum(-2) + 0.25 * u[..., cells[:, 4:], :].sum(-2)
-
-
-def quadratic_dataset(ds: Dataset, cases_dir: Path) -> tuple[Dataset, np.ndarray]:
-    """``ds`` with each converged case's field at the mesh's quadratic nodes, and the cells.
-
-    Raises:
-        ValueError: if a case's fields are missing, or its mesh is not the first case's.
-    """
-    converged = np.flatnonzero(ds.converged)
-    first, cells, nodes = read_fields(cases_dir / str(ds.ids[converged[0]]))
-    U = np.full((len(ds.ids), *first.shape), np.nan)
-    for i in converged:
-        u, c, x = read_fields(cases_dir / str(ds.ids[i]))
-        if not (np.array_equal(c, cells) and np.array_equal(x, nodes)):
-            raise ValueError(f"{cases_dir / str(ds.ids[i])}: another mesh than the first case's")
-        U[i] = u
-    quadratic = Dataset(X=nodes, boundary=np.zeros(len(nodes), dtype=bool), C1=ds.C1,
-                        phi=ds.phi, theta=ds.theta, direction=ds.direction, displacement=U,
-                        converged=ds.converged, splits=ds.splits, ids=ds.ids,
-                        node_index=np.arange(len(nodes)))
-    return quadratic, cells
 
 
 def outside_cases(
@@ -155,7 +107,8 @@ def outside_cases(
         if summary["status"] != "converged" or not lo - 1e-9 <= C1 <= hi + 1e-9:
             continue
         if cells is not None:
-            u, c, _ = read_fields(summary_path.parent)
+            u, c, _ = read_node_displacement(summary_path.parent / "fields.h5")
+            u = 1e3 * u  # mm
             if not np.array_equal(c, cells):
                 raise ValueError(f"{summary_path.parent}: another mesh than the dataset's")
             found.append((str(summary["case"]), C1, float(summary["phi"]),
@@ -189,13 +142,13 @@ def main(argv: list[str] | None = None) -> int:
                         help="config whose `surrogate` section the pod models take")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="override one surrogate setting (YAML value), e.g. modes=32")
-    parser.add_argument("--quadratic", type=Path, metavar="CASES",
-                        help="the sweep's case folders: take the basis at the FE's quadratic "
-                             "nodes (each case's fields.h5) and measure every error at the "
-                             "cells' centroids, between the nodes (the models by Surrogate.at)")
+    parser.add_argument("--centroids", action="store_true",
+                        help="measure every error at the quadratic mesh's cell centroids, "
+                             "between the nodes (the models by Surrogate.at); needs a dataset "
+                             "with the fields at every node (/nodes)")
     parser.add_argument("--json", type=Path, help="write the figures here too")
     args = parser.parse_args(argv)
-    for path in (args.model, args.by_direction, args.by_c1, args.outside, args.quadratic):
+    for path in (args.model, args.by_direction, args.by_c1, args.outside):
         if path is not None and not path.is_dir():
             print(f"error: {path} is not a folder", file=sys.stderr)
             return 2
@@ -207,31 +160,29 @@ def main(argv: list[str] | None = None) -> int:
     except (OSError, SurrogateError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    ds = read_dataset(args.dataset)
+    ds = read_dataset(args.dataset, nodes=True)
     if ds.node_index is None:
         print(f"error: {args.dataset} has no node_index", file=sys.stderr)
         return 2
     converged = np.flatnonzero(ds.converged)
     figures: dict[str, dict] = {}
-    basis, cells, truth = ds, None, None
-    if args.quadratic:
-        try:
-            basis, cells = quadratic_dataset(ds, args.quadratic)
-        except ValueError as error:
-            print(f"error: {error}", file=sys.stderr)
+    cells, truth = None, None
+    if args.centroids:
+        if ds.nodes is None:
+            print(f"error: {args.dataset} has no fields at a quadratic mesh's nodes (/nodes, "
+                  "written for a mesh of 10-node tetrahedra): no centroids to measure at",
+                  file=sys.stderr)
             return 2
-        centroid_x = at_centroids(basis.X, cells)
+        cells = ds.nodes.cells
+        centroid_x = at_centroids(ds.nodes.X, cells)
 
         def truth(i: int) -> np.ndarray:
-            return at_centroids(basis.displacement[i], cells)
+            return at_centroids(ds.nodes.displacement[i].astype(np.float64), cells)
 
     def where(model: Surrogate):  # the model's predict at the points the errors are taken
         return _quiet(model if cells is None else model.at(centroid_x))
 
-    def pod_predict(pod: Surrogate):  # at the nodes, then between them
-        if cells is None:
-            return _quiet(pod)
-        return lambda C1, phi, theta: at_centroids(_quiet(pod)(C1, phi, theta), cells)
+    pod_predict = where
 
     def row(name: str, pod: ErrorSpread, model: ErrorSpread | None) -> None:
         figures[name] = {"pod": pod.to_json(), "model": model.to_json() if model else None}
@@ -241,11 +192,11 @@ def main(argv: list[str] | None = None) -> int:
     for split, path in (("by_direction", args.by_direction), ("by_c1", args.by_c1)):
         parts = ds.splits[split]
         test = np.intersect1d(parts["test"], converged)
-        pod, seconds = fit(basis, parts["train"], parts["validation"], config)
+        pod, seconds = fit(ds, parts["train"], parts["validation"], config)
         other = spread(where(Surrogate.load(path)), ds, test, truth) if path else None
         row(f"{split} held out ({seconds:.0f} s)",
             spread(pod_predict(pod), ds, test, truth), other)
-    pod, seconds = fit(basis, converged, converged, config)
+    pod, seconds = fit(ds, converged, converged, config)
     surrogate = Surrogate.load(args.model)
     model = where(surrogate)
     soft = [i for i in converged
@@ -262,12 +213,11 @@ def main(argv: list[str] | None = None) -> int:
                   for f in (pod_predict(pod), model)]
         row(case, *errors)
     queries = [(float(ds.C1[i]), float(ds.phi[i]), float(ds.theta[i])) for i in converged[:50]]
-    timing = {name: _median_ms(f, queries) for name, f in (("pod", _quiet(pod)), ("model", model))}
+    timing = {name: _median_ms(f, queries) for name, f in (("pod", where(pod)), ("model", model))}
     figures["prediction_median_ms"] = timing
-    pod_at, model_at = (("the material points",) * 2 if cells is None else
-                        (f"its {len(basis.X)} quadratic nodes", f"the {len(cells)} centroids"))
+    at = "the material points" if cells is None else f"the {len(cells)} centroids"
     print(f"prediction, median of {len(queries) * 4} cases in this process: POD "
-          f"{timing['pod']:.3f} ms at {pod_at}, model {timing['model']:.3f} ms at {model_at}")
+          f"{timing['pod']:.3f} ms, model {timing['model']:.3f} ms, at {at}")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps({"settings": config.as_dict(), "figures": figures},

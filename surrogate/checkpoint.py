@@ -75,9 +75,13 @@ def save_model(folder: str | Path, result: TrainResult, ds: Dataset) -> Path:
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     checkpoint = in_memory(result, ds)
+    nodes = checkpoint.nodes
     extra = {name: value for name, value in (("points_factor", checkpoint.point_factor),
                                              ("points_basis", checkpoint.basis),
-                                             ("mesh_cells", checkpoint.cells))
+                                             ("mesh_cells", checkpoint.cells),
+                                             ("mesh_nodes_X", nodes and nodes.X),
+                                             ("mesh_nodes_cells", nodes and nodes.cells),
+                                             ("mesh_nodes_basis", nodes and nodes.basis))
              if value is not None}
     node_index = ds.node_index if ds.node_index is not None else np.arange(ds.n_points)
     np.savez(
@@ -106,6 +110,32 @@ def save_model(folder: str | Path, result: TrainResult, ds: Dataset) -> Path:
 
 
 @dataclass(frozen=True)
+class NodeModes:
+    """A ``pod`` model's modes at every node of a quadratic mesh: its answers between the points.
+
+    Attributes:
+        X: the nodes (K, 3), m.
+        cells: the 10-node tetrahedra as rows of ``X`` (C, 10), corners first.
+        basis: the modes there (K, 3, modes), float32.
+    """
+
+    X: np.ndarray
+    cells: np.ndarray
+    basis: np.ndarray
+
+    def __post_init__(self) -> None:
+        X, cells, basis = self.X, self.cells, self.basis
+        if X.ndim != 2 or X.shape[1] != 3 or cells.ndim != 2 or cells.shape[1] != 10:
+            raise ValueError(f"quadratic nodes need (K, 3) nodes and (C, 10) cells, got "
+                             f"{X.shape} and {cells.shape}")
+        if cells.size and (cells.min() < 0 or cells.max() >= len(X)):
+            raise ValueError("the quadratic cells are not cells of the nodes")
+        if basis.ndim != 3 or basis.shape[:2] != (len(X), 3) or not np.all(np.isfinite(basis)):
+            raise ValueError(f"the modes at the nodes are not finite (K, 3, modes) with K = "
+                             f"{len(X)}, got shape {basis.shape}")
+
+
+@dataclass(frozen=True)
 class Checkpoint:
     """What a model folder holds, checked against its architecture.
 
@@ -122,6 +152,8 @@ class Checkpoint:
         held_out: ids of cases kept out of its training and validation.
         basis: a ``pod`` model's modes at the points (N, 3, modes), else None.
         cells: the mesh's tetrahedra as rows of ``X`` (C, 4), where its dataset had them.
+        nodes: a ``pod`` model's modes at every node of a quadratic mesh, where its dataset had
+            the fields there; else None.
     """
 
     config: SurrogateConfig
@@ -136,6 +168,7 @@ class Checkpoint:
     held_out: list[str] = field(default_factory=list)
     basis: np.ndarray | None = None
     cells: np.ndarray | None = None
+    nodes: NodeModes | None = None
 
 
 def in_memory(result: TrainResult, ds: Dataset) -> Checkpoint:
@@ -145,11 +178,17 @@ def in_memory(result: TrainResult, ds: Dataset) -> Checkpoint:
     """
     cases = result.train_cases if result.train_cases is not None else np.flatnonzero(ds.converged)
     held_out = result.held_out_cases if result.held_out_cases is not None else []
+    nodes = None
+    if result.node_basis is not None:
+        if ds.nodes is None:
+            raise ValueError("a model fitted at a quadratic mesh's nodes is saved with the "
+                             "dataset it was fitted on, read with its nodes")
+        nodes = NodeModes(ds.nodes.X, ds.nodes.cells, result.node_basis)
     return Checkpoint(
         result.config, result.params, result.normalisation, ds.X, ds.boundary,
         training_range(ds, cases), point_factor=result.point_factor, node_index=ds.node_index,
         metrics=result.summary(), held_out=[str(ds.ids[c]) for c in held_out],
-        basis=result.basis, cells=ds.cells,
+        basis=result.basis, cells=ds.cells, nodes=nodes,
     )
 
 
@@ -186,6 +225,15 @@ def load_checkpoint(folder: str | Path) -> Checkpoint:
     if cells is not None and (cells.ndim != 2 or cells.shape[1] != 4 or cells.min() < 0
                               or cells.max() >= len(X)):
         raise ModelFileError(f"{folder}: mesh_cells are not tetrahedra of its points")
+    nodes = None
+    if "mesh_nodes_basis" in points:
+        try:
+            nodes = NodeModes(points["mesh_nodes_X"], points["mesh_nodes_cells"],
+                              points["mesh_nodes_basis"])
+        except (KeyError, ValueError) as err:
+            raise ModelFileError(f"{folder}: {err}") from None
+        if basis is not None and nodes.basis.shape[2] != basis.shape[2]:
+            raise ModelFileError(f"{folder}: the modes at the nodes are not the points' modes")
     return Checkpoint(
         config,
         params,
@@ -199,6 +247,7 @@ def load_checkpoint(folder: str | Path) -> Checkpoint:
         held_out=list(meta.get("held_out_cases") or []),
         basis=basis,
         cells=cells,
+        nodes=nodes,
     )
 
 

@@ -91,7 +91,7 @@ def train(args: argparse.Namespace) -> int:
 
     try:
         config, overrides = settings(args.config, args.set)
-        dataset = read_dataset(args.dataset)
+        dataset = read_dataset(args.dataset, nodes=config.structure == "pod")
         result = train_and_evaluate(dataset, config, progress=args.progress)
     except (OSError, SurrogateError, DatasetError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)

@@ -1,8 +1,12 @@
-"""Fields given at the mesh's vertices, between them: linear interpolation in its tetrahedra.
+"""Fields given at a mesh's nodes, between them: its tetrahedra's shape functions.
 
-A ``pod`` surrogate's modes are known at the material points only (the mesh's vertices); it
-answers at another point, such as a tumour's material position, by the linear shape functions of
-the tetrahedron that holds it (:meth:`surrogate.predict.Surrogate.at`).
+A ``pod`` surrogate's modes are known at the mesh's nodes; it answers at another point, such as
+a tumour's material position, by the shape functions of the tetrahedron that holds it
+(:meth:`surrogate.predict.Surrogate.at`): the linear ones of its corners (:func:`locate`) where
+the modes are known at the vertices only, the quadratic ones of its ten nodes
+(:func:`locate_quadratic`) where they are known at every node of a quadratic mesh, as the FE
+field is. The quadratic cells may be curved (edge nodes on the skin): a point's reference
+coordinates in its cell are then found by Newton's method on the cell's map.
 """
 
 from __future__ import annotations
@@ -15,6 +19,13 @@ OUTSIDE_M = 1e-3
 """How far outside the mesh (m) a point may lie and still be answered, on its nearest cell's
 face: a point on the curved skin lies up to a fraction of a millimetre outside the straight-sided
 cells of its vertices."""
+
+
+EDGES = ((0, 1), (1, 2), (0, 2), (0, 3), (1, 3), (2, 3))
+"""Corner pairs of a tetrahedron's six edges; a 10-node cell's edge nodes follow its corners in
+an order of these that :func:`edge_order` reads from the nodes' positions."""
+NEWTON_STEPS = 8
+"""Newton steps that invert a curved cell's map (it is nearly affine: two or three suffice)."""
 
 
 def locate(X: np.ndarray, cells: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -33,6 +44,13 @@ def locate(X: np.ndarray, cells: np.ndarray, points: np.ndarray) -> tuple[np.nda
     Raises:
         ValueError: naming how many points lie farther outside the mesh, and the farthest.
     """
+    which, weights = _cells_holding(X, cells, points)
+    return cells[which], weights
+
+
+def _cells_holding(X: np.ndarray, cells: np.ndarray, points: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Each point's cell (M,) and its barycentric coordinates there (M, 4): see :func:`locate`."""
     from scipy.spatial import cKDTree
 
     X, points = np.asarray(X, dtype=float), np.asarray(points, dtype=float)
@@ -53,7 +71,8 @@ def locate(X: np.ndarray, cells: np.ndarray, points: np.ndarray) -> tuple[np.nda
     pick = np.arange(len(points))
     weights = np.clip(bary[pick, best], 0.0, None)
     weights /= weights.sum(axis=1, keepdims=True)
-    rows = cells[near[pick, best]]
+    which = near[pick, best]
+    rows = cells[which]
     gap = np.linalg.norm(np.einsum("mj,mjd->md", weights, X[rows]) - points, axis=1)
     outside = gap > OUTSIDE_M
     if outside.any():
@@ -61,9 +80,91 @@ def locate(X: np.ndarray, cells: np.ndarray, points: np.ndarray) -> tuple[np.nda
             f"{int(outside.sum())} of {len(points)} points lie outside the mesh by more than "
             f"{1e3 * OUTSIDE_M:g} mm (the farthest {1e3 * gap.max():.1f} mm, point "
             f"{int(np.argmax(gap))}): the model's modes are known inside the body only")
-    return rows, weights
+    return which, weights
+
+
+def edge_order(X: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """Which corner pair each edge node of a 10-node cell sits between: (6, 2) corner slots.
+
+    Read from the nodes' positions (each edge node lies nearest the midpoint of its corners,
+    curved or not), so that any writer's node order will do, as long as every cell shares it.
+
+    Raises:
+        ValueError: if ``cells`` are not 10-node tetrahedra, or their edge nodes are not in one
+            order.
+    """
+    if cells.ndim != 2 or cells.shape[1] != 10:
+        raise ValueError(f"quadratic cells have 10 nodes, got cells of shape {cells.shape}")
+    corners, edge_nodes = X[cells[:, :4]], X[cells[:, 4:]]
+    midpoints = np.stack([(corners[:, a] + corners[:, b]) / 2 for a, b in EDGES], axis=1)
+    distance = np.linalg.norm(edge_nodes[:, :, None, :] - midpoints[:, None, :, :], axis=-1)
+    nearest = np.argmin(distance, axis=2)  # (C, 6): the pair of each edge node
+    order = nearest[0]
+    if not np.all(nearest == order) or len(set(order.tolist())) != 6:
+        raise ValueError("the cells' edge nodes are not in one order of their corner pairs")
+    return np.asarray(EDGES)[order]
+
+
+def quadratic_weights(bary: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """The 10-node tetrahedron's shape functions at barycentric coordinates (M, 4): (M, 10).
+
+    Corner i: λ_i (2 λ_i − 1); the edge node between corners i and j: 4 λ_i λ_j.
+    """
+    corner = bary * (2.0 * bary - 1.0)
+    edge = 4.0 * bary[:, pairs[:, 0]] * bary[:, pairs[:, 1]]
+    return np.concatenate([corner, edge], axis=1)
+
+
+def _quadratic_gradients(bary: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """d(shape functions)/d(λ1, λ2, λ3), with λ0 = 1 − λ1 − λ2 − λ3: (M, 10, 3)."""
+    dbary = np.array([[-1.0, -1.0, -1.0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])  # dλ_i/dξ
+    corner = (4.0 * bary - 1.0)[:, :, None] * dbary[None]
+    a, b = pairs[:, 0], pairs[:, 1]
+    edge = 4.0 * (bary[:, a, None] * dbary[None, b] + bary[:, b, None] * dbary[None, a])
+    return np.concatenate([corner, edge], axis=1)
+
+
+def locate_quadratic(
+    X: np.ndarray, cells: np.ndarray, points: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each point's 10-node tetrahedron and its quadratic shape functions there.
+
+    The point is found among the straight cells of the corners (:func:`locate`), then its
+    reference coordinates in that cell's curved map by Newton's method.
+
+    Args:
+        X: the mesh's nodes (K, 3), m.
+        cells: its 10-node tetrahedra as rows of ``X`` (C, 10), corners first.
+        points: where to interpolate (M, 3), m.
+
+    Returns:
+        ``(rows (M, 10), weights (M, 10))`` for :func:`interpolate`.
+
+    Raises:
+        ValueError: as :func:`locate`, or for cells that are not 10-node tetrahedra.
+    """
+    X, points = np.asarray(X, dtype=float), np.asarray(points, dtype=float)
+    pairs = edge_order(X, cells)
+    which, bary = _cells_holding(X, cells[:, :4], points)
+    rows = cells[which]
+    nodes = X[rows]  # (M, 10, 3)
+    straight = bary
+    xi = bary[:, 1:].copy()
+    with np.errstate(all="ignore"):
+        for _ in range(NEWTON_STEPS):
+            bary = np.concatenate([1.0 - xi.sum(1, keepdims=True), xi], axis=1)
+            residual = np.einsum("mk,mkd->md", quadratic_weights(bary, pairs), nodes) - points
+            jacobian = np.einsum("mkd,mke->mde", nodes, _quadratic_gradients(bary, pairs))
+            xi -= np.linalg.solve(jacobian, residual[..., None])[..., 0]
+        bary = np.concatenate([1.0 - xi.sum(1, keepdims=True), xi], axis=1)
+        gap = np.einsum("mk,mkd->md", quadratic_weights(bary, pairs), nodes) - points
+    # a point the curved map does not reach (outside the body, clipped to a face by locate):
+    # the straight cell's coordinates
+    lost = ~np.isfinite(gap).all(axis=1) | (np.linalg.norm(gap, axis=1) > 1e-3 * OUTSIDE_M)
+    bary[lost] = straight[lost]
+    return rows, quadratic_weights(bary, pairs)
 
 
 def interpolate(field: np.ndarray, rows: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """A field at the vertices (N, ...) at the located points (M, ...)."""
+    """A field at the nodes (N, ...) at the located points (M, ...)."""
     return np.einsum("mj,mj...->m...", weights, field[rows])

@@ -19,6 +19,13 @@ and basis together.
 The modes are stored scaled by the weights' RMS over the training cases, so that the branch's
 outputs are of order one: the displacement of a case is ``gain(C1) · u_scale · (b(C1, ĝ) ·
 modes)``.
+
+Where the dataset holds the fields at every node of a quadratic mesh (``/nodes``, read with
+``read_dataset(..., nodes=True)``), the modes are taken there: the FE field's own nodes, between
+which its quadratic shape functions give it exactly. The material points' modes are their
+rows (a query at the points costs the same), and the model answers between the points by the
+quadratic shape functions (:func:`surrogate.interpolation.locate_quadratic`) instead of the
+vertices' linear ones.
 """
 
 from __future__ import annotations
@@ -71,9 +78,15 @@ def case_split(
     return train, val
 
 
-def scaled_fields(ds: Dataset, cases: np.ndarray, norm: Normalisation) -> np.ndarray:
-    """The cases' fields as the model predicts them, (cases, 3N): u / (gain(C1) · u_scale)."""
-    u = ds.displacement[cases] / (norm.gain(ds.C1[cases]) * norm.u_scale)[:, None, None]
+def scaled_fields(ds: Dataset, cases: np.ndarray, norm: Normalisation,
+                  displacement: np.ndarray | None = None) -> np.ndarray:
+    """The cases' fields as the model predicts them, (cases, 3N): u / (gain(C1) · u_scale).
+
+    ``displacement`` (cases of ``ds``, nodes, 3) in mm replaces the material points' fields,
+    e.g. the fields at a quadratic mesh's nodes.
+    """
+    u = ds.displacement if displacement is None else displacement
+    u = u[cases] / (norm.gain(ds.C1[cases]) * norm.u_scale)[:, None, None]
     return u.reshape(len(cases), -1)
 
 
@@ -147,8 +160,8 @@ def fit(
 ) -> TrainResult:
     """Fit the basis on ``train_cases`` and train the branch, stopping early on ``val_cases``.
 
-    ``holdout`` is recorded as the cases kept out. Any point set will do: a dataset whose points
-    are the mesh's quadratic nodes gives the basis there (:mod:`studies.pod_basis`).
+    ``holdout`` is recorded as the cases kept out. Where ``ds`` holds the fields at a quadratic
+    mesh's nodes, the basis is taken there (the module docstring).
 
     Raises:
         ValueError: if a case did not converge, or there are fewer training cases than modes.
@@ -161,19 +174,31 @@ def fit(
         raise ValueError(f"surrogate.modes = {config.modes} POD modes need at least as many "
                          f"training cases ({len(train_cases)} given) and a validation case")
     norm = Normalisation.fit(ds, train_cases, config.c1_encoding, config.output_scaling)
-    train_fields = scaled_fields(ds, train_cases, norm)
+    nodes = ds.nodes if ds.nodes is not None and ds.nodes.displacement is not None else None
+    at_nodes = None if nodes is None else nodes.displacement
+    train_fields = scaled_fields(ds, train_cases, norm, at_nodes)
     basis, singular, scale = fit_basis(train_fields, config.modes)
     unit = basis / scale**2  # projects a field onto the scaled basis: weights of RMS one
-    modes = _clamped(basis.T.reshape(ds.n_points, 3, config.modes), ds.boundary)
+    node_modes = None
+    if nodes is None:
+        modes = _clamped(basis.T.reshape(ds.n_points, 3, config.modes), ds.boundary)
+    else:
+        # the rib's nodes: the points flagged so, and the edge nodes every training field
+        # holds at zero (the Dirichlet condition's own nodes)
+        rib = ~np.any(train_fields.reshape(len(train_cases), -1, 3) != 0.0, axis=(0, 2))
+        rib[nodes.vertex[ds.boundary]] = True
+        node_modes = _clamped(basis.T.reshape(len(nodes.X), 3, config.modes), rib)
+        modes = node_modes[nodes.vertex]
     basis_j = jnp.asarray(modes.reshape(-1, config.modes).T)
 
-    def data(cases: np.ndarray, fields: np.ndarray) -> tuple[jax.Array, jax.Array, jax.Array]:
+    def data(cases: np.ndarray) -> tuple[jax.Array, jax.Array, jax.Array]:
         features = norm.case(ds.C1[cases], ds.direction[cases])
-        return (jnp.asarray(features, jnp.float32), jnp.asarray(fields @ unit.T, jnp.float32),
-                jnp.asarray(fields, jnp.float32))
+        weights = scaled_fields(ds, cases, norm, at_nodes) @ unit.T
+        return (jnp.asarray(features, jnp.float32), jnp.asarray(weights, jnp.float32),
+                jnp.asarray(scaled_fields(ds, cases, norm), jnp.float32))
 
-    train_x, train_w, _ = data(train_cases, train_fields)
-    val_x, val_w, val_fields = data(val_cases, scaled_fields(ds, val_cases, norm))
+    train_x, train_w, _ = data(train_cases)
+    val_x, val_w, val_fields = data(val_cases)
     val_gain = jnp.asarray(norm.gain(ds.C1[val_cases]) * norm.u_scale, jnp.float32)
     off_rib = jnp.asarray(~ds.boundary, jnp.float32)
     n, n_off = ds.n_points, max(int(np.sum(~ds.boundary)), 1)
@@ -197,13 +222,15 @@ def fit(
     result = TrainResult(
         params={"branch": layers}, config=config, normalisation=norm,
         train_cases=train_cases, held_out_cases=None if holdout is None else np.asarray(holdout),
-        basis=modes,
+        basis=modes, node_basis=node_modes,
     )
     result.compile_s = time.perf_counter() - t0
     left = float(np.sum(singular[config.modes:] ** 2) / np.sum(singular**2))
-    log.info("%s pod: %d training cases, %d validation cases on %d points, %d modes leaving "
-             "%.2e of the training fields' energy out, compiled in %.1f s", config.architecture,
-             len(train_cases), len(val_cases), n, config.modes, left, result.compile_s)
+    log.info("%s pod: %d training cases, %d validation cases, modes at %d %s, %d modes "
+             "leaving %.2e of the training fields' energy out, compiled in %.1f s",
+             config.architecture, len(train_cases), len(val_cases),
+             n if nodes is None else len(nodes.X), "points" if nodes is None else "nodes",
+             config.modes, left, result.compile_s)
 
     best: dict[str, Any] = {"loss": float("inf"), "layers": layers, "epoch": 0}
     since_best = 0

@@ -279,9 +279,11 @@ class Surrogate:
         """The same model queried at other material points ``points`` (M, 3), in m.
 
         The network is a function of the reference position, so it answers between the
-        material points it was trained on (a ``pod`` model by its modes' linear interpolation in
-        the mesh's tetrahedra, :mod:`surrogate.interpolation`): a tumour's material position,
-        found from the imaged shape (:func:`fem.tracking.to_reference`), is predicted directly.
+        material points it was trained on (a ``pod`` model by its modes' interpolation in the
+        mesh's tetrahedra, :mod:`surrogate.interpolation`: quadratic where it has its modes at
+        every node of a quadratic mesh, linear between the vertices otherwise): a tumour's
+        material position, found from the imaged shape (:func:`fem.tracking.to_reference`), is
+        predicted directly.
         Every point goes through the domain network (points strictly inside the body); an
         exact-Dirichlet model's factor is evaluated at them with the model's own length scale.
         Each query of the returned model costs in proportion to M.
@@ -303,18 +305,22 @@ class Surrogate:
             factor = dirichlet_factor(self.X, self.boundary, c.config.bc_length, at=points)
         basis = None
         if c.config.structure == "pod":
-            from surrogate.interpolation import interpolate, locate
+            from surrogate.interpolation import interpolate, locate, locate_quadratic
 
-            if c.cells is None:
+            if c.nodes is not None:
+                where = locate_quadratic(c.nodes.X, c.nodes.cells, points)
+                basis = interpolate(c.nodes.basis, *where).astype(np.float32)
+            elif c.cells is not None:
+                basis = interpolate(c.basis, *locate(self.X, c.cells, points)).astype(np.float32)
+            else:
                 raise ValueError(
                     "this pod model answers at its material points only: its dataset has no "
                     "mesh cells to interpolate its modes in (rebuild the dataset with its mesh, "
                     "snakemake --forcerun aggregate, and train again)")
-            basis = interpolate(c.basis, *locate(self.X, c.cells, points)).astype(np.float32)
         return Surrogate(replace(
             c, X=points, boundary=np.zeros(len(points), dtype=bool),
             point_factor=None if factor is None else factor.astype(np.float32),
-            node_index=None, basis=basis, cells=None,
+            node_index=None, basis=basis, cells=None, nodes=None,
         ))
 
     # -- queries ----------------------------------------------------------------------

@@ -64,6 +64,8 @@ class TrainResult:
         held_out_cases: case indices excluded from training and validation.
         basis: a ``pod`` model's modes at the points (N, 3, modes), in units of the
             displacement scale per unit weight (:mod:`surrogate.pod`); None for the others.
+        node_basis: a ``pod`` model's modes at every node of its dataset's quadratic mesh
+            (K, 3, modes), where it was fitted there; else None.
     """
 
     params: Params
@@ -80,6 +82,7 @@ class TrainResult:
     train_cases: np.ndarray | None = None
     held_out_cases: np.ndarray | None = None
     basis: np.ndarray | None = None
+    node_basis: np.ndarray | None = None
 
     def summary(self) -> dict[str, Any]:
         """JSON-friendly metrics."""

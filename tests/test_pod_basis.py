@@ -70,12 +70,12 @@ def test_a_quadratic_field_is_exact_at_a_cells_centroid_whatever_the_edge_order(
 def test_the_benchmark_refuses_a_linear_mesh_for_the_centroids(
     small_run, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """The tests' small run has a linear mesh: ``--quadratic`` names the problem, fits nothing."""
+    """The tests' small run has a linear mesh: ``--centroids`` names the problem, fits nothing."""
     from studies.pod_basis import main
 
     results = small_run / "results"
     code = main([str(results / "dataset/dataset.h5"), "--model", str(results / "surrogate/model"),
-                 "--quadratic", str(results / "cases"), "--config", "tests/config.yaml",
+                 "--centroids", "--config", "tests/config.yaml",
                  "--set", "max_epochs=1", "--set", "modes=2"])
     assert code == 2
     assert "10-node tetrahedra" in capsys.readouterr().err

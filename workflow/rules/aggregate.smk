@@ -9,6 +9,8 @@ rule aggregate:
     input:
         summaries=case_files("summary.json"),
         points=case_files("points.h5"),
+        # on a quadratic mesh, the fields at every node (a pod surrogate's modes between points)
+        fields=case_files("fields.h5"),
         # its tetrahedra go into the dataset (a pod surrogate interpolates its modes in them)
         mesh=MESH,
     output:

@@ -15,4 +15,5 @@ build_dataset(
     config=snakemake.params.provenance,
     test_cases=[(c["C1"], c["phi"], c.get("theta", 0.0)) for c in snakemake.params.clinical],
     mesh=snakemake.input.mesh,
+    fields_paths=snakemake.input.fields,
 )

@@ -26,7 +26,8 @@ config = SurrogateConfig.from_mapping(dict(snakemake.params.surrogate)).with_arc
 # repeat r trains with seed + r: the same seeds in the study and in every variant
 config = config.replace(seed=config.seed + int(getattr(wildcards, "repeat", 0)))
 
-dataset = read_dataset(snakemake.input.dataset)
+# a pod model takes its modes at every node of a quadratic mesh, where the dataset has them
+dataset = read_dataset(snakemake.input.dataset, nodes=config.structure == "pod")
 holdout = [
     dataset.case_index(c["C1"], c["phi"], c.get("theta", 0.0)) for c in snakemake.params.holdout
 ]

@@ -1,0 +1,204 @@
+"""The fields at every node of a quadratic mesh: in the dataset, a pod model's modes, its answers.
+
+The FE field is quadratic in each cell; a ``pod`` model whose modes are known at every node
+answers between the points by the same shape functions, so that a field quadratic in space
+comes back exactly where the vertices' linear interpolation misses its curvature.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from fem.dataset import (
+    FIELD_DATASET,
+    DatasetError,
+    build_dataset,
+    gravity_direction,
+    read_dataset,
+    write_points,
+)
+from fem.sweep import Case
+from surrogate.config import SurrogateConfig
+from surrogate.exceptions import ExtrapolationWarning
+from surrogate.interpolation import (
+    EDGES,
+    edge_order,
+    interpolate,
+    locate_quadratic,
+    quadratic_weights,
+)
+
+pytestmark = pytest.mark.unit
+
+CONFIG = SurrogateConfig(structure="pod", modes=6, hidden_layers=2, width=32, activation="silu",
+                         c1_encoding="inverse", output_scaling="compliance",
+                         output_form="gravity_linear", learning_rate=0.003, beta1=0.9,
+                         beta2=0.999, lr_schedule="cosine", max_epochs=60, patience=60)
+SIZE = 0.1
+"""The cube's edge (m): a breast's scale, so that the 1 mm outside tolerance means the same."""
+
+
+def quadratic_cube(n: int = 4, order: tuple[tuple[int, int], ...] = EDGES[::-1]
+                   ) -> tuple[np.ndarray, np.ndarray, int]:
+    """A cube's 10-node tetrahedra, its edge nodes at midpoints in ``order``.
+
+    Returns the nodes, the cells and the number of vertices (the first rows of the nodes).
+    """
+    from scipy.spatial import Delaunay
+
+    axis = np.linspace(0.0, SIZE, n)
+    V = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1).reshape(-1, 3)
+    tets = Delaunay(V).simplices
+    tets = tets[np.abs(np.linalg.det(V[tets[:, 1:]] - V[tets[:, :1]])) > 1e-12 * SIZE**3]
+    nodes, edges, cells = list(V), {}, []
+    for tet in tets:
+        row = list(tet)
+        for a, b in order:
+            key = (min(tet[a], tet[b]), max(tet[a], tet[b]))
+            if key not in edges:
+                edges[key] = len(nodes)
+                nodes.append((V[key[0]] + V[key[1]]) / 2)
+            row.append(edges[key])
+        cells.append(row)
+    return np.asarray(nodes), np.asarray(cells, dtype=np.int64), len(V)
+
+
+def _field(X: np.ndarray, C1: float, phi: float, theta: float) -> np.ndarray:
+    """A displacement (m) quadratic in X, linear in ĝ, scaled as 1/C1, zero on the rib x = 0."""
+    g = gravity_direction(np.asarray(phi), np.asarray(theta))
+    M = np.array([[1.0, 0.2, 0.0], [0.0, 1.0, 0.3], [0.1, 0.0, 1.0]])
+    x, y = X[:, 0] / SIZE, X[:, 1] / SIZE
+    A = (x * (1.0 + 3.0 * x + 3.0 * y))[:, None, None] * M
+    return 0.001 / C1 * (A @ g)
+
+
+def test_quadratic_shape_functions_give_a_quadratic_field_exactly() -> None:
+    X, cells, _ = quadratic_cube()
+    assert np.array_equal(edge_order(X, cells), np.asarray(EDGES[::-1]))
+    rng = np.random.default_rng(0)
+    points = rng.uniform(0.0, SIZE, (300, 3))
+    f = _field(X, 1.0, 60.0, 30.0)
+    np.testing.assert_allclose(interpolate(f, *locate_quadratic(X, cells, points)),
+                               _field(points, 1.0, 60.0, 30.0), rtol=0, atol=1e-15)
+    shuffled = cells.copy()
+    shuffled[1, 4:] = shuffled[1, [5, 4, 6, 7, 8, 9]]  # one cell's edge nodes in another order
+    with pytest.raises(ValueError, match="not in one order"):
+        edge_order(X, shuffled)
+
+
+def test_curved_cells_are_inverted_so_that_a_linear_field_is_exact() -> None:
+    """Edge nodes moved off their midpoints (a curved skin): the isoparametric map is inverted."""
+    X, cells, n_vertices = quadratic_cube()
+    curved = X.copy()
+    curved[n_vertices:] += 0.004 * SIZE * np.sin(30.0 / SIZE * X[n_vertices:, [1, 2, 0]])
+    pairs = edge_order(curved, cells)
+    rng = np.random.default_rng(1)
+    which = rng.integers(0, len(cells), 400)
+    # points given by their reference coordinates in curved cells
+    points = np.einsum("mk,mkd->md", quadratic_weights(rng.dirichlet(np.ones(4), 400), pairs),
+                       curved[cells[which]])
+    linear = np.array([[1.0, 2.0, 0.0], [0.0, 1.0, 3.0], [1.0, 0.0, 1.0]])
+    got = interpolate(curved @ linear, *locate_quadratic(curved, cells, points))
+    np.testing.assert_allclose(got, points @ linear, rtol=0, atol=1e-12)
+
+
+@pytest.fixture(scope="module")
+def sweep(tmp_path_factory: pytest.TempPathFactory):
+    """Cases on the quadratic cube: points at the vertices, fields at every node."""
+    from meshes.io import GEOMETRY_DATASET, TOPOLOGY_DATASET
+
+    folder = tmp_path_factory.mktemp("quadratic")
+    X, cells, n_vertices = quadratic_cube()
+    V = X[:n_vertices]
+    summaries, points, fields = [], [], []
+    for C1 in (1.0, 2.0, 3.0, 4.0, 5.0):
+        for phi, theta in ((0.0, 0.0), (60.0, 0.0), (120.0, 0.0), (180.0, 0.0), (-60.0, 0.0),
+                           (-120.0, 0.0), (90.0, 90.0), (90.0, -90.0)):
+            case = folder / Case(C1, phi, theta).id
+            case.mkdir()
+            write_points(case / "points.h5", np.arange(n_vertices), V,
+                         _field(V, C1, phi, theta), V[:, 0] == 0.0, case.name)
+            with h5py.File(case / "fields.h5", "w") as h5:
+                h5[GEOMETRY_DATASET] = X
+                h5[TOPOLOGY_DATASET] = cells
+                h5[FIELD_DATASET] = _field(X, C1, phi, theta)
+            (case / "summary.json").write_text(json.dumps({
+                "status": "converged", "case": case.name, "C1": C1, "phi": phi, "theta": theta,
+                "gravity_vector": [0, 0, 0], "load_fraction": 1.0}))
+            summaries.append(case / "summary.json")
+            points.append(case / "points.h5")
+            fields.append(case / "fields.h5")
+    with h5py.File(folder / "mesh.h5", "w") as h5:
+        h5[GEOMETRY_DATASET] = X
+        h5[TOPOLOGY_DATASET] = cells
+    build_dataset(summaries, points, folder / "ds.h5", mesh=folder / "mesh.xdmf",
+                  fields_paths=fields)
+    return folder, summaries, points, fields
+
+
+def test_the_dataset_holds_the_fields_at_every_node(sweep) -> None:
+    folder = sweep[0]
+    ds = read_dataset(folder / "ds.h5", nodes=True)
+    nodes = ds.nodes
+    assert nodes is not None and nodes.cells.shape[1] == 10
+    assert len(nodes.X) > ds.n_points
+    np.testing.assert_array_equal(nodes.X[nodes.vertex], ds.X)
+    np.testing.assert_allclose(nodes.displacement[:, nodes.vertex], ds.displacement,
+                               rtol=1e-6, atol=1e-9)
+    assert read_dataset(folder / "ds.h5").nodes is None  # read only when asked for
+
+
+def test_a_case_on_another_mesh_is_named_and_nothing_is_written(sweep, tmp_path: Path) -> None:
+    from meshes.io import GEOMETRY_DATASET
+
+    folder, summaries, points, fields = sweep
+    other = tmp_path / "fields.h5"
+    with h5py.File(fields[3]) as src, h5py.File(other, "w") as dst:
+        for key in src:
+            src.copy(key, dst)
+        del dst[GEOMETRY_DATASET]
+        dst[GEOMETRY_DATASET] = src[GEOMETRY_DATASET][...] * 1.01
+    with pytest.raises(DatasetError, match="another mesh than"):
+        build_dataset(summaries, points, tmp_path / "ds.h5", mesh=folder / "mesh.xdmf",
+                      fields_paths=[*fields[:3], other, *fields[4:]])
+    assert not (tmp_path / "ds.h5").exists()
+
+
+def test_a_pod_model_with_the_nodes_answers_between_the_points_quadratically(
+        sweep, tmp_path: Path) -> None:
+    """At the edge nodes, a model fitted at the nodes is as right as at its points.
+
+    The edge nodes are no material points; a model fitted at the vertices only misses the
+    field's curvature there.
+    """
+    from surrogate.checkpoint import save_model
+    from surrogate.predict import Surrogate
+    from surrogate.train import train_and_evaluate
+
+    folder = sweep[0]
+    models = {}
+    for name, nodes in (("quadratic", True), ("linear", False)):
+        ds = read_dataset(folder / "ds.h5", nodes=nodes)
+        save_model(tmp_path / name, train_and_evaluate(ds, CONFIG, progress=False), ds)
+        models[name] = Surrogate.load(tmp_path / name)
+    assert models["quadratic"]._checkpoint.nodes is not None
+    assert models["linear"]._checkpoint.nodes is None
+    X, cells, n_vertices = quadratic_cube()
+    between = X[n_vertices:]
+    query = (2.0, 60.0, 0.0)  # a training case: the branch's weights are near exact there
+    truth = 1e3 * _field(between, *query)
+    errors = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ExtrapolationWarning)
+        at_points = models["quadratic"].predict(*query)
+        for name, model in models.items():
+            errors[name] = np.abs(model.at(between).predict(*query) - truth).max()
+    at_points_error = np.abs(at_points - 1e3 * _field(X[:n_vertices], *query)).max()
+    assert errors["quadratic"] <= 2.0 * at_points_error + 1e-6
+    assert errors["linear"] >= 10.0 * errors["quadratic"]
