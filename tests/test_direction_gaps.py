@@ -1,0 +1,58 @@
+"""The sweep's spacing error between its directions, from the dataset alone."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fem.dataset import Dataset, gravity_direction
+from fem.sweep import sphere_directions
+from studies.direction_gaps import direction_gaps, leave_one_out, main
+
+pytestmark = pytest.mark.unit
+
+
+def _dataset(bump: float) -> Dataset:
+    """Two C1 values x a caudal lattice of 24 directions.
+
+    The fields are linear in ĝ over C1, plus at the softer C1 a bump in direction, narrower
+    than the lattice's spacing, about its direction nearest gravity towards the feet.
+    """
+    rng = np.random.default_rng(0)
+    X = rng.uniform(-0.05, 0.05, (30, 3))
+    A = rng.normal(size=(30, 3, 3))
+    dirs = np.array(sphere_directions(24, "caudal"))
+    phi, theta = np.tile(dirs[:, 0], 2), np.tile(dirs[:, 1], 2)
+    C1 = np.repeat([1.0, 3.0], len(dirs))
+    g = gravity_direction(phi, theta)
+    u = np.einsum("nij,mj->mni", A, g) / C1[:, None, None]
+    toward_feet = g[np.argmin(g[:, 2])]  # the lattice's caudal-most direction
+    feet = np.exp(-(1.0 - g @ toward_feet) / 0.01) * (C1 == 1.0)  # none of its neighbours
+    u[:, :, 2] += bump * feet[:, None]
+    return Dataset(X=X, boundary=np.zeros(30, bool), C1=C1, phi=phi, theta=theta, direction=g,
+                   displacement=u, converged=np.ones(len(C1), bool), splits={},
+                   ids=np.array([f"case{i}" for i in range(len(C1))]))
+
+
+def test_a_field_linear_in_the_direction_has_no_gap() -> None:
+    gaps = direction_gaps(_dataset(bump=0.0))
+    assert [s.C1 for s in gaps.stiffness] == [1.0, 3.0]
+    for s in gaps.stiffness:
+        assert s.directions == 24 and s.over_limit == 0
+        assert s.max_mm < 1e-8
+
+
+def test_a_field_that_changes_fast_with_direction_is_found_where_it_does() -> None:
+    soft = leave_one_out(_dataset(bump=5.0), 1.0, limit_mm=0.5)
+    worst = soft.rows[0]
+    assert worst.max_mm > 1.0 and soft.over_limit >= 1
+    assert gravity_direction(np.array(worst.phi), np.array(worst.theta))[2] < -0.97  # the feet
+    stiff = leave_one_out(_dataset(bump=5.0), 3.0)
+    assert stiff.max_mm < 1e-8  # the bump is at the soft C1 only
+    with pytest.raises(ValueError, match="needs five"):
+        leave_one_out(_dataset(bump=0.0), 2.0)
+
+
+def test_the_command_names_a_missing_dataset(tmp_path, capsys) -> None:
+    assert main([str(tmp_path / "none.h5")]) == 2
+    assert "does not exist" in capsys.readouterr().err
