@@ -91,7 +91,7 @@ positions (0° and 180°) are sampled exactly."""
 
 PHI_SAMPLINGS = ("paper", "uniform", "equal_area")
 
-CASE_KEYS = ("C1_kPa", "phi_deg", "theta_deg", "sphere")
+CASE_KEYS = ("C1_kPa", "phi_deg", "theta_deg", "sphere", "refine")
 """The keys of a ``sweep`` section that choose its cases (a preset sets all of them)."""
 
 SWEEP_PRESETS: dict[str, dict[str, Any]] = {
@@ -227,6 +227,31 @@ def grid(spec: Any, name: str) -> list[float]:
     return values
 
 
+def refine_directions(sweep: dict[str, Any]) -> tuple[float, list[tuple[float, float]]]:
+    """A sweep's ``refine: {C1_max, directions}``: the extra directions of its soft cases.
+
+    Returns:
+        ``(C1_max, [(Φ, θ), ...])``; ``(0.0, [])`` without ``refine``.
+
+    Raises:
+        InvalidParameterError: for a C1_max that is not positive, or a direction that is not
+            a (Φ, θ) pair of finite degrees.
+    """
+    refine = resolve_sweep(sweep).get("refine")
+    if not refine:
+        return 0.0, []
+    c1_max = float(refine["C1_max"])
+    if not math.isfinite(c1_max) or c1_max <= 0:
+        raise InvalidParameterError(f"sweep.refine.C1_max must be a positive kPa, got {c1_max}")
+    directions = []
+    for pair in refine.get("directions", []):
+        if len(pair) != 2 or not all(math.isfinite(float(v)) for v in pair):
+            raise InvalidParameterError(
+                f"sweep.refine.directions: {pair!r} is not a [phi, theta] pair in degrees")
+        directions.append((float(pair[0]), float(pair[1])))
+    return c1_max, directions
+
+
 def sweep_cases(sweep: dict[str, Any]) -> list[Case]:
     """All cases of a sweep config section, sorted and without duplicates.
 
@@ -235,7 +260,9 @@ def sweep_cases(sweep: dict[str, Any]) -> list[Case]:
             sampling rule, see :func:`sample_phi`) × ``theta_deg`` (list, default ``[0]``),
             or ``sphere: {n, part}`` (directions over the whole sphere or its caudal half,
             :func:`sphere_directions`), or both: the plane's directions and the sphere's;
-            or a ``preset`` (:func:`resolve_sweep`).
+            or a ``preset`` (:func:`resolve_sweep`). ``refine: {C1_max, directions}`` adds
+            its directions at the C1 values up to ``C1_max`` only: where a soft field changes
+            fastest with direction (:mod:`studies.direction_gaps` proposes them).
 
     Raises:
         InvalidParameterError: if the sweep has more than :data:`MAX_CASES` cases, or two of
@@ -252,14 +279,22 @@ def sweep_cases(sweep: dict[str, Any]) -> list[Case]:
         directions += sphere_directions(int(sphere["n"]), sphere.get("part", "whole"))
     if not directions:
         raise InvalidParameterError("sweep needs phi_deg or sphere")
-    if len(c1s) * len(directions) > MAX_CASES:
+    c1_max, extra = refine_directions(sweep)
+    soft = [c for c in c1s if c <= c1_max + 1e-9]
+    if extra and not soft:
         raise InvalidParameterError(
-            f"sweep: {len(c1s)} C1 values x {len(directions)} gravity directions is "
-            f"{len(c1s) * len(directions)} cases, more than {MAX_CASES}"
+            f"sweep.refine.C1_max = {c1_max:g} kPa is below every C1 of the sweep: its "
+            "directions would have no case")
+    n_cases = len(c1s) * len(directions) + len(soft) * len(extra)
+    if n_cases > MAX_CASES:
+        raise InvalidParameterError(
+            f"sweep: {len(c1s)} C1 values x {len(directions)} gravity directions (and "
+            f"{len(extra)} refined ones) is {n_cases} cases, more than {MAX_CASES}"
         )
     _distinct_folders("sweep.C1_kPa", c1s, 2, "kPa")
-    _distinct_folders("sweep gravity directions (phi, theta)", directions, 1, "deg")
-    return sorted({Case(c, p, t) for c in c1s for p, t in directions})
+    _distinct_folders("sweep gravity directions (phi, theta)", directions + extra, 1, "deg")
+    return sorted({Case(c, p, t) for c in c1s for p, t in directions}
+                  | {Case(c, p, t) for c in soft for p, t in extra})
 
 
 def _distinct_folders(name: str, values: Sequence[Any], digits: int, unit: str) -> None:

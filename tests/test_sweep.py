@@ -147,6 +147,29 @@ def test_the_caudal_half_covers_every_posture_short_of_head_down_evenly() -> Non
     assert {c.phi for c in both if c.theta == 0.0} >= set(PAPER_PHI_DEG)
 
 
+def test_refined_directions_are_solved_at_the_soft_c1_values_only() -> None:
+    base = {"C1_kPa": [0.8, 1.0, 1.2, 2.0, 5.0], "phi_deg": [0.0, 90.0, 180.0]}
+    extra = [[60.0, -90.0], [30.5, -45.25]]
+    cases = sweep_cases({**base, "refine": {"C1_max": 1.0, "directions": extra}})
+    refined = [c for c in cases if c.theta != 0.0]
+    assert len(cases) == 5 * 3 + 2 * 2
+    assert sorted({c.C1 for c in refined}) == [0.8, 1.0]
+    assert {(c.phi, c.theta) for c in refined} == {(60.0, -90.0), (30.5, -45.2)}
+    assert set(sweep_cases(base)) < set(cases)
+    # a refined direction that is one of the sweep's adds nothing
+    assert sweep_cases({**base, "refine": {"C1_max": 1.0, "directions": [[90.0, 0.0]]}}) == \
+        sweep_cases(base)
+    with pytest.raises(InvalidParameterError, match="below every C1 of the sweep"):
+        sweep_cases({**base, "refine": {"C1_max": 0.5, "directions": extra}})
+    with pytest.raises(InvalidParameterError, match="not a \\[phi, theta\\] pair"):
+        sweep_cases({**base, "refine": {"C1_max": 1.0, "directions": [[60.0]]}})
+    with pytest.raises(InvalidParameterError, match="share one case folder"):
+        sweep_cases({**base, "refine": {"C1_max": 1.0, "directions": [[90.01, 0.0]]}})
+    # the paper's preset replaces it
+    assert sweep_cases({**base, "refine": {"C1_max": 1.0, "directions": extra},
+                        "preset": "paper"}) == sweep_cases({"preset": "paper"})
+
+
 def test_the_paper_preset_replaces_every_key_that_chooses_cases() -> None:
     from fem.sweep import resolve_sweep
 

@@ -61,16 +61,27 @@ def case_files(name):
 # A chain job's cases: every C1 of the sweep at one direction (solve.smk). Its one wildcard,
 # {direction} = "phi=<deg>_theta=<deg>", matches the sweep's directions only (as pairs: a sphere's
 # Phi and theta values combine into directions it lacks), so a case at another direction is
-# solved alone.
-CHAIN_C1 = sorted({f"{case.C1:.2f}" for case in CONFIG.cases}, key=float)
-CHAIN_DIRECTION = "|".join(
-    sorted({re.escape(f"phi={case.phi:.1f}_theta={case.theta:.1f}") for case in CONFIG.cases})
-)
+# solved alone. The directions of sweep.refine, solved at the soft C1 values only, are chains of
+# those values (solve_refine_chain).
+def _chain_groups():
+    c1_of = {}
+    for case in CONFIG.cases:
+        c1_of.setdefault(f"phi={case.phi:.1f}_theta={case.theta:.1f}", set()).add(
+            f"{case.C1:.2f}")
+    every = set().union(*c1_of.values())
+    refined = {d: c1s for d, c1s in c1_of.items() if c1s != every}
+    return (sorted(every, key=float), sorted(set(c1_of) - set(refined)),
+            sorted(set().union(*refined.values()), key=float), sorted(refined))
 
 
-def chain_files(name):
+CHAIN_C1, _FULL_DIRECTIONS, REFINE_C1, _REFINE_DIRECTIONS = _chain_groups()
+CHAIN_DIRECTION = "|".join(re.escape(d) for d in _FULL_DIRECTIONS)
+REFINE_DIRECTION = "|".join(re.escape(d) for d in _REFINE_DIRECTIONS)
+
+
+def chain_files(name, c1s=CHAIN_C1):
     """File ``name`` of every case of one direction's chain ({direction} left open)."""
-    return [f"results/cases/c1={c1}_{{direction}}/{name}" for c1 in CHAIN_C1]
+    return [f"results/cases/c1={c1}_{{direction}}/{name}" for c1 in c1s]
 
 
 def all_cores():

@@ -2,8 +2,9 @@
 #
 # With sweep.chains (the default), the sweep's cases of one gravity direction are one job,
 # `solve_chain`: the stiffest first, each case from its neighbours' solutions (fem.chain), every
-# case still written to its own folder. Asking for a sweep case's file runs its direction's
-# chain; `solve` runs any other case (and every case with chains off) alone, from rest.
+# case still written to its own folder (`solve_refine_chain` for sweep.refine's directions, at
+# their soft C1 values). Asking for a sweep case's file runs its direction's chain; `solve` runs
+# any other case (and every case with chains off) alone, from rest.
 #
 # The case's files are update() outputs: Snakemake keeps a case's previous files while it is
 # solved again (fem.io.CaseWriter replaces them at the end, summary.json last) and restores them
@@ -66,6 +67,20 @@ if CONFIG.chains:
             ENV
         script:
             "../scripts/solve_chain.py"
+
+    if REFINE_DIRECTION:
+
+        ruleorder: solve_refine_chain > solve
+
+        # sweep.refine's directions: chains of the soft C1 values only
+        use rule solve_chain as solve_refine_chain with:
+            output:
+                summaries=update(chain_files("summary.json", REFINE_C1)),
+                points=update(chain_files("points.h5", REFINE_C1)),
+                fields=update(chain_files("fields.xdmf", REFINE_C1)),
+                fields_h5=update(chain_files("fields.h5", REFINE_C1)),
+            wildcard_constraints:
+                direction=REFINE_DIRECTION,
 
 
 # FE cases outside the sweep (the surrogate's extrapolation study): the same job, in their own
