@@ -25,7 +25,7 @@ from fem.dataset import (
 )
 from fem.sweep import Case
 from surrogate.config import SurrogateConfig
-from surrogate.exceptions import ExtrapolationWarning
+from surrogate.exceptions import ExtrapolationWarning, ModelFileError
 from surrogate.interpolation import (
     EDGES,
     edge_order,
@@ -202,3 +202,13 @@ def test_a_pod_model_with_the_nodes_answers_between_the_points_quadratically(
     at_points_error = np.abs(at_points - 1e3 * _field(X[:n_vertices], *query)).max()
     assert errors["quadratic"] <= 2.0 * at_points_error + 1e-6
     assert errors["linear"] >= 10.0 * errors["quadratic"]
+    # a folder whose modes at the nodes do not fit its nodes is refused, by name
+    from surrogate.checkpoint import PARAMS_NPZ, load_checkpoint
+
+    folder = tmp_path / "quadratic"
+    with np.load(folder / PARAMS_NPZ) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    arrays["mesh_nodes_basis"] = arrays["mesh_nodes_basis"][:-1]
+    np.savez(folder / PARAMS_NPZ, **arrays)
+    with pytest.raises(ModelFileError, match="the modes at the nodes are not finite"):
+        load_checkpoint(folder)
