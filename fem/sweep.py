@@ -287,9 +287,10 @@ def sweep_cases(sweep: dict[str, Any]) -> list[Case]:
             "directions would have no case")
     n_cases = len(c1s) * len(directions) + len(soft) * len(extra)
     if n_cases > MAX_CASES:
+        refined = f" and {len(extra)} refined ones at {len(soft)}" if extra else ""
         raise InvalidParameterError(
-            f"sweep: {len(c1s)} C1 values x {len(directions)} gravity directions (and "
-            f"{len(extra)} refined ones) is {n_cases} cases, more than {MAX_CASES}"
+            f"sweep: {len(c1s)} C1 values x {len(directions)} gravity directions{refined} is "
+            f"{n_cases} cases, more than {MAX_CASES}"
         )
     _distinct_folders("sweep.C1_kPa", c1s, 2, "kPa")
     _distinct_folders("sweep gravity directions (phi, theta)", directions + extra, 1, "deg")
