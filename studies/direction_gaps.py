@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fem.dataset import Dataset, DatasetError, read_dataset
+from fem.dataset import Dataset, DatasetError, direction_keys, read_dataset
 from studies.results import Record, Result
 
 KERNEL = "cubic"
@@ -151,10 +151,10 @@ def propose(ds: Dataset, gaps: DirectionGaps, k: int) -> list[tuple[float, float
         return []
     score: dict[str, float] = {}
     for s in soft:
-        for row in s.rows:
-            score[f"{row.phi:.1f}/{row.theta:.1f}"] = max(score.get(
-                f"{row.phi:.1f}/{row.theta:.1f}", 0.0), row.max_mm)
-    keys = np.array([f"{p:.1f}/{t:.1f}" for p, t in zip(ds.phi, ds.theta, strict=True)])
+        angles = np.array([(r.phi, r.theta) for r in s.rows])
+        for key, row in zip(direction_keys(angles[:, 0], angles[:, 1]), s.rows, strict=True):
+            score[key] = max(score.get(key, 0.0), row.max_mm)
+    keys = direction_keys(ds.phi, ds.theta)
     _, first = np.unique(keys, return_index=True)
     g = ds.direction[first] / np.linalg.norm(ds.direction[first], axis=1)[:, None]
     errs = np.array([score.get(keys[i], 0.0) for i in first])

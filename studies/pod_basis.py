@@ -182,8 +182,6 @@ def main(argv: list[str] | None = None) -> int:
     def where(model: Surrogate):  # the model's predict at the points the errors are taken
         return _quiet(model if cells is None else model.at(centroid_x))
 
-    pod_predict = where
-
     def row(name: str, pod: ErrorSpread, model: ErrorSpread | None) -> None:
         figures[name] = {"pod": pod.to_json(), "model": model.to_json() if model else None}
         text = f"{name:<34} {pod.cases:>4}  POD {_fmt(pod)}"
@@ -195,22 +193,22 @@ def main(argv: list[str] | None = None) -> int:
         pod, seconds = fit(ds, parts["train"], parts["validation"], config)
         other = spread(where(Surrogate.load(path)), ds, test, truth) if path else None
         row(f"{split} held out ({seconds:.0f} s)",
-            spread(pod_predict(pod), ds, test, truth), other)
+            spread(where(pod), ds, test, truth), other)
     pod, seconds = fit(ds, converged, converged, config)
     surrogate = Surrogate.load(args.model)
     model = where(surrogate)
     soft = [i for i in converged
             if ds.C1[i] <= SOFT_C1_KPA + 1e-9 and ds.theta[i] < CAUDAL_THETA_DEG]
     row(f"every case, inside ({seconds:.0f} s)",
-        spread(pod_predict(pod), ds, converged, truth), spread(model, ds, converged, truth))
+        spread(where(pod), ds, converged, truth), spread(model, ds, converged, truth))
     if soft:
-        row("soft caudal, inside", spread(pod_predict(pod), ds, soft, truth),
+        row("soft caudal, inside", spread(where(pod), ds, soft, truth),
             spread(model, ds, soft, truth))
     outside = outside_cases(ds, args.outside, surrogate, cells) if args.outside else []
     for case, C1, phi, theta, fe in outside:
         errors = [ErrorSpread.over([CaseErrors.between(f(C1, phi, theta), fe, case, C1, phi,
                                                        theta)])
-                  for f in (pod_predict(pod), model)]
+                  for f in (where(pod), model)]
         row(case, *errors)
     queries = [(float(ds.C1[i]), float(ds.phi[i]), float(ds.theta[i])) for i in converged[:50]]
     timing = {name: _median_ms(f, queries) for name, f in (("pod", where(pod)), ("model", model))}

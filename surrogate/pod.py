@@ -191,14 +191,15 @@ def fit(
         modes = node_modes[nodes.vertex]
     basis_j = jnp.asarray(modes.reshape(-1, config.modes).T)
 
-    def data(cases: np.ndarray) -> tuple[jax.Array, jax.Array, jax.Array]:
+    def data(cases: np.ndarray, basis_fields: np.ndarray) -> tuple[jax.Array, jax.Array]:
+        """The cases' features and weights, from their fields where the basis is."""
         features = norm.case(ds.C1[cases], ds.direction[cases])
-        weights = scaled_fields(ds, cases, norm, at_nodes) @ unit.T
-        return (jnp.asarray(features, jnp.float32), jnp.asarray(weights, jnp.float32),
-                jnp.asarray(scaled_fields(ds, cases, norm), jnp.float32))
+        return (jnp.asarray(features, jnp.float32),
+                jnp.asarray(basis_fields @ unit.T, jnp.float32))
 
-    train_x, train_w, _ = data(train_cases)
-    val_x, val_w, val_fields = data(val_cases)
+    train_x, train_w = data(train_cases, train_fields)
+    val_x, val_w = data(val_cases, scaled_fields(ds, val_cases, norm, at_nodes))
+    val_fields = jnp.asarray(scaled_fields(ds, val_cases, norm), jnp.float32)  # at the points
     val_gain = jnp.asarray(norm.gain(ds.C1[val_cases]) * norm.u_scale, jnp.float32)
     off_rib = jnp.asarray(~ds.boundary, jnp.float32)
     n, n_off = ds.n_points, max(int(np.sum(~ds.boundary)), 1)
