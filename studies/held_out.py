@@ -72,13 +72,59 @@ class CaseErrors(Record):
                    mean / scale, p95 / scale, top / scale)
 
     @classmethod
-    def of(cls, model: Surrogate, ds: Dataset, case: int) -> CaseErrors:
-        """The model's errors on case ``case`` of the dataset."""
+    def of(cls, model: Surrogate, ds: Dataset, case: int,
+           centroids: Centroids | None = None) -> CaseErrors:
+        """The model's errors on case ``case`` of the dataset.
+
+        At its material points; with ``centroids``, at the quadratic mesh's cell centroids
+        instead (``model`` answering there: :meth:`Centroids.model`).
+        """
         C1, phi, theta = float(ds.C1[case]), float(ds.phi[case]), float(ds.theta[case])
         with warnings.catch_warnings():  # a sweep case lies in the range by construction;
             warnings.simplefilter("ignore", ExtrapolationWarning)  # near a failed one it warns
             pred = model.predict(C1, phi, theta)
-        return cls.between(pred, ds.displacement[case], str(ds.ids[case]), C1, phi, theta)
+        fe = ds.displacement[case] if centroids is None else centroids.fe(ds, case)
+        return cls.between(pred, fe, str(ds.ids[case]), C1, phi, theta)
+
+
+@dataclass(frozen=True)
+class Centroids:
+    """The cell centroids of a quadratic mesh: points between the nodes, where a tumour lies.
+
+    The FE field is quadratic in each 10-node cell; at a centroid it is a fixed combination of
+    the cell's nodes (:func:`surrogate.interpolation.at_centroids`), exact whatever the model.
+    A model's error there is what a user meets between the material points it trained on.
+
+    Attributes:
+        X: the centroids (C, 3), m, in the mesh's reference frame.
+        cells: the 10-node cells (C, 10), rows of the dataset's ``/nodes``.
+    """
+
+    X: np.ndarray
+    cells: np.ndarray
+
+    @classmethod
+    def of(cls, ds: Dataset) -> Centroids | None:
+        """The dataset's centroids.
+
+        None where it has no fields at a quadratic mesh's nodes (a linear mesh, or a dataset
+        read without ``nodes=True``).
+        """
+        from surrogate.interpolation import at_centroids
+
+        if ds.nodes is None or ds.nodes.displacement is None:
+            return None
+        return cls(at_centroids(ds.nodes.X, ds.nodes.cells), ds.nodes.cells)
+
+    def fe(self, ds: Dataset, case: int) -> np.ndarray:
+        """Case ``case``'s FE displacement at the centroids (C, 3), mm."""
+        from surrogate.interpolation import at_centroids
+
+        return at_centroids(ds.nodes.displacement[case].astype(np.float64), self.cells)
+
+    def model(self, model: Surrogate) -> Surrogate:
+        """``model`` answering at the centroids (:meth:`surrogate.predict.Surrogate.at`)."""
+        return model.at(self.X)
 
 
 @dataclass(frozen=True, slots=True)
@@ -137,6 +183,9 @@ class HeldOutBlock(Record):
         inside_model: the by-sample model's errors over the same cases.
         rows: the held-out model's errors per test case.
         inside_rows: the by-sample model's, in the same order.
+        held_out_between: the held-out model's errors at the cell centroids (:class:`Centroids`)
+            over the same cases; absent where the dataset has no quadratic mesh's nodes.
+        inside_between: the by-sample model's there.
     """
 
     split: str
@@ -146,6 +195,8 @@ class HeldOutBlock(Record):
     inside_model: ErrorSpread
     rows: list[CaseErrors]
     inside_rows: list[CaseErrors]
+    held_out_between: ErrorSpread | None = None
+    inside_between: ErrorSpread | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -153,11 +204,13 @@ class HeldOutEvaluation(Result):
     """``results/surrogate/held_out.json``: every held-out model, and the by-sample model.
 
     ``inside_all`` is the by-sample model over every converged case of the sweep: its error
-    inside the data.
+    inside the data; ``inside_all_between`` the same at the cell centroids, between the
+    material points (absent without a quadratic mesh's nodes).
     """
 
     blocks: list[HeldOutBlock]
     inside_all: ErrorSpread
+    inside_all_between: ErrorSpread | None = None
 
 
 def held_out_groups(ds: Dataset, split: str, cases: np.ndarray) -> list[str]:
@@ -177,6 +230,9 @@ def evaluate_held_out(
 ) -> HeldOutEvaluation:
     """Each held-out model on its split's test cases, ``inside`` (the by-sample model) beside.
 
+    Every error is taken at the material points and, where ``ds`` was read with its fields
+    at a quadratic mesh's nodes (``read_dataset(..., nodes=True)``), at the cell centroids too.
+
     Args:
         models: the held-out models by the split each trained on (``by_case``,
             ``by_direction``, ``by_c1``).
@@ -189,6 +245,12 @@ def evaluate_held_out(
     """
     converged = np.flatnonzero(ds.converged)
     inside_of = {int(i): CaseErrors.of(inside, ds, int(i)) for i in converged}
+    centroids = Centroids.of(ds)
+    inside_between_of: dict[int, CaseErrors] = {}
+    if centroids is not None:
+        inside_at = centroids.model(inside)
+        inside_between_of = {int(i): CaseErrors.of(inside_at, ds, int(i), centroids)
+                             for i in converged}
     blocks = []
     for split, model in models.items():
         if model.config.split != split:
@@ -199,6 +261,12 @@ def evaluate_held_out(
             raise ValueError(f"the dataset's {split} split has no test cases")
         rows = [CaseErrors.of(model, ds, int(i)) for i in test]
         inside_rows = [inside_of[int(i)] for i in test]
+        held_out_between = inside_between = None
+        if centroids is not None:
+            model_at = centroids.model(model)
+            held_out_between = ErrorSpread.over(
+                [CaseErrors.of(model_at, ds, int(i), centroids) for i in test])
+            inside_between = ErrorSpread.over([inside_between_of[int(i)] for i in test])
         blocks.append(HeldOutBlock(
             split=split,
             held_out=HELD_OUT.get(split, split),
@@ -207,8 +275,13 @@ def evaluate_held_out(
             inside_model=ErrorSpread.over(inside_rows),
             rows=rows,
             inside_rows=inside_rows,
+            held_out_between=held_out_between,
+            inside_between=inside_between,
         ))
-    return HeldOutEvaluation(blocks=blocks, inside_all=ErrorSpread.over(list(inside_of.values())))
+    return HeldOutEvaluation(
+        blocks=blocks, inside_all=ErrorSpread.over(list(inside_of.values())),
+        inside_all_between=(ErrorSpread.over(list(inside_between_of.values()))
+                            if inside_between_of else None))
 
 
 def by_stiffness(rows: Sequence[CaseErrors], edges: Sequence[float]) -> list[
@@ -291,5 +364,5 @@ if __name__ == "__main__":
     raise SystemExit(main())
 
 
-__all__ = ["HELD_OUT", "CaseErrors", "ErrorSpread", "HeldOutBlock", "HeldOutEvaluation",
-           "by_stiffness", "evaluate_held_out", "held_out_groups"]
+__all__ = ["HELD_OUT", "CaseErrors", "Centroids", "ErrorSpread", "HeldOutBlock",
+           "HeldOutEvaluation", "by_stiffness", "evaluate_held_out", "held_out_groups"]

@@ -39,10 +39,11 @@ from pathlib import Path
 import numpy as np
 
 from fem.dataset import Dataset, read_dataset, read_node_displacement, read_summary
-from studies.held_out import CaseErrors, ErrorSpread
+from studies.held_out import CaseErrors, Centroids, ErrorSpread
 from studies.surrogate_evaluation import fe_in_model_order
 from surrogate.config import SurrogateConfig
 from surrogate.exceptions import ExtrapolationWarning
+from surrogate.interpolation import at_centroids
 from surrogate.predict import Surrogate
 
 SOFT_C1_KPA = 1.0
@@ -77,15 +78,6 @@ def spread(predict, ds: Dataset, cases: Sequence[int], truth=None) -> ErrorSprea
         rows.append(CaseErrors.between(predict(C1, phi, theta), fe, str(ds.ids[i]), C1, phi,
                                        theta))
     return ErrorSpread.over(rows)
-
-
-def at_centroids(u: np.ndarray, cells: np.ndarray) -> np.ndarray:
-    """A quadratic field given at the nodes, at each cell's centroid: (..., cells, 3).
-
-    At the barycentre every vertex shape function of the 10-node tetrahedron is -1/8 and
-    every edge one 1/4, whatever the order of the edges.
-    """
-    return -0.125 * u[..., cells[:, :4], :].sum(-2) + 0.25 * u[..., cells[:, 4:], :].sum(-2)
 
 
 def outside_cases(
@@ -173,14 +165,14 @@ def main(argv: list[str] | None = None) -> int:
                   "written for a mesh of 10-node tetrahedra): no centroids to measure at",
                   file=sys.stderr)
             return 2
-        cells = ds.nodes.cells
-        centroid_x = at_centroids(ds.nodes.X, cells)
+        centroids = Centroids.of(ds)
+        cells = centroids.cells
 
         def truth(i: int) -> np.ndarray:
-            return at_centroids(ds.nodes.displacement[i].astype(np.float64), cells)
+            return centroids.fe(ds, i)
 
     def where(model: Surrogate):  # the model's predict at the points the errors are taken
-        return _quiet(model if cells is None else model.at(centroid_x))
+        return _quiet(model if cells is None else centroids.model(model))
 
     def row(name: str, pod: ErrorSpread, model: ErrorSpread | None) -> None:
         figures[name] = {"pod": pod.to_json(), "model": model.to_json() if model else None}

@@ -17,7 +17,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from studies.held_out import CaseErrors
+import numpy as np
+
+from studies.held_out import CaseErrors, Centroids
 from studies.results import Record, Result
 from studies.surrogate_evaluation import extrapolation_kind, fe_in_model_order
 from surrogate.exceptions import ExtrapolationWarning
@@ -42,6 +44,9 @@ class PostureRow(Record):
         fe_solve_s: the FE solve's wall time.
         errors: the surrogate against FE (mean, 95th percentile and max point error).
         extrapolation_warnings: what the model warned of when asked.
+        between: the same at the cell centroids of the case's quadratic mesh, between the
+            material points, where a tumour lies (:class:`studies.held_out.Centroids`);
+            absent where the case's fields are not on 10-node cells.
     """
 
     posture: str
@@ -56,6 +61,7 @@ class PostureRow(Record):
     fe_solve_s: float | None
     errors: CaseErrors | None
     extrapolation_warnings: list[str]
+    between: CaseErrors | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -69,30 +75,37 @@ class PostureEvaluation(Result):
 
 def evaluate_postures(
     model: Surrogate,
-    postures: Sequence[tuple[str, bool, str | Path, str | Path]],
+    postures: Sequence[tuple[str, bool, str | Path, str | Path, str | Path | None]],
 ) -> PostureEvaluation:
     """The model against FE in each posture.
 
     Args:
         model: the surrogate.
-        postures: ``(name, in_sweep, summary.json, points.h5)`` of each posture's FE case.
+        postures: ``(name, in_sweep, summary.json, points.h5, fields.h5)`` of each posture's
+            FE case; with its ``fields.h5`` (None: not compared there) on a quadratic mesh,
+            the errors are also taken at the cell centroids.
 
     Raises:
-        ValueError: if a case's material points are not the model's.
+        ValueError: if a case's material points are not the model's, or a centroid lies
+            outside the model's mesh.
     """
     from fem.dataset import read_summary
 
     rows = []
-    for name, in_sweep, summary_path, points_path in postures:
+    at_centroids: _CentroidModel | None = None
+    for name, in_sweep, summary_path, points_path, fields_path in postures:
         summary = read_summary(summary_path)
         C1, phi, theta = float(summary["C1"]), float(summary["phi"]), float(summary["theta"])
-        errors = None
+        errors = between = None
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", ExtrapolationWarning)
             pred = model.predict(C1, phi, theta)
         if summary["status"] == "converged":
             fe, _ = fe_in_model_order(model, points_path)
             errors = CaseErrors.between(pred, fe, summary["case"], C1, phi, theta)
+            if fields_path is not None:
+                at_centroids, between = _between(model, at_centroids, fields_path,
+                                                 str(summary["case"]), C1, phi, theta)
         rows.append(PostureRow(
             posture=name,
             case=str(summary["case"]),
@@ -106,12 +119,46 @@ def evaluate_postures(
             fe_solve_s=(summary.get("wall_s") or {}).get("solve"),
             errors=errors,
             extrapolation_warnings=[str(w.message) for w in caught],
+            between=between,
         ))
     return PostureEvaluation(
         architecture=model.config.architecture,
         training_range=dict(model.training_range or {}),
         rows=rows,
     )
+
+
+@dataclass(frozen=True)
+class _CentroidModel:
+    """A model answering at one quadratic mesh's cell centroids (the postures share a mesh)."""
+
+    centroids: Centroids
+    model: Surrogate
+
+
+def _between(
+    model: Surrogate, cached: _CentroidModel | None, fields_path: str | Path, case: str,
+    C1: float, phi: float, theta: float,
+) -> tuple[_CentroidModel | None, CaseErrors | None]:
+    """The model against the case's FE field at its mesh's cell centroids.
+
+    None on a linear mesh, whose fields file lacks the FE field's edge values. The model
+    answering at the centroids is returned too, kept for the next posture on the same mesh.
+    """
+    from fem.dataset import read_node_displacement
+    from surrogate.interpolation import at_centroids
+
+    u, cells, nodes = read_node_displacement(fields_path)
+    if cells.ndim != 2 or cells.shape[1] != 10:
+        return cached, None
+    if cached is None or not np.array_equal(cached.centroids.cells, cells):
+        centroids = Centroids(at_centroids(nodes, cells), cells)
+        cached = _CentroidModel(centroids, centroids.model(model))
+    with warnings.catch_warnings():  # warned of once already, at the material points
+        warnings.simplefilter("ignore", ExtrapolationWarning)
+        pred = cached.model.predict(C1, phi, theta)
+    fe = at_centroids(1e3 * u, cells)  # mm
+    return cached, CaseErrors.between(pred, fe, case, C1, phi, theta)
 
 
 __all__ = ["PostureEvaluation", "PostureRow", "evaluate_postures"]

@@ -28,6 +28,24 @@ NEWTON_STEPS = 8
 """Newton steps that invert a curved cell's map (it is nearly affine: two or three suffice)."""
 
 
+def at_centroids(u: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """A quadratic field given at the nodes, at each cell's centroid: (..., cells, 3).
+
+    ``u`` (..., nodes, 3) is given at the nodes of 10-node tetrahedra ``cells`` (C, 10),
+    corners first. At the barycentre every corner shape function is -1/8 and every edge one
+    1/4, whatever the order of the edges; a curved cell's centroid (the image of the reference
+    cell's) is the same combination of its nodes' positions.
+
+    Raises:
+        ValueError: if ``cells`` are not 10-node tetrahedra.
+    """
+    cells = np.asarray(cells)
+    if cells.ndim != 2 or cells.shape[1] != 10:
+        raise ValueError(f"centroids of a quadratic field need 10-node cells, got shape "
+                         f"{cells.shape}")
+    return -0.125 * u[..., cells[:, :4], :].sum(-2) + 0.25 * u[..., cells[:, 4:], :].sum(-2)
+
+
 def locate(X: np.ndarray, cells: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Each point's tetrahedron corners and their linear shape functions there.
 

@@ -45,27 +45,6 @@ def test_the_benchmarks_pod_model_recovers_a_field_between_its_cases() -> None:
         fit(ds, np.arange(c1.size), [3], config)
 
 
-@pytest.mark.unit
-def test_a_quadratic_field_is_exact_at_a_cells_centroid_whatever_the_edge_order() -> None:
-    """The 10-node tetrahedron's shape functions at its barycentre: -1/8 and 1/4."""
-    from studies.pod_basis import at_centroids
-
-    vertices = np.array([[0.0, 0.0, 0.0], [1.0, 0.1, 0.0], [0.2, 1.0, 0.1], [0.1, 0.3, 1.2]])
-    edges = [(2, 3), (0, 1), (1, 3), (0, 2), (1, 2), (0, 3)]  # any order
-    nodes = np.vstack([vertices, [(vertices[a] + vertices[b]) / 2 for a, b in edges]])
-
-    def field(x: np.ndarray) -> np.ndarray:
-        return np.stack([x[..., 0] ** 2 + x[..., 1] * x[..., 2], 3 * x[..., 1] ** 2 - x[..., 0],
-                         x[..., 2] * x[..., 0] + 0.5], axis=-1)
-
-    cells = np.arange(10)[None, :]
-    centroid = vertices.mean(axis=0)
-    np.testing.assert_allclose(at_centroids(field(nodes), cells)[0], field(centroid),
-                               atol=1e-12)
-    np.testing.assert_allclose(at_centroids(nodes, cells)[0], centroid, atol=1e-12)
-    assert not np.allclose(field(vertices).mean(axis=0), field(centroid))  # linear would miss
-
-
 @pytest.mark.workflow
 def test_the_benchmark_refuses_a_linear_mesh_for_the_centroids(
     small_run, capsys: pytest.CaptureFixture[str]

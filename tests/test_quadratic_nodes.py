@@ -28,6 +28,7 @@ from surrogate.config import SurrogateConfig
 from surrogate.exceptions import ExtrapolationWarning, ModelFileError
 from surrogate.interpolation import (
     EDGES,
+    at_centroids,
     edge_order,
     interpolate,
     locate_quadratic,
@@ -108,6 +109,26 @@ def test_curved_cells_are_inverted_so_that_a_linear_field_is_exact() -> None:
     np.testing.assert_allclose(got, points @ linear, rtol=0, atol=1e-12)
 
 
+def test_a_quadratic_field_is_exact_at_a_cells_centroid_whatever_the_edge_order() -> None:
+    """The 10-node tetrahedron's shape functions at its barycentre: -1/8 and 1/4."""
+    vertices = np.array([[0.0, 0.0, 0.0], [1.0, 0.1, 0.0], [0.2, 1.0, 0.1], [0.1, 0.3, 1.2]])
+    edges = [(2, 3), (0, 1), (1, 3), (0, 2), (1, 2), (0, 3)]  # any order
+    nodes = np.vstack([vertices, [(vertices[a] + vertices[b]) / 2 for a, b in edges]])
+
+    def field(x: np.ndarray) -> np.ndarray:
+        return np.stack([x[..., 0] ** 2 + x[..., 1] * x[..., 2], 3 * x[..., 1] ** 2 - x[..., 0],
+                         x[..., 2] * x[..., 0] + 0.5], axis=-1)
+
+    cells = np.arange(10)[None, :]
+    centroid = vertices.mean(axis=0)
+    np.testing.assert_allclose(at_centroids(field(nodes), cells)[0], field(centroid),
+                               atol=1e-12)
+    np.testing.assert_allclose(at_centroids(nodes, cells)[0], centroid, atol=1e-12)
+    assert not np.allclose(field(vertices).mean(axis=0), field(centroid))  # linear would miss
+    with pytest.raises(ValueError, match="10-node cells"):
+        at_centroids(nodes, cells[:, :4])
+
+
 @pytest.fixture(scope="module")
 def sweep(tmp_path_factory: pytest.TempPathFactory):
     """Cases on the quadratic cube: points at the vertices, fields at every node."""
@@ -170,23 +191,32 @@ def test_a_case_on_another_mesh_is_named_and_nothing_is_written(sweep, tmp_path:
     assert not (tmp_path / "ds.h5").exists()
 
 
+@pytest.fixture(scope="module")
+def models(sweep, tmp_path_factory: pytest.TempPathFactory):
+    """Pod models fitted on the cube's sweep at every node (quadratic) and at the vertices."""
+    from surrogate.checkpoint import save_model
+    from surrogate.predict import Surrogate
+    from surrogate.train import train_and_evaluate
+
+    folder, out = sweep[0], tmp_path_factory.mktemp("models")
+    found = {}
+    for name, nodes in (("quadratic", True), ("linear", False)):
+        ds = read_dataset(folder / "ds.h5", nodes=nodes)
+        save_model(out / name, train_and_evaluate(ds, CONFIG, progress=False), ds)
+        found[name] = Surrogate.load(out / name)
+    return found, out
+
+
 def test_a_pod_model_with_the_nodes_answers_between_the_points_quadratically(
-        sweep, tmp_path: Path) -> None:
+        models, tmp_path: Path) -> None:
     """At the edge nodes, a model fitted at the nodes is as right as at its points.
 
     The edge nodes are no material points; a model fitted at the vertices only misses the
     field's curvature there.
     """
-    from surrogate.checkpoint import save_model
-    from surrogate.predict import Surrogate
-    from surrogate.train import train_and_evaluate
+    import shutil
 
-    folder = sweep[0]
-    models = {}
-    for name, nodes in (("quadratic", True), ("linear", False)):
-        ds = read_dataset(folder / "ds.h5", nodes=nodes)
-        save_model(tmp_path / name, train_and_evaluate(ds, CONFIG, progress=False), ds)
-        models[name] = Surrogate.load(tmp_path / name)
+    models, saved = models
     assert models["quadratic"]._checkpoint.nodes is not None
     assert models["linear"]._checkpoint.nodes is None
     X, cells, n_vertices = quadratic_cube()
@@ -206,9 +236,61 @@ def test_a_pod_model_with_the_nodes_answers_between_the_points_quadratically(
     from surrogate.checkpoint import PARAMS_NPZ, load_checkpoint
 
     folder = tmp_path / "quadratic"
+    shutil.copytree(saved / "quadratic", folder)
     with np.load(folder / PARAMS_NPZ) as npz:
         arrays = {k: npz[k] for k in npz.files}
     arrays["mesh_nodes_basis"] = arrays["mesh_nodes_basis"][:-1]
     np.savez(folder / PARAMS_NPZ, **arrays)
     with pytest.raises(ModelFileError, match="the modes at the nodes are not finite"):
         load_checkpoint(folder)
+
+
+def test_the_held_out_and_posture_errors_are_taken_between_the_points_too(
+        sweep, models) -> None:
+    """At the cell centroids the FE field is exact, and a linear model's miss shows there.
+
+    The cube's field is quadratic in space: the centroids' FE values equal the field there;
+    the model fitted at every node answers them as well as its material points, the one fitted
+    at the vertices misses the curvature, and the evaluations report both at the centroids.
+    """
+    from studies.held_out import Centroids, evaluate_held_out
+    from studies.postures import evaluate_postures
+
+    folder, summaries, points, fields = sweep
+    models = models[0]
+    ds = read_dataset(folder / "ds.h5", nodes=True)
+    centroids = Centroids.of(ds)
+    assert centroids is not None and centroids.X.shape == (len(ds.nodes.cells), 3)
+    case = 11
+    np.testing.assert_allclose(centroids.fe(ds, case), 1e3 * _field(
+        centroids.X, float(ds.C1[case]), float(ds.phi[case]), float(ds.theta[case])),
+        rtol=1e-5, atol=1e-6)
+    assert Centroids.of(read_dataset(folder / "ds.h5")) is None
+
+    quadratic = evaluate_held_out({}, models["quadratic"], ds)
+    linear = evaluate_held_out({}, models["linear"], ds)
+    assert quadratic.inside_all_between.cases == int(ds.converged.sum())
+    assert quadratic.inside_all_between.max_mm <= 2.0 * quadratic.inside_all.max_mm + 1e-6
+    assert linear.inside_all_between.max_mm >= 10.0 * quadratic.inside_all_between.max_mm
+    assert evaluate_held_out({}, models["quadratic"], read_dataset(folder / "ds.h5")
+                             ).inside_all_between is None
+
+    postures = evaluate_postures(models["linear"], [
+        ("supine", True, summaries[case], points[case], fields[case]),
+        ("supine, no fields", True, summaries[case], points[case], None)])
+    with_fields, without = postures.rows
+    assert with_fields.between.case == with_fields.errors.case == ds.ids[case]
+    assert with_fields.between.max_mm >= 10.0 * quadratic.inside_all_between.max_mm
+    assert without.between is None and without.errors == with_fields.errors
+
+    from report.context import Context
+    from report.sections.generalisation import held_out_part, postures_part
+
+    ctx = Context(out_dir=folder, clinical=[], paths={}, clinical_fields=[],
+                  results={"held_out": linear, "postures": postures})
+    spread = linear.inside_all_between
+    assert (f"{spread.mean_mm:.3g} / {spread.p95_mm:.3g} / {spread.max_mm:.3g}"
+            in held_out_part(ctx))
+    page = postures_part(ctx)
+    assert f"{with_fields.between.max_mm:.3g}</td>" in page and "between the points" in page
+

@@ -147,7 +147,8 @@ rule train_held_out:
 
 
 # Each held-out model's errors on its test cases (mean, 95th percentile and max per case, mm
-# and relative), beside the by-sample model's on the same cases.
+# and relative), beside the by-sample model's on the same cases: at the material points and,
+# where the dataset has a quadratic mesh's nodes, at its cell centroids between them.
 rule held_out:
     input:
         dataset=DATASET,
@@ -214,12 +215,14 @@ rule extrapolation:
 
 
 # The model in the postures a patient takes (surrogate_study.postures), against FE: the sweep's
-# cases where it has them, else extra solves by `solve_outside`.
+# cases where it has them, else extra solves by `solve_outside`; at the material points and at
+# the quadratic mesh's cell centroids (from each case's fields.h5), between them.
 rule postures:
     input:
         model=MODEL,
         summaries=posture_files("summary.json"),
         points=posture_files("points.h5"),
+        fields=posture_files("fields.h5"),
     output:
         POSTURES_JSON,
     params:

@@ -13,7 +13,7 @@ from surrogate.predict import Surrogate  # noqa: E402
 
 job_log(snakemake.log[0])
 
-dataset = read_dataset(snakemake.input.dataset)
+dataset = read_dataset(snakemake.input.dataset, nodes=True)  # the centroids, where it has them
 models = {Path(path).parent.name.removeprefix("model_"): Surrogate.load(path)
           for path in snakemake.input.held_out}
 evaluate_held_out(models, Surrogate.load(snakemake.input.model), dataset).write(snakemake.output[0])

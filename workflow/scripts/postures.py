@@ -11,9 +11,10 @@ from surrogate.predict import Surrogate  # noqa: E402
 job_log(snakemake.log[0])
 
 cases = [
-    (name, in_sweep, summary, points)
-    for (name, in_sweep), summary, points in zip(
-        snakemake.params.postures, snakemake.input.summaries, snakemake.input.points, strict=True
+    (name, in_sweep, summary, points, fields)
+    for (name, in_sweep), summary, points, fields in zip(
+        snakemake.params.postures, snakemake.input.summaries, snakemake.input.points,
+        snakemake.input.fields, strict=True,
     )
 ]
 evaluate_postures(Surrogate.load(snakemake.input.model), cases).write(snakemake.output[0])
