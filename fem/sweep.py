@@ -227,29 +227,51 @@ def grid(spec: Any, name: str) -> list[float]:
     return values
 
 
-def refine_directions(sweep: dict[str, Any]) -> tuple[float, list[tuple[float, float]]]:
-    """A sweep's ``refine: {C1_max, directions}``: the extra directions of its soft cases.
+@dataclass(frozen=True)
+class Refinement:
+    """A sweep's ``refine``: extra gravity directions solved in a band of soft C1 values.
+
+    Attributes:
+        C1_min: the softest C1 (kPa) they are solved at (0: from the sweep's softest).
+        C1_max: the stiffest.
+        directions: the extra directions, (Φ, θ) in degrees.
+    """
+
+    C1_min: float
+    C1_max: float
+    directions: tuple[tuple[float, float], ...]
+
+    def covers(self, c1: float) -> bool:
+        """Whether the directions are solved at ``c1`` (kPa)."""
+        return self.C1_min - 1e-9 <= c1 <= self.C1_max + 1e-9
+
+
+def refine_directions(sweep: dict[str, Any]) -> Refinement:
+    """A sweep's ``refine: {C1_min, C1_max, directions}``: the extra directions of its soft cases.
 
     Returns:
-        ``(C1_max, [(Φ, θ), ...])``; ``(0.0, [])`` without ``refine``.
+        The refinement; one without directions where the sweep has no ``refine``.
 
     Raises:
-        InvalidParameterError: for a C1_max that is not positive, or a direction that is not
-            a (Φ, θ) pair of finite degrees.
+        InvalidParameterError: for a C1_max that is not positive, a C1_min above it, or a
+            direction that is not a (Φ, θ) pair of finite degrees.
     """
     refine = resolve_sweep(sweep).get("refine")
     if not refine:
-        return 0.0, []
-    c1_max = float(refine["C1_max"])
+        return Refinement(0.0, 0.0, ())
+    c1_min, c1_max = float(refine.get("C1_min", 0.0)), float(refine["C1_max"])
     if not math.isfinite(c1_max) or c1_max <= 0:
         raise InvalidParameterError(f"sweep.refine.C1_max must be a positive kPa, got {c1_max}")
+    if not math.isfinite(c1_min) or not 0 <= c1_min <= c1_max:
+        raise InvalidParameterError(
+            f"sweep.refine.C1_min must lie between 0 and C1_max = {c1_max:g} kPa, got {c1_min}")
     directions = []
     for pair in refine.get("directions", []):
         if len(pair) != 2 or not all(math.isfinite(float(v)) for v in pair):
             raise InvalidParameterError(
                 f"sweep.refine.directions: {pair!r} is not a [phi, theta] pair in degrees")
         directions.append((float(pair[0]), float(pair[1])))
-    return c1_max, directions
+    return Refinement(c1_min, c1_max, tuple(directions))
 
 
 def sweep_cases(sweep: dict[str, Any]) -> list[Case]:
@@ -260,9 +282,10 @@ def sweep_cases(sweep: dict[str, Any]) -> list[Case]:
             sampling rule, see :func:`sample_phi`) × ``theta_deg`` (list, default ``[0]``),
             or ``sphere: {n, part}`` (directions over the whole sphere or its caudal half,
             :func:`sphere_directions`), or both: the plane's directions and the sphere's;
-            or a ``preset`` (:func:`resolve_sweep`). ``refine: {C1_max, directions}`` adds
-            its directions at the C1 values up to ``C1_max`` only: where a soft field changes
-            fastest with direction (:mod:`studies.direction_gaps` proposes them).
+            or a ``preset`` (:func:`resolve_sweep`). ``refine: {C1_min, C1_max, directions}``
+            adds its directions at the C1 values from ``C1_min`` (default: the softest) to
+            ``C1_max`` only: where a soft field changes fastest with direction
+            (:mod:`studies.direction_gaps` proposes them).
 
     Raises:
         InvalidParameterError: if the sweep has more than :data:`MAX_CASES` cases, or two of
@@ -279,12 +302,13 @@ def sweep_cases(sweep: dict[str, Any]) -> list[Case]:
         directions += sphere_directions(int(sphere["n"]), sphere.get("part", "whole"))
     if not directions:
         raise InvalidParameterError("sweep needs phi_deg or sphere")
-    c1_max, extra = refine_directions(sweep)
-    soft = [c for c in c1s if c <= c1_max + 1e-9]
+    refine = refine_directions(sweep)
+    extra = list(refine.directions)
+    soft = [c for c in c1s if refine.covers(c)]
     if extra and not soft:
         raise InvalidParameterError(
-            f"sweep.refine.C1_max = {c1_max:g} kPa is below every C1 of the sweep: its "
-            "directions would have no case")
+            f"sweep.refine: no C1 of the sweep lies between C1_min = {refine.C1_min:g} and "
+            f"C1_max = {refine.C1_max:g} kPa: its directions would have no case")
     n_cases = len(c1s) * len(directions) + len(soft) * len(extra)
     if n_cases > MAX_CASES:
         refined = f" and {len(extra)} refined ones at {len(soft)}" if extra else ""

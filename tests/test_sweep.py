@@ -159,8 +159,15 @@ def test_refined_directions_are_solved_at_the_soft_c1_values_only() -> None:
     # a refined direction that is one of the sweep's adds nothing
     assert sweep_cases({**base, "refine": {"C1_max": 1.0, "directions": [[90.0, 0.0]]}}) == \
         sweep_cases(base)
-    with pytest.raises(InvalidParameterError, match="below every C1 of the sweep"):
+    with pytest.raises(InvalidParameterError, match="no C1 of the sweep lies between"):
         sweep_cases({**base, "refine": {"C1_max": 0.5, "directions": extra}})
+    # C1_min leaves out the softest values: 1.0 and 1.2 only
+    band = sweep_cases({**base, "refine": {"C1_min": 1.0, "C1_max": 1.2, "directions": extra}})
+    assert sorted({c.C1 for c in band if c.theta != 0.0}) == [1.0, 1.2]
+    with pytest.raises(InvalidParameterError, match="C1_min must lie between 0 and C1_max"):
+        sweep_cases({**base, "refine": {"C1_min": 2.0, "C1_max": 1.2, "directions": extra}})
+    with pytest.raises(InvalidParameterError, match="no C1 of the sweep lies between"):
+        sweep_cases({**base, "refine": {"C1_min": 1.3, "C1_max": 1.9, "directions": extra}})
     with pytest.raises(InvalidParameterError, match="not a \\[phi, theta\\] pair"):
         sweep_cases({**base, "refine": {"C1_max": 1.0, "directions": [[60.0]]}})
     with pytest.raises(InvalidParameterError, match="share one case folder"):
