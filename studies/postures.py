@@ -92,7 +92,7 @@ def evaluate_postures(
     from fem.dataset import read_summary
 
     rows = []
-    at_centroids: _CentroidModel | None = None
+    cached: _CentroidModel | None = None  # the model at the centroids, kept between cases
     for name, in_sweep, summary_path, points_path, fields_path in postures:
         summary = read_summary(summary_path)
         C1, phi, theta = float(summary["C1"]), float(summary["phi"]), float(summary["theta"])
@@ -104,8 +104,8 @@ def evaluate_postures(
             fe, _ = fe_in_model_order(model, points_path)
             errors = CaseErrors.between(pred, fe, summary["case"], C1, phi, theta)
             if fields_path is not None:
-                at_centroids, between = _between(model, at_centroids, fields_path,
-                                                 str(summary["case"]), C1, phi, theta)
+                cached, between = _between(model, cached, fields_path, str(summary["case"]),
+                                           C1, phi, theta)
         rows.append(PostureRow(
             posture=name,
             case=str(summary["case"]),
