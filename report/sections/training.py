@@ -19,9 +19,9 @@ def training_section(ctx: Context) -> str:
     arch = summary.get("architecture", "n/a")
     out = [para(
         "The selected model's training: the loss (the paper's Eq. 2) on the training and "
-        "validation samples, and the validation error in mm, per epoch. Training stops when "
-        "the validation loss has not improved for the configured patience; the best epoch's "
-        "weights are kept.", "caption")]
+        "validation samples, and the validation error in mm, per epoch. Training stops at "
+        "max_epochs, or earlier when the validation loss has not improved for the configured "
+        "patience; the best epoch's weights are kept.", "caption")]
     if history.get("history"):
         out.append(ctx.figure(
             "training_history.png",
