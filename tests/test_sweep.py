@@ -27,7 +27,7 @@ def test_case_id_rejects_garbage() -> None:
         Case.from_id("c1=1_phi=0")
 
 
-def test_default_config_is_the_papers_plane_and_the_caudal_half() -> None:
+def test_default_config_is_the_papers_plane_the_caudal_half_and_16_soft_directions() -> None:
     from fem.sweep import sphere_directions
 
     config = yaml.safe_load((REPO / "config.yaml").read_text())
@@ -35,8 +35,12 @@ def test_default_config_is_the_papers_plane_and_the_caudal_half() -> None:
     c1s = sorted({c.C1 for c in cases})
     assert len(c1s) == 22 and c1s[0] == 0.8 and c1s[-1] == 5.0
     assert np.allclose(np.diff(c1s), 0.2)
-    directions = {(c.phi, c.theta) for c in cases}
-    assert len(directions) == 32 and len(cases) == 22 * 32
+    every_c1 = {(phi, theta) for phi, theta in {(c.phi, c.theta) for c in cases}
+                if sum(1 for c in cases if (c.phi, c.theta) == (phi, theta)) == 22}
+    refined = {(c.phi, c.theta) for c in cases} - every_c1
+    assert len(every_c1) == 32 and len(refined) == 16 and len(cases) == 22 * 32 + 2 * 16
+    assert {c.C1 for c in cases if (c.phi, c.theta) in refined} == {1.0, 1.2}
+    directions = every_c1
     assert {(phi, 0.0) for phi in PAPER_PHI_DEG} <= directions  # the paper's plane, whole
     lattice = (Case(1.0, phi, theta) for phi, theta in sphere_directions(16, "caudal"))
     caudal = {(case.phi, case.theta) for case in lattice}  # as the case folders round them
