@@ -57,7 +57,8 @@ def held_out_part(ctx: Context) -> str:
 BETWEEN = (
     " A tumour lies between the material points the model trained on: the column 'between "
     "the points' gives the same errors at the FE mesh's cell centroids, where the FE field is "
-    "known exactly from its quadratic cells (blank where the mesh is linear).")
+    "known exactly from its quadratic cells (blank where the mesh is linear). The centroids "
+    "lie inside the body; the skin's points are among the material points.")
 
 
 def _between(spread: CaseErrors | ErrorSpread | None) -> str:
