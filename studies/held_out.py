@@ -116,6 +116,23 @@ class Centroids:
             return None
         return cls(at_centroids(ds.nodes.X, ds.nodes.cells), ds.nodes.cells)
 
+    @classmethod
+    def of_fields(cls, path: str | Path) -> tuple[Centroids, np.ndarray] | None:
+        """A case's ``fields.h5``: its mesh's centroids and its FE displacement there (mm).
+
+        None on a linear mesh, whose fields file lacks the FE field's edge values.
+
+        Raises:
+            fem.dataset.DatasetError: if the file is not a case's fields.
+        """
+        from fem.dataset import read_node_displacement
+        from surrogate.interpolation import at_centroids
+
+        u, cells, nodes = read_node_displacement(path)
+        if cells.ndim != 2 or cells.shape[1] != 10:
+            return None
+        return cls(at_centroids(nodes, cells), cells), at_centroids(1e3 * u, cells)
+
     def fe(self, ds: Dataset, case: int) -> np.ndarray:
         """Case ``case``'s FE displacement at the centroids (C, 3), mm."""
         from surrogate.interpolation import at_centroids

@@ -38,12 +38,11 @@ from pathlib import Path
 
 import numpy as np
 
-from fem.dataset import Dataset, read_dataset, read_node_displacement, read_summary
+from fem.dataset import Dataset, read_dataset, read_summary
 from studies.held_out import CaseErrors, Centroids, ErrorSpread
 from studies.surrogate_evaluation import fe_in_model_order
 from surrogate.config import SurrogateConfig
 from surrogate.exceptions import ExtrapolationWarning
-from surrogate.interpolation import at_centroids
 from surrogate.predict import Surrogate
 
 SOFT_C1_KPA = 1.0
@@ -99,12 +98,11 @@ def outside_cases(
         if summary["status"] != "converged" or not lo - 1e-9 <= C1 <= hi + 1e-9:
             continue
         if cells is not None:
-            u, c, _ = read_node_displacement(summary_path.parent / "fields.h5")
-            u = 1e3 * u  # mm
-            if not np.array_equal(c, cells):
+            read = Centroids.of_fields(summary_path.parent / "fields.h5")
+            if read is None or not np.array_equal(read[0].cells, cells):
                 raise ValueError(f"{summary_path.parent}: another mesh than the dataset's")
             found.append((str(summary["case"]), C1, float(summary["phi"]),
-                          float(summary["theta"]), at_centroids(u, cells)))
+                          float(summary["theta"]), read[1]))
             continue
         fe, _ = fe_in_model_order(model, summary_path.parent / "points.h5")
         found.append((str(summary["case"]), C1, float(summary["phi"]), float(summary["theta"]),

@@ -145,19 +145,15 @@ def _between(
     None on a linear mesh, whose fields file lacks the FE field's edge values. The model
     answering at the centroids is returned too, kept for the next posture on the same mesh.
     """
-    from fem.dataset import read_node_displacement
-    from surrogate.interpolation import at_centroids
-
-    u, cells, nodes = read_node_displacement(fields_path)
-    if cells.ndim != 2 or cells.shape[1] != 10:
+    read = Centroids.of_fields(fields_path)
+    if read is None:
         return cached, None
-    if cached is None or not np.array_equal(cached.centroids.cells, cells):
-        centroids = Centroids(at_centroids(nodes, cells), cells)
+    centroids, fe = read
+    if cached is None or not np.array_equal(cached.centroids.cells, centroids.cells):
         cached = _CentroidModel(centroids, centroids.model(model))
     with warnings.catch_warnings():  # warned of once already, at the material points
         warnings.simplefilter("ignore", ExtrapolationWarning)
         pred = cached.model.predict(C1, phi, theta)
-    fe = at_centroids(1e3 * u, cells)  # mm
     return cached, CaseErrors.between(pred, fe, case, C1, phi, theta)
 
 
