@@ -166,6 +166,34 @@ def corpus_rows(table: CorpusTable) -> list[list[str]]:
     return rows
 
 
+def corpus_failures(table: CorpusTable) -> list[list[str]]:
+    """The report's rows of the cases some path did not converge: how far each path loaded them.
+
+    One row per anatomy and case, in the config's order: the load fraction λ each path reached
+    (the state it kept) and why it stopped, the default's path first.
+    """
+    rows = []
+    for run in table.anatomies:
+        paths = [run.by_solver(run.solver), run.by_solver(EXACT)]
+        for default, exact in zip(*paths, strict=True):
+            if default.converged and exact.converged:
+                continue
+            row = [run.name, default.case]
+            for solve in (default, exact):
+                row += [f"{solve.load_fraction:.3f}" + ("" if solve.converged else " (failed)"),
+                        f"{solve.newton_iterations:d}", f"{solve.solve_s:.0f}",
+                        "" if solve.converged else solve.reason]
+            rows.append(row)
+    return rows
+
+
+FAILURES_HEADER = [
+    "anatomy", "case",
+    "default: λ reached", "default: Newton its", "default: time (s)", "default: why it stopped",
+    "exact Newton: λ reached", "exact: Newton its", "exact: time (s)", "exact: why it stopped",
+]
+
+
 CORPUS_HEADER = [
     "anatomy", "geometry", "breast (model) volume (ml)", "cells", "P2/P1 unknowns",
     "min dihedral (°)",
@@ -175,5 +203,5 @@ CORPUS_HEADER = [
 ]
 
 
-__all__ = ["AnatomyRun", "CORPUS_HEADER", "CorpusSolve", "CorpusTable", "EXACT", "corpus_cases",
-           "corpus_rows", "solve_anatomy"]
+__all__ = ["AnatomyRun", "CORPUS_HEADER", "CorpusSolve", "CorpusTable", "EXACT",
+           "FAILURES_HEADER", "corpus_cases", "corpus_failures", "corpus_rows", "solve_anatomy"]

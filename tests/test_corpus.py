@@ -116,3 +116,36 @@ def test_the_corpus_study_solves_an_anatomy_with_both_paths(tmp_path: Path) -> N
     table.write(tmp_path / "corpus.json")
     row = corpus_rows(CorpusTable.read(tmp_path / "corpus.json"))[0]
     assert row[0] == "scan" and row[6] == "1/1" and row[-1] == "none"
+
+
+@pytest.mark.unit
+def test_the_failures_table_lists_each_case_a_path_did_not_converge_with_its_load_fraction(
+) -> None:
+    """A case both paths converged is left out; one either path failed shows both paths' λ."""
+    from studies.corpus import (
+        EXACT,
+        FAILURES_HEADER,
+        AnatomyRun,
+        CorpusSolve,
+        CorpusTable,
+        corpus_failures,
+    )
+
+    def solve(case: str, solver: str, fraction: float, reason: str) -> CorpusSolve:
+        return CorpusSolve(
+            case=case, C1=1.0, phi=0.0, theta=0.0, solver=solver, converged=fraction == 1.0,
+            load_fraction=fraction, load_steps=3, newton_iterations=40, preconditioner_builds=2,
+            exact_retries=0, rescued=False, solve_s=12.0, max_disp_mm=50.0, reason=reason)
+
+    solves = [solve("a", "direct", 1.0, "converged"), solve("a", EXACT, 1.0, "converged"),
+              solve("b", "direct", 0.75, "step cut below min_step"),
+              solve("b", EXACT, 0.734, "step cut below min_step"),
+              solve("c", "direct", 1.0, "converged"), solve("c", EXACT, 0.5, "diverged")]
+    run = AnatomyRun(name="ptotic", description="", source="parametric", volume_ml=1.0,
+                     breast_volume_ml=1.0, cells=1, dofs=1, min_dihedral_deg=10.0,
+                     solver="direct", solves=solves, machine={})
+    rows = corpus_failures(CorpusTable([run], soft_C1=0.8, soft_phi=[]))
+    assert [row[:2] for row in rows] == [["ptotic", "b"], ["ptotic", "c"]]
+    assert all(len(row) == len(FAILURES_HEADER) for row in rows)
+    assert rows[0][2] == "0.750 (failed)" and rows[0][6] == "0.734 (failed)"
+    assert rows[1][2] == "1.000" and rows[1][5] == "" and rows[1][9] == "diverged"

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from report.context import Context
 from report.html import missing, para, table
-from studies.corpus import CORPUS_HEADER, EXACT, corpus_rows
+from studies.corpus import CORPUS_HEADER, EXACT, FAILURES_HEADER, corpus_failures, corpus_rows
 
 
 def corpus_section(ctx: Context) -> str:
@@ -33,4 +33,12 @@ def corpus_section(ctx: Context) -> str:
         if not missed else
         f"{missed} case(s) converged with exact Newton but not with the default: see the last "
         "column."))
+    failures = corpus_failures(corpus)
+    if failures:
+        out.append(para(
+            "Where the cases stop: each case some path did not converge, with the load fraction "
+            "λ of full gravity that each path reached (the state it kept) and why it stopped. "
+            "Where both paths stop at nearly the same λ, the model, not the solver, has reached "
+            "its limit there (docs/solver.md).", "caption"))
+        out.append(table(FAILURES_HEADER, failures, table_id="corpus-failures"))
     return "".join(out)
