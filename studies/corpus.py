@@ -6,11 +6,18 @@ solver settings (the default) and again with ``direct-refactor`` (exact Newton, 
 factorisation at every iteration), in one process on one mesh. The default must converge every
 case exact Newton converges; the table gives each anatomy's volume, cells, unknowns, cases
 converged, Newton iterations and time.
+
+An anatomy's soft cases can take many minutes each where they fail, so a job writes every solve
+to a progress file as it finishes (:class:`Progress`): a job stopped part-way (a time limit, a
+reboot) resumes where it was, keeping the solves of the same mesh with the same settings.
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
 import logging
+import os
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -18,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from fem.parameters import SolverSettings
+from fem.parameters import SolverSettings, as_dict
 from fem.sweep import Case, clinical_cases
 from studies.machine import machine_state
 from studies.mesh_quality import MeshQuality
@@ -74,6 +81,8 @@ class AnatomyRun(Result):
     solver: str
     solves: list[CorpusSolve]
     machine: dict[str, Any]
+    resumed: int = 0
+    """Solves taken from the progress file of an earlier, stopped job (timed there)."""
 
     def by_solver(self, solver: str) -> list[CorpusSolve]:
         """The solves of one path, in case order."""
@@ -95,6 +104,57 @@ class CorpusTable(Result):
     soft_phi: list[float]
 
 
+def fingerprint(mesh_path: str | Path, settings: SolverSettings) -> str:
+    """What a solve depends on besides its case: the mesh's files and the solver settings."""
+    digest = hashlib.sha256()
+    xdmf = Path(mesh_path)
+    for path in (xdmf, xdmf.with_suffix(".h5")):
+        if path.exists():
+            digest.update(path.read_bytes())
+    digest.update(json.dumps(as_dict(settings), sort_keys=True, default=str).encode())
+    return digest.hexdigest()
+
+
+class Progress:
+    """The solves an anatomy's job has finished, one JSON line each, so that it can resume.
+
+    Each line holds a solve and the :func:`fingerprint` of its mesh and settings; only the
+    lines of the fingerprints asked for count, and a line cut short (the job killed while
+    writing it) is ignored.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+
+    def done(self, fingerprints: set[str]) -> dict[tuple[str, str], CorpusSolve]:
+        """The finished solves by (case, solver), of these fingerprints only.
+
+        The file is rewritten without the other lines (another mesh or settings).
+        """
+        kept: dict[tuple[str, str], CorpusSolve] = {}
+        lines = []
+        if self.path.exists():
+            for line in self.path.read_text().splitlines():
+                try:
+                    entry = json.loads(line)
+                    solve = CorpusSolve.from_json(entry["solve"], where=str(self.path))
+                except (ValueError, KeyError, TypeError):
+                    continue
+                if entry.get("fingerprint") in fingerprints:
+                    kept[(solve.case, solve.solver)] = solve
+                    lines.append(line)
+            self.path.write_text("".join(f"{line}\n" for line in lines))
+        return kept
+
+    def add(self, fingerprint: str, solve: CorpusSolve) -> None:
+        """Append one finished solve and flush it to disk."""
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        with self.path.open("a") as out:
+            out.write(json.dumps({"fingerprint": fingerprint, "solve": solve.to_json()}) + "\n")
+            out.flush()
+            os.fsync(out.fileno())
+
+
 def solve_anatomy(
     name: str,
     description: str,
@@ -102,11 +162,15 @@ def solve_anatomy(
     quality: MeshQuality,
     settings: SolverSettings,
     cases: list[Case],
+    progress: str | Path | None = None,
 ) -> AnatomyRun:
     """Solve ``cases`` on one anatomy's mesh with ``settings`` and with exact Newton.
 
     The two paths run alternately case by case in one process (one mesh read and form
     compilation each), so their times are comparable under the same load on the machine.
+    With ``progress`` (a :class:`Progress` file), each solve is recorded there as it finishes,
+    and the solves already recorded for this mesh and these settings are taken from it instead
+    of solved again.
     """
     from fem.case import CaseRunner
 
@@ -114,10 +178,18 @@ def solve_anatomy(
     paths = {settings.solver: CaseRunner(mesh_path, settings)}
     if settings.solver != EXACT:
         paths[EXACT] = CaseRunner(mesh_path, exact)
+    keys = {solver: fingerprint(mesh_path, runner.settings) for solver, runner in paths.items()}
+    record = None if progress is None else Progress(progress)
+    done = {} if record is None else record.done(set(keys.values()))
     before = machine_state().to_json()
     solves = []
     for case in cases:
         for solver, runner in paths.items():
+            if (case.id, solver) in done:
+                solves.append(done[(case.id, solver)])
+                log.info("%s %s %s: taken from %s (%s)", name, case.id, solver, progress,
+                         done[(case.id, solver)].reason)
+                continue
             start = time.perf_counter()
             result, timings = runner.solve(case)
             elapsed = time.perf_counter() - start
@@ -131,6 +203,8 @@ def solve_anatomy(
                 max_disp_mm=float(1e3 * np.linalg.norm(u, axis=1).max(initial=0.0)),
                 reason=result.reason,
             ))
+            if record is not None:
+                record.add(keys[solver], solves[-1])
             log.info("%s %s %s: %s, %d Newton its, %.1f s", name, case.id, solver,
                      result.reason, result.total_iterations, elapsed)
     dofs = paths[settings.solver].problem.num_dofs()
@@ -143,7 +217,7 @@ def solve_anatomy(
         # import is all breast
         breast_volume_ml=float(quality.anatomy.get("breast_volume_ml") or quality.volume_ml),
         min_dihedral_deg=quality.min_dihedral_deg, solver=settings.solver, solves=solves,
-        machine={"before": before, "after": machine_state().to_json()},
+        machine={"before": before, "after": machine_state().to_json()}, resumed=len(done),
     )
 
 
@@ -204,4 +278,5 @@ CORPUS_HEADER = [
 
 
 __all__ = ["AnatomyRun", "CORPUS_HEADER", "CorpusSolve", "CorpusTable", "EXACT",
-           "FAILURES_HEADER", "corpus_cases", "corpus_failures", "corpus_rows", "solve_anatomy"]
+           "FAILURES_HEADER", "Progress", "corpus_cases", "corpus_failures", "corpus_rows",
+           "fingerprint", "solve_anatomy"]

@@ -95,19 +95,56 @@ def test_a_remeshed_import_below_the_dihedral_floor_names_its_worst_cells(tmp_pa
 
 
 @pytest.mark.solve
-def test_the_corpus_study_solves_an_anatomy_with_both_paths(tmp_path: Path) -> None:
-    """One case on the coarse scan: the default and exact Newton agree and are recorded."""
+def test_the_corpus_study_solves_an_anatomy_with_both_paths_and_resumes_a_stopped_job(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """One case on the coarse scan with both paths: they agree and are recorded.
+
+    Run again on the same progress file (its last line cut short, as by a job killed while
+    writing it), the job solves nothing and returns the same solves; with other settings, the
+    file's solves do not count.
+    """
+    from dataclasses import replace
+
+    from fem.case import CaseRunner
     from fem.parameters import SolverSettings
     from fem.sweep import Case
-    from studies.corpus import EXACT, CorpusTable, corpus_rows, solve_anatomy
+    from studies.corpus import (
+        EXACT,
+        AnatomyRun,
+        CorpusTable,
+        Progress,
+        corpus_rows,
+        fingerprint,
+        solve_anatomy,
+    )
     from studies.mesh_quality import MeshQuality
 
     section, _ = _import("scan", tmp_path)
     config = yaml.safe_load((REPO / "config.yaml").read_text())
     settings = SolverSettings.from_config({**config, "mesh": section})
     assert settings.contact is None  # the default contact is off on an import
-    run = solve_anatomy("scan", ANATOMIES["scan"].description, tmp_path / "mesh.xdmf",
-                        MeshQuality.read(tmp_path / "quality.json"), settings, [Case(1.0, 180.0)])
+    mesh, progress = tmp_path / "mesh.xdmf", tmp_path / "progress.jsonl"
+
+    def anatomy() -> AnatomyRun:
+        return solve_anatomy("scan", ANATOMIES["scan"].description, mesh,
+                             MeshQuality.read(tmp_path / "quality.json"), settings,
+                             [Case(1.0, 180.0)], progress=progress)
+
+    run = anatomy()
+    assert run.resumed == 0 and len(progress.read_text().splitlines()) == 2
+
+    def no_solve(self: CaseRunner, case: Case) -> None:
+        raise AssertionError(f"{case.id} solved again")
+
+    monkeypatch.setattr(CaseRunner, "solve", no_solve)
+    with progress.open("a") as out:
+        out.write('{"fingerprint": "')
+    resumed = anatomy()
+    assert resumed.resumed == 2 and resumed.solves == run.solves
+    other = replace(settings, loading=replace(settings.loading, max_steps=59))
+    assert fingerprint(mesh, other) != fingerprint(mesh, settings)
+    assert Progress(progress).done({fingerprint(mesh, other)}) == {}
     default, exact = run.by_solver("direct"), run.by_solver(EXACT)
     assert [s.converged for s in default + exact] == [True, True] and run.missed == []
     assert default[0].max_disp_mm == pytest.approx(exact[0].max_disp_mm, rel=1e-6)

@@ -28,6 +28,11 @@ def corpus_section(ctx: Context) -> str:
         "iterations count every attempt, failed ones included; times are one solve's wall "
         "time, in the same job for both paths.", "caption")]
     out.append(table(CORPUS_HEADER, corpus_rows(corpus), table_id="corpus"))
+    resumed = [f"{run.name} ({run.resumed})" for run in runs if run.resumed]
+    if resumed:
+        out.append(para(
+            "Solves taken from an earlier, stopped job's progress file, timed in that job: "
+            f"{', '.join(resumed)}."))
     out.append(para(
         "The default converged every case that exact Newton converged."
         if not missed else

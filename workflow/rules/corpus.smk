@@ -2,7 +2,8 @@
 # itself, from the config's breast to a scan-like surface in scanner axes and a volume mesh in
 # another axis convention, each imported as a user's file would be, then solved with the
 # config's solver and with exact Newton. A benchmark of the import and the solver on more than
-# one mesh; `snakemake -j2 corpus` runs it alone, the report shows its table.
+# one mesh; `snakemake -j2 corpus` runs it alone, the report shows its table. A stopped
+# solve job keeps its finished solves (progress.jsonl) and a rerun resumes there.
 wildcard_constraints:
     anatomy="|".join(CORPUS_ANATOMIES),
 
@@ -46,6 +47,8 @@ rule corpus_solve:
         clinical=CONFIG.section("clinical"),
         soft_C1=CONFIG.section("corpus", "soft_C1"),
         soft_phi=CONFIG.section("corpus", "soft_phi"),
+        # each solve as it finishes: a stopped job resumes there (studies.corpus.Progress)
+        progress=lambda wildcards: f"{CORPUS_DIR}/{wildcards.anatomy}/progress.jsonl",
     log:
         f"results/logs/corpus/solve_{{anatomy}}.log",
     benchmark:

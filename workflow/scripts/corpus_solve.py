@@ -19,5 +19,6 @@ settings = SolverSettings.from_config({**snakemake.params.config, "mesh": mesh})
 run = solve_anatomy(name, ANATOMIES[name].description, snakemake.input.mesh,
                     MeshQuality.read(snakemake.input.quality), settings,
                     corpus_cases(snakemake.params.clinical, snakemake.params.soft_C1,
-                                 snakemake.params.soft_phi))
+                                 snakemake.params.soft_phi),
+                    progress=snakemake.params.progress)
 run.write(snakemake.output[0])
