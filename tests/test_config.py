@@ -98,6 +98,7 @@ def test_variants_override_the_surrogate_settings() -> None:
                                      output_scaling="compliance", output_form="gravity_linear",
                                      structure="pod", lr_schedule="cosine", learning_rate=0.003,
                                      beta1=0.9, beta2=0.999,
+                                     max_epochs=config.surrogate.max_epochs,
                                      patience=config.surrogate.patience) == config.surrogate
     assert protocol.settings.patience == 20  # the paper's early stopping, at its constant rate
     vector = config.surrogate_study.variant("vector_output").settings
