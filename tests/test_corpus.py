@@ -181,8 +181,16 @@ def test_the_failures_table_lists_each_case_a_path_did_not_converge_with_its_loa
     run = AnatomyRun(name="ptotic", description="", source="parametric", volume_ml=1.0,
                      breast_volume_ml=1.0, cells=1, dofs=1, min_dihedral_deg=10.0,
                      solver="direct", solves=solves, machine={})
-    rows = corpus_failures(CorpusTable([run], soft_C1=0.8, soft_phi=[]))
+    table = CorpusTable([run], soft_C1=0.8, soft_phi=[])
+    rows = corpus_failures(table)
     assert [row[:2] for row in rows] == [["ptotic", "b"], ["ptotic", "c"]]
     assert all(len(row) == len(FAILURES_HEADER) for row in rows)
     assert rows[0][2] == "0.750 (failed)" and rows[0][6] == "0.734 (failed)"
     assert rows[1][2] == "1.000" and rows[1][5] == "" and rows[1][9] == "diverged"
+    from report.context import Context
+    from report.sections.corpus import corpus_section
+
+    page = corpus_section(Context(out_dir=Path("."), clinical=[], paths={}, clinical_fields=[],
+                                  results={"corpus": table}))
+    assert 'id="corpus-failures"' in page and "0.734 (failed)" in page
+    assert "The default converged every case that exact Newton converged." in page
