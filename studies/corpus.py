@@ -248,8 +248,7 @@ def corpus_failures(table: CorpusTable) -> list[list[str]]:
     """
     rows = []
     for run in table.anatomies:
-        paths = [run.by_solver(run.solver), run.by_solver(EXACT)]
-        for default, exact in zip(*paths, strict=True):
+        for default, exact in zip(run.by_solver(run.solver), run.by_solver(EXACT), strict=True):
             if default.converged and exact.converged:
                 continue
             row = [run.name, default.case]
