@@ -5,8 +5,9 @@ points in the training set: its error says how well the network fits, not how we
 answers between the sweep's cases, which is what a user asks of it. The dataset's group
 splits (:data:`fem.dataset.SPLIT_KINDS`) hold out whole gravity directions
 (``by_direction``), whole C1 values (``by_c1``) or whole setups (``by_case``). Each held-out
-model is judged here on its test cases, and the by-sample model, which trained on most of
-those cases' points, on the same cases beside it: the pair says how much a sweep's spacing
+model is judged here on its test cases, and the by-sample model beside it on those of the
+same cases it trained on (every case, for the paper's split of points; all but its validation
+cases, for a ``pod`` model, :func:`trained_cases`): the pair says how much a sweep's spacing
 costs, and so whether the sweep is dense enough ("as small an error at held-out directions
 as inside the data").
 
@@ -197,9 +198,10 @@ class HeldOutBlock(Record):
         groups: the held-out groups of its test part (directions as ``phi/theta`` in degrees,
             C1 values in kPa, or case ids).
         held_out_model: the held-out model's errors over its test cases.
-        inside_model: the by-sample model's errors over the same cases.
+        inside_model: the by-sample model's errors over those of the same cases it trained on
+            (:func:`trained_cases`); None where it trained on none of them.
         rows: the held-out model's errors per test case.
-        inside_rows: the by-sample model's, in the same order.
+        inside_rows: the by-sample model's on those cases, in the same order.
         held_out_between: the held-out model's errors at the cell centroids (:class:`Centroids`)
             over the same cases; absent where the dataset has no quadratic mesh's nodes.
         inside_between: the by-sample model's there.
@@ -209,7 +211,7 @@ class HeldOutBlock(Record):
     held_out: str
     groups: list[str]
     held_out_model: ErrorSpread
-    inside_model: ErrorSpread
+    inside_model: ErrorSpread | None
     rows: list[CaseErrors]
     inside_rows: list[CaseErrors]
     held_out_between: ErrorSpread | None = None
@@ -220,9 +222,9 @@ class HeldOutBlock(Record):
 class HeldOutEvaluation(Result):
     """``results/surrogate/held_out.json``: every held-out model, and the by-sample model.
 
-    ``inside_all`` is the by-sample model over every converged case of the sweep: its error
-    inside the data; ``inside_all_between`` the same at the cell centroids, between the
-    material points (absent without a quadratic mesh's nodes).
+    ``inside_all`` is the by-sample model over every converged case of the sweep it trained on
+    (:func:`trained_cases`): its error inside the data; ``inside_all_between`` the same at the
+    cell centroids, between the material points (absent without a quadratic mesh's nodes).
     """
 
     blocks: list[HeldOutBlock]
@@ -242,6 +244,26 @@ def held_out_groups(ds: Dataset, split: str, cases: np.ndarray) -> list[str]:
     return [str(ds.ids[i]) for i in cases]
 
 
+def trained_cases(model: Surrogate, ds: Dataset) -> np.ndarray:
+    """The converged cases of ``ds`` whose fields ``model`` trained on (indices, ascending).
+
+    A ``pod`` model trains on whole cases and leaves its validation cases out (with ``split:
+    by_sample``, the ``by_case`` split's validation cases: :func:`surrogate.pod.case_split`); a
+    pointwise or separable model's by-sample split draws points, so that it trains on part of
+    every case. Cases the model held out (``Surrogate.held_out``) are not among them.
+    """
+    held = np.flatnonzero(np.isin(ds.ids, list(model.held_out)))
+    if model.config.structure == "pod":
+        from surrogate.pod import case_split
+
+        cases = case_split(ds, model.config, held)[0]
+    elif model.config.split == "by_sample":
+        cases = np.setdiff1d(np.arange(len(ds.ids)), held)
+    else:
+        cases = np.setdiff1d(ds.splits[model.config.split]["train"], held)
+    return np.intersect1d(cases, np.flatnonzero(ds.converged))
+
+
 def evaluate_held_out(
     models: Mapping[str, Surrogate], inside: Surrogate, ds: Dataset
 ) -> HeldOutEvaluation:
@@ -253,21 +275,22 @@ def evaluate_held_out(
     Args:
         models: the held-out models by the split each trained on (``by_case``,
             ``by_direction``, ``by_c1``).
-        inside: the by-sample model.
+        inside: the by-sample model, judged on the cases it trained on only
+            (:func:`trained_cases`): its error inside the data.
         ds: the dataset both trained on.
 
     Raises:
         ValueError: if a model trained on another split than its key, or a split has no
             test cases.
     """
-    converged = np.flatnonzero(ds.converged)
-    inside_of = {int(i): CaseErrors.of(inside, ds, int(i)) for i in converged}
+    trained = trained_cases(inside, ds)
+    inside_of = {int(i): CaseErrors.of(inside, ds, int(i)) for i in trained}
     centroids = Centroids.of(ds)
     inside_between_of: dict[int, CaseErrors] = {}
     if centroids is not None:
         inside_at = centroids.model(inside)
         inside_between_of = {int(i): CaseErrors.of(inside_at, ds, int(i), centroids)
-                             for i in converged}
+                             for i in trained}
     blocks = []
     for split, model in models.items():
         if model.config.split != split:
@@ -277,19 +300,20 @@ def evaluate_held_out(
         if test.size == 0:
             raise ValueError(f"the dataset's {split} split has no test cases")
         rows = [CaseErrors.of(model, ds, int(i)) for i in test]
-        inside_rows = [inside_of[int(i)] for i in test]
+        inside_rows = [inside_of[int(i)] for i in test if int(i) in inside_of]
         held_out_between = inside_between = None
         if centroids is not None:
             model_at = centroids.model(model)
             held_out_between = ErrorSpread.over(
                 [CaseErrors.of(model_at, ds, int(i), centroids) for i in test])
-            inside_between = ErrorSpread.over([inside_between_of[int(i)] for i in test])
+            between = [inside_between_of[int(i)] for i in test if int(i) in inside_between_of]
+            inside_between = ErrorSpread.over(between) if between else None
         blocks.append(HeldOutBlock(
             split=split,
             held_out=HELD_OUT.get(split, split),
             groups=held_out_groups(ds, split, test),
             held_out_model=ErrorSpread.over(rows),
-            inside_model=ErrorSpread.over(inside_rows),
+            inside_model=ErrorSpread.over(inside_rows) if inside_rows else None,
             rows=rows,
             inside_rows=inside_rows,
             held_out_between=held_out_between,
@@ -362,11 +386,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{folder}: {config.architecture} {config.structure}, {config.output_form} output, "
               f"split {config.split}, validation error "
               f"{model.metrics.get('validation_error_mm')} mm")
-        if config.split == "by_sample":  # its split draws points, not cases
-            parts = {"every case": np.arange(len(ds.C1))}
+        trained = trained_cases(model, ds)
+        if config.split == "by_sample":  # every case but a pod model's validation cases
+            parts = {"trained on": trained,
+                     "not trained on": np.setdiff1d(np.flatnonzero(ds.converged), trained)}
         else:
             parts = {"held out": np.asarray(split["test"], dtype=np.int64),
-                     "trained on": np.asarray(split["train"], dtype=np.int64)}
+                     "trained on": trained}
         for label, cases in parts.items():
             cases = cases[ds.converged[cases]]
             rows = [CaseErrors.of(model, ds, int(i)) for i in cases]

@@ -253,7 +253,7 @@ def test_the_held_out_and_posture_errors_are_taken_between_the_points_too(
     the model fitted at every node answers them as well as its material points, the one fitted
     at the vertices misses the curvature, and the evaluations report both at the centroids.
     """
-    from studies.held_out import Centroids, evaluate_held_out
+    from studies.held_out import Centroids, evaluate_held_out, trained_cases
     from studies.postures import evaluate_postures
 
     folder, summaries, points, fields = sweep
@@ -269,7 +269,12 @@ def test_the_held_out_and_posture_errors_are_taken_between_the_points_too(
 
     quadratic = evaluate_held_out({}, models["quadratic"], ds)
     linear = evaluate_held_out({}, models["linear"], ds)
-    assert quadratic.inside_all_between.cases == int(ds.converged.sum())
+    # inside the data: the cases the pod model trained on, not its validation cases
+    validation = ds.splits["by_case"]["validation"]
+    trained = trained_cases(models["quadratic"], ds)
+    assert validation.size and not np.isin(validation, trained).any()
+    assert trained.size + validation.size == int(ds.converged.sum())
+    assert quadratic.inside_all.cases == quadratic.inside_all_between.cases == trained.size
     assert quadratic.inside_all_between.max_mm <= 2.0 * quadratic.inside_all.max_mm + 1e-6
     assert linear.inside_all_between.max_mm >= 10.0 * quadratic.inside_all_between.max_mm
     assert evaluate_held_out({}, models["quadratic"], read_dataset(folder / "ds.h5")
@@ -294,3 +299,27 @@ def test_the_held_out_and_posture_errors_are_taken_between_the_points_too(
     page = postures_part(ctx)
     assert f"{with_fields.between.max_mm:.3g}</td>" in page and "between the points" in page
 
+
+
+def test_a_held_out_block_without_cases_the_by_sample_model_trained_on(
+        sweep, models, tmp_path: Path) -> None:
+    """Where the by-sample model trained on none of a split's test cases, no row says it did."""
+    from report.context import Context
+    from report.sections.generalisation import held_out_part
+    from studies.held_out import CaseErrors, ErrorSpread, HeldOutBlock, HeldOutEvaluation
+
+    folder = sweep[0]
+    ds = read_dataset(folder / "ds.h5")
+    model = models[0]["linear"]
+    test = ds.splits["by_case"]["validation"][:2]  # cases the pod model validated on
+    rows = [CaseErrors.of(model, ds, int(i)) for i in test]
+    block = HeldOutBlock(split="by_case", held_out="whole setups", groups=list(ds.ids[test]),
+                         held_out_model=ErrorSpread.over(rows), inside_model=None, rows=rows,
+                         inside_rows=[])
+    evaluation = HeldOutEvaluation(blocks=[block], inside_all=ErrorSpread.over(rows))
+    evaluation.write(tmp_path / "held_out.json")
+    back = HeldOutEvaluation.read(tmp_path / "held_out.json")
+    assert back.blocks[0].inside_model is None and back == evaluation
+    page = held_out_part(Context(out_dir=folder, clinical=[], paths={}, clinical_fields=[],
+                                 results={"held_out": back}))
+    assert page.count("held out model") == 1 and page.count("by sample model") == 1

@@ -17,7 +17,8 @@ def held_out_part(ctx: Context) -> str:
         "most of its points in the training data. The models here were trained with whole "
         "groups of the sweep held out: whole gravity directions, whole C1 values, whole "
         "setups. Each is judged on its held-out cases; the by-sample model (the one used "
-        "downstream) on the same cases beside it. A held-out group's neighbours in the "
+        "downstream) beside it on those of the same cases it trained on (a pod model does not "
+        "train on its validation cases). A held-out group's neighbours in the "
         "training data are twice the sweep's spacing apart, so the held-out error is a "
         "pessimistic estimate of the error midway between the full sweep's cases: where it is "
         "close to the "
@@ -31,6 +32,8 @@ def held_out_part(ctx: Context) -> str:
         for who, spread, between in (
                 ("held out", block.held_out_model, block.held_out_between),
                 ("by sample", block.inside_model, block.inside_between)):
+            if spread is None:  # the by-sample model trained on none of these cases
+                continue
             rows.append([
                 block.split.replace("_", "-") if who == "held out" else "",
                 block.held_out if who == "held out" else "",
@@ -41,7 +44,7 @@ def held_out_part(ctx: Context) -> str:
                 pct(spread.relative_max), _between(between), spread.worst_case,
             ])
     inside = result.inside_all
-    rows.append(["every converged case", "nothing (the by-sample model's own data)", "",
+    rows.append(["every case it trained on", "nothing (the by-sample model's own data)", "",
                  "by sample model", inside.cases, fmt(inside.mean_mm, ".3g"),
                  fmt(inside.p95_mm, ".3g"), fmt(inside.max_mm, ".3g"),
                  pct(inside.relative_max), _between(result.inside_all_between),
