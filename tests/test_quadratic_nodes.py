@@ -300,7 +300,6 @@ def test_the_held_out_and_posture_errors_are_taken_between_the_points_too(
     assert f"{with_fields.between.max_mm:.3g}</td>" in page and "between the points" in page
 
 
-
 def test_a_held_out_block_without_cases_the_by_sample_model_trained_on(
         sweep, models, tmp_path: Path) -> None:
     """Where the by-sample model trained on none of a split's test cases, no row says it did."""
