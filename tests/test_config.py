@@ -50,7 +50,7 @@ def read(name: str) -> dict[str, Any]:
 
 def test_the_default_config_parses_into_every_layer() -> None:
     config = WorkflowConfig.from_mapping(read("config.yaml"))
-    assert len(config.cases) == 22 * 32 + 2 * 16 and config.cases == tuple(sorted(config.cases))
+    assert len(config.cases) == 22 * 32 + 2 * 40 and config.cases == tuple(sorted(config.cases))
     assert [case.id for case in config.clinical] == [
         "c1=1.00_phi=180.0_theta=0.0", "c1=5.00_phi=180.0_theta=0.0",
         "c1=1.00_phi=0.0_theta=0.0", "c1=5.00_phi=0.0_theta=0.0"]

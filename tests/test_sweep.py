@@ -27,7 +27,7 @@ def test_case_id_rejects_garbage() -> None:
         Case.from_id("c1=1_phi=0")
 
 
-def test_default_config_is_the_papers_plane_the_caudal_half_and_16_soft_directions() -> None:
+def test_default_config_is_the_papers_plane_the_caudal_half_and_40_soft_directions() -> None:
     from fem.sweep import sphere_directions
 
     config = yaml.safe_load((REPO / "config.yaml").read_text())
@@ -38,7 +38,7 @@ def test_default_config_is_the_papers_plane_the_caudal_half_and_16_soft_directio
     every_c1 = {(phi, theta) for phi, theta in {(c.phi, c.theta) for c in cases}
                 if sum(1 for c in cases if (c.phi, c.theta) == (phi, theta)) == 22}
     refined = {(c.phi, c.theta) for c in cases} - every_c1
-    assert len(every_c1) == 32 and len(refined) == 16 and len(cases) == 22 * 32 + 2 * 16
+    assert len(every_c1) == 32 and len(refined) == 40 and len(cases) == 22 * 32 + 2 * 40
     assert {c.C1 for c in cases if (c.phi, c.theta) in refined} == {1.0, 1.2}
     directions = every_c1
     assert {(phi, 0.0) for phi in PAPER_PHI_DEG} <= directions  # the paper's plane, whole

@@ -16,18 +16,18 @@ from tests.conftest import REPO, job_counts, snakemake
 pytestmark = pytest.mark.workflow
 
 
-def test_full_config_plans_736_solves_in_48_chains_and_the_paper_preset_688_in_16(
+def test_full_config_plans_784_solves_in_72_chains_and_the_paper_preset_688_in_16(
     tmp_path: Path,
 ) -> None:
-    """The default: 22 C1 values x 32 directions, and 16 refined directions at 1.0, 1.2 kPa."""
+    """The default: 22 C1 values x 32 directions, and 40 refined directions at 1.0, 1.2 kPa."""
     run = snakemake(tmp_path, "-n", "-j2", config=REPO / "config.yaml")
     assert run.returncode == 0, run.stderr
     text = run.stdout + run.stderr
     counts = job_counts(text)
     assert counts["solve_chain"] == 32 and "solve" not in counts  # 16 in the plane, 16 caudal
-    assert counts["solve_refine_chain"] == 16
+    assert counts["solve_refine_chain"] == 40
     summaries = set(re.findall(r"results/cases/[^,\s]+/summary\.json", text))
-    assert len(summaries) == 22 * 32 + 2 * 16
+    assert len(summaries) == 22 * 32 + 2 * 40
     refined = {s for s in summaries if "phi=81.0_theta=-82.5" in s}
     assert refined == {f"results/cases/c1={c1}_phi=81.0_theta=-82.5/summary.json"
                        for c1 in ("1.00", "1.20")}
@@ -45,7 +45,7 @@ def test_full_config_plans_736_solves_in_48_chains_and_the_paper_preset_688_in_1
     run = snakemake(tmp_path, "-n", "-j2", config=tmp_path / "per_case.yaml")
     assert run.returncode == 0, run.stderr
     counts = job_counts(run.stdout + run.stderr)
-    assert counts["solve"] == 22 * 32 + 2 * 16 and "solve_chain" not in counts
+    assert counts["solve"] == 22 * 32 + 2 * 40 and "solve_chain" not in counts
     assert "solve_refine_chain" not in counts
     assert counts["mesh"] == counts["aggregate"] == counts["select_model"] == counts["report"] == 1
 
