@@ -197,6 +197,47 @@ def sphere_directions(n: int, part: str = "whole") -> list[tuple[float, float]]:
     return [(float(p), float(t)) for p, t in zip(phi, theta, strict=True)]
 
 
+def random_cases(
+    n: int, seed: int, c1_range: tuple[float, float], part: str = "caudal"
+) -> list[Case]:
+    """``n`` cases drawn at random within a sweep's range: a test set off its grid.
+
+    C1 is drawn uniformly in the compliance 1/C1 between the range's ends: the field scales
+    nearly as 1/C1, so each stretch of the range is drawn in proportion to the displacement it
+    spans, and the soft end, where the field is largest and changes fastest, is not left to
+    chance. Gravity is drawn uniformly over the whole sphere or its caudal half
+    (:data:`SPHERE_PARTS`, as :func:`sphere_directions`). Each value is rounded to its case
+    folder's precision (0.01 kPa, 0.1°) by :class:`Case`, so that the case solved is the case
+    drawn.
+
+    Raises:
+        InvalidParameterError: if ``n`` < 0, the range is not 0 < low < high, or ``part`` is
+            not one of :data:`SPHERE_PARTS`.
+    """
+    lo, hi = (float(v) for v in c1_range)
+    if n < 0:
+        raise InvalidParameterError(f"the number of random cases must be >= 0, got {n}")
+    if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo < hi):
+        raise InvalidParameterError(
+            f"random cases need a C1 range 0 < low < high kPa, got [{lo:g}, {hi:g}]")
+    if part not in SPHERE_PARTS:
+        raise InvalidParameterError(f"random directions: part must be one of {SPHERE_PARTS}, "
+                                    f"got {part!r}")
+    rng = np.random.default_rng(seed)
+    c1 = 1.0 / rng.uniform(1.0 / hi, 1.0 / lo, n)
+    azimuth = rng.uniform(0.0, 2.0 * np.pi, n)
+    # uniform in the axial coordinate is uniform in area (Archimedes), as for the lattice
+    axial = rng.uniform(-1.0, 1.0, n) if part == "whole" else -rng.uniform(0.0, 1.0, n)
+    ring = np.sqrt(1.0 - axial**2)
+    if part == "whole":  # polar axis x, as sphere_directions' whole lattice
+        g = np.stack([axial, ring * np.cos(azimuth), ring * np.sin(azimuth)], axis=1)
+    else:  # polar axis z, the caudal half
+        g = np.stack([ring * np.cos(azimuth), ring * np.sin(azimuth), axial], axis=1)
+    phi = np.degrees(np.arccos(np.clip(g[:, 0], -1.0, 1.0)))
+    theta = np.degrees(np.arctan2(g[:, 2], g[:, 1]))  # g = [cos Φ, sin Φ cos θ, sin Φ sin θ]
+    return [Case(float(c), float(p), float(t)) for c, p, t in zip(c1, phi, theta, strict=True)]
+
+
 #: The most values a ``{start, stop, step}`` range may have, and the most cases a sweep may
 #: have: a sweep is planned as one job per case, and a plan of millions of jobs does not end.
 MAX_GRID_VALUES = 10_000

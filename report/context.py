@@ -19,6 +19,7 @@ from studies.fe_benchmark import ClinicalBenchmark
 from studies.fe_speed_accuracy import SpeedAccuracy
 from studies.held_out import HeldOutEvaluation
 from studies.mesh_quality import MeshQuality
+from studies.off_grid import OffGridEvaluation
 from studies.postures import PostureEvaluation
 from studies.reference_roundtrip import RoundTripTable
 from studies.reference_state import ReferenceRecord
@@ -36,7 +37,7 @@ INPUT_NAMES = (
     "dataset", "quality", "mesh_png", "model", "history", "table2", "variants", "clinical",
     "extrapolation", "benchmark", "clinical_fields", "fe_clinical", "fe_speed_accuracy",
     "fe_stability", "corpus", "reference_roundtrip", "reference_record", "tracking", "stiffness",
-    "viewer", "held_out", "postures",
+    "viewer", "held_out", "postures", "off_grid",
 )
 
 
@@ -60,6 +61,7 @@ RESULT_TYPES: dict[str, Callable[[Path], Any]] = {
     "stiffness": StiffnessResult.read,
     "held_out": HeldOutEvaluation.read,
     "postures": PostureEvaluation.read,
+    "off_grid": OffGridEvaluation.read,
 }
 
 

@@ -33,7 +33,7 @@ from fem.contact import resolve_obstacle
 from fem.dataset import SplitFractions, direction_keys
 from fem.exceptions import FEError
 from fem.parameters import SolverSettings
-from fem.sweep import Case, clinical_cases, sweep_cases
+from fem.sweep import Case, clinical_cases, random_cases, sweep_cases
 from meshes.config import MeshConfig
 from meshes.parametric import BreastGeometry
 from studies.fe_variants import MeshSpec, Variant, expand_variants
@@ -305,6 +305,28 @@ def postures_of(section: Mapping[str, Any], sweep: tuple[Case, ...]) -> tuple[Po
     return tuple(out)
 
 
+def off_grid_cases(section: Mapping[str, Any], sweep: tuple[Case, ...]) -> tuple[Case, ...]:
+    """The ``off_grid`` section's random cases within the sweep's range, less the sweep's own.
+
+    ``{n, seed, part, C1_kPa: [low, high]}``: ``n`` cases drawn from ``seed``
+    (:func:`fem.sweep.random_cases`), C1 between ``C1_kPa``'s ends (default: the sweep's
+    softest and stiffest), gravity over ``part`` of the sphere. A draw that repeats a case or
+    falls on one of the sweep's is dropped: the set is off the grid by construction.
+
+    Raises:
+        ConfigError: for a range or part that :func:`fem.sweep.random_cases` refuses.
+    """
+    n = int(section.get("n", 0))
+    if n == 0:
+        return ()
+    with _section("surrogate_study.off_grid"):
+        c1_range = section.get("C1_kPa") or (min(c.C1 for c in sweep), max(c.C1 for c in sweep))
+        drawn = random_cases(n, int(section.get("seed", 0)), tuple(c1_range),
+                             section.get("part", "caudal"))
+    in_sweep = set(sweep)
+    return tuple(c for c in dict.fromkeys(drawn) if c not in in_sweep)
+
+
 @dataclass(frozen=True, slots=True)
 class SurrogateStudyConfig:
     """The surrogate's study (``surrogate_study``).
@@ -317,6 +339,8 @@ class SurrogateStudyConfig:
         timing_repeats: timed predictions per model.
         prediction_budget_ms: the selection's time budget (None: by accuracy alone).
         postures: the clinical postures at each of their C1 values.
+        off_grid: the random test cases of ``off_grid`` that the sweep lacks, in drawn order
+            (:func:`off_grid_cases`).
     """
 
     architectures: tuple[str, ...]
@@ -326,6 +350,7 @@ class SurrogateStudyConfig:
     timing_repeats: int
     prediction_budget_ms: float | None
     postures: tuple[Posture, ...] = ()
+    off_grid: tuple[Case, ...] = ()
 
     @classmethod
     def from_sections(
@@ -357,6 +382,7 @@ class SurrogateStudyConfig:
             timing_repeats=study["timing_repeats"],
             prediction_budget_ms=study["prediction_budget_ms"],
             postures=postures_of(study.get("postures") or {}, sweep),
+            off_grid=off_grid_cases(study.get("off_grid") or {}, sweep),
         )
 
     def variant(self, name: str) -> SurrogateVariant:

@@ -87,6 +87,25 @@ def test_extrapolation_skips_the_cases_of_the_sweep() -> None:
     assert extra == (Case(0.8, 180.0), Case(6.0, 180.0))
 
 
+def test_the_off_grid_set_is_drawn_within_the_sweep_and_off_its_grid() -> None:
+    raw = read("config.yaml")
+    config = WorkflowConfig.from_mapping(raw)
+    cases = config.surrogate_study.off_grid
+    assert len(cases) == raw["surrogate_study"]["off_grid"]["n"]
+    assert not set(cases) & set(config.cases)
+    c1s = [c.C1 for c in config.cases]
+    assert all(min(c1s) <= c.C1 <= max(c1s) for c in cases)
+    assert any(c.C1 < 1.2 for c in cases)  # the soft end is drawn
+    raw["surrogate_study"]["off_grid"] = {"n": 5, "seed": 2, "C1_kPa": [1.0, 1.5]}
+    again = WorkflowConfig.from_mapping(raw).surrogate_study.off_grid
+    assert len(again) == 5 and all(1.0 <= c.C1 <= 1.5 for c in again)
+    raw["surrogate_study"]["off_grid"] = {"n": 0}
+    assert WorkflowConfig.from_mapping(raw).surrogate_study.off_grid == ()
+    raw["surrogate_study"]["off_grid"] = {"n": 3, "C1_kPa": [2.0, 1.0]}
+    with pytest.raises(ConfigError, match="surrogate_study.off_grid.*0 < low < high"):
+        WorkflowConfig.from_mapping(raw)
+
+
 def test_variants_override_the_surrogate_settings() -> None:
     raw = read("config.yaml")
     config = WorkflowConfig.from_mapping(raw)

@@ -300,6 +300,45 @@ def test_the_held_out_and_posture_errors_are_taken_between_the_points_too(
     assert f"{with_fields.between.max_mm:.3g}</td>" in page and "between the points" in page
 
 
+def test_the_off_grid_set_is_judged_against_its_goals_and_lists_failed_solves(
+        sweep, models, tmp_path: Path) -> None:
+    """The off-grid evaluation spreads the compared cases' errors and names the failed ones."""
+    from report.context import Context
+    from report.sections.generalisation import off_grid_part
+    from studies.off_grid import GOALS_MM, OffGridEvaluation, evaluate_off_grid
+
+    folder, summaries, points, fields = sweep
+    failed = tmp_path / "failed.json"
+    failed.write_text(json.dumps({**json.loads(summaries[3].read_text()), "status": "failed",
+                                  "reason": "step cut below min_step at λ=0.5"}))
+    cases = [(summaries[5], points[5], fields[5]), (failed, points[3], fields[3]),
+             (summaries[11], points[11], None)]
+    assert evaluate_off_grid(models[0]["quadratic"], cases).goals_mm == GOALS_MM
+    # the cube's field is a few mm: goals at its scale, which the model fitted at every node
+    # meets and the one fitted at the vertices misses between them (at the vertices it fits)
+    goals = {"mean": 0.05, "max": 0.05}
+    good = evaluate_off_grid(models[0]["quadratic"], cases, goals)
+    bad = evaluate_off_grid(models[0]["linear"], cases, goals)
+    for result in (good, bad):
+        assert [r.posture for r in result.rows] == ["off-grid 1", "off-grid 2", "off-grid 3"]
+        assert [r.case for r in result.failed] == [result.rows[1].case]
+        assert result.spread.cases == 2 and result.between.cases == 1
+        assert result.spread.max_mm == max(result.rows[k].errors.max_mm for k in (0, 2))
+        assert result.spread.max_mm < goals["max"]
+    assert good.goals_met and good.between.max_mm < goals["max"]
+    assert not bad.goals_met and bad.between.max_mm > goals["max"]
+    path = tmp_path / "off_grid.json"
+    bad.write(path)
+    assert OffGridEvaluation.read(path) == bad
+
+    ctx = Context(out_dir=folder, clinical=[], paths={}, clinical_fields=[],
+                  results={"off_grid": bad})
+    page = off_grid_part(ctx)
+    assert "1 of 3 FE solves failed" in page and "min_step at λ=0.5" in page
+    assert "all 2 compared (a goal missed)" in page
+    assert f"{bad.spread.max_mm:.3g}</td>" in page
+
+
 def test_a_held_out_block_without_cases_the_by_sample_model_trained_on(
         sweep, models, tmp_path: Path) -> None:
     """Where the by-sample model trained on none of a split's test cases, no row says it did."""

@@ -151,6 +151,34 @@ def test_the_caudal_half_covers_every_posture_short_of_head_down_evenly() -> Non
     assert {c.phi for c in both if c.theta == 0.0} >= set(PAPER_PHI_DEG)
 
 
+def test_random_cases_are_seeded_within_the_range_and_uniform_in_compliance() -> None:
+    from fem.sweep import random_cases
+
+    cases = random_cases(4000, 3, (0.8, 5.0), "caudal")
+    assert cases == random_cases(4000, 3, (0.8, 5.0), "caudal")
+    assert cases[:10] != random_cases(10, 4, (0.8, 5.0), "caudal")
+    assert all(Case.from_id(c.id) == c for c in cases[:50])  # the case solved is the one drawn
+    c1 = np.array([c.C1 for c in cases])
+    assert c1.min() >= 0.8 and c1.max() <= 5.0
+    # uniform in 1/C1 from 0.2 to 1.25: its mean is the midpoint, and C1 <= 1.25 kPa
+    # (compliance >= 0.8) holds 0.45 / 1.05 of the draws
+    assert np.mean(1.0 / c1) == pytest.approx(0.725, abs=0.01)
+    assert np.mean(c1 <= 1.25) == pytest.approx(0.45 / 1.05, abs=0.02)
+    dirs = np.array([Gravity(c.phi, c.theta).vector for c in cases]) / 9.81
+    np.testing.assert_allclose(np.linalg.norm(dirs, axis=1), 1.0, atol=2e-3)  # 0.1 deg rounding
+    assert dirs[:, 2].max() <= 2e-3 and dirs[:, 2].min() < -0.99
+    assert np.mean(dirs[:, 2] > -0.5) == pytest.approx(0.5, abs=0.02)  # equal area, as above
+    assert np.abs(dirs[:, :2].mean(axis=0)).max() < 0.03  # no side of the plane favoured
+    whole = np.array([Gravity(c.phi, c.theta).vector
+                      for c in random_cases(4000, 3, (1.0, 2.0), "whole")]) / 9.81
+    assert np.abs(whole.mean(axis=0)).max() < 0.03 and whole[:, 2].max() > 0.99
+    assert random_cases(0, 1, (1.0, 2.0)) == []
+    with pytest.raises(InvalidParameterError, match="C1 range 0 < low < high"):
+        random_cases(3, 1, (2.0, 1.0))
+    with pytest.raises(InvalidParameterError, match="part must be one of"):
+        random_cases(3, 1, (1.0, 2.0), "cranial")
+
+
 def test_refined_directions_are_solved_at_the_soft_c1_values_only() -> None:
     base = {"C1_kPa": [0.8, 1.0, 1.2, 2.0, 5.0], "phi_deg": [0.0, 90.0, 180.0]}
     extra = [[60.0, -90.0], [30.5, -45.25]]

@@ -274,7 +274,8 @@ def test_small_sweep_report(small_run: Path) -> None:
 def test_held_out_models_and_postures_are_judged_against_fe(small_run: Path) -> None:
     """Held-out models are judged on exactly their held-out groups; postures against FE.
 
-    A posture's FE case comes from the sweep or from one solve outside it, as configured.
+    A posture's FE case comes from the sweep or from one solve outside it, as configured; the
+    random case off the grid from a solve outside it.
     """
     from fem.dataset import read_dataset
     from studies.held_out import HeldOutEvaluation
@@ -311,6 +312,16 @@ def test_held_out_models_and_postures_are_judged_against_fe(small_run: Path) -> 
     assert f"{standing.errors.max_mm:.3g}" in table and "standing" in table
     held_table = html_table(page, "held-out")
     assert "by-direction" in held_table and f"{direction.held_out_model.max_mm:.3g}" in held_table
+
+    # the random case off the grid (surrogate_study.off_grid): solved outside the sweep
+    from studies.off_grid import OffGridEvaluation
+
+    off_grid = OffGridEvaluation.read(results / "surrogate/off_grid.json")
+    (row,) = off_grid.rows
+    assert row.case not in set(ds.ids) and not row.in_sweep
+    assert (results / "outside" / row.case / "summary.json").is_file()
+    assert row.errors is not None and off_grid.spread.max_mm == row.errors.max_mm > 0
+    assert f"{row.errors.max_mm:.3g}" in html_table(page, "off-grid")
 
 
 def test_held_out_command_prints_the_workflows_figures(small_run: Path, capsys) -> None:

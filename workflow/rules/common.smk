@@ -153,6 +153,7 @@ VARIANTS_JSON = f"{SURROGATE_DIR}/variants.json"
 BENCHMARK_JSON = f"{SURROGATE_DIR}/benchmark.json"
 HELD_OUT_JSON = f"{SURROGATE_DIR}/held_out.json"
 POSTURES_JSON = f"{SURROGATE_DIR}/postures.json"
+OFF_GRID_JSON = f"{SURROGATE_DIR}/off_grid.json"
 
 
 def clinical_ids():
@@ -189,6 +190,11 @@ def extrapolation_files(name):
     return [f"results/outside/{case.id}/{name}" for case in CONFIG.surrogate_study.extrapolation]
 
 
+def off_grid_files(name):
+    """File ``name`` of every random test case off the sweep's grid (solved outside it)."""
+    return [f"results/outside/{case.id}/{name}" for case in CONFIG.surrogate_study.off_grid]
+
+
 def held_out_models(name="model.json"):
     """File ``name`` of the model of every held-out split the sweep can form."""
     return [f"{SURROGATE_DIR}/model_{split}/{name}" for split in CONFIG.held_out_splits]
@@ -201,4 +207,4 @@ def clinical_fields():
 
 
 SURROGATE_RESULTS = [STUDY_TABLE, VARIANTS_JSON, CLINICAL_JSON, EXTRAPOLATION_JSON, BENCHMARK_JSON,
-                     HELD_OUT_JSON, POSTURES_JSON]
+                     HELD_OUT_JSON, POSTURES_JSON, OFF_GRID_JSON]

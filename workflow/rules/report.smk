@@ -16,6 +16,7 @@ rule report:
         extrapolation=EXTRAPOLATION_JSON,
         held_out=HELD_OUT_JSON,
         postures=POSTURES_JSON,
+        off_grid=OFF_GRID_JSON,
         benchmark=BENCHMARK_JSON,
         clinical_fields=clinical_fields(),
         fe_clinical=FE_CLINICAL_JSON,

@@ -238,6 +238,27 @@ rule postures:
         "../scripts/postures.py"
 
 
+# The model at random cases off the sweep's grid (surrogate_study.off_grid), each an extra FE
+# solve by `solve_outside`: what a user meets between the sweep's points.
+rule off_grid:
+    input:
+        model=MODEL,
+        summaries=off_grid_files("summary.json"),
+        points=off_grid_files("points.h5"),
+        fields=off_grid_files("fields.h5"),
+    output:
+        OFF_GRID_JSON,
+    log:
+        "results/logs/surrogate/off_grid.log",
+    threads: 1
+    resources:
+        mem_mb=2000,
+    conda:
+        ENV
+    script:
+        "../scripts/off_grid.py"
+
+
 # Both threads reserved: the job pins itself to one core and times the FE solver and the
 # surrogate there, with no other job of the workflow beside it.
 rule surrogate_benchmark:
