@@ -205,21 +205,21 @@ def random_cases(
     C1 is drawn uniformly in the compliance 1/C1 between the range's ends: the field scales
     nearly as 1/C1, so each stretch of the range is drawn in proportion to the displacement it
     spans, and the soft end, where the field is largest and changes fastest, is not left to
-    chance. Gravity is drawn uniformly over the whole sphere or its caudal half
-    (:data:`SPHERE_PARTS`, as :func:`sphere_directions`). Each value is rounded to its case
-    folder's precision (0.01 kPa, 0.1°) by :class:`Case`, so that the case solved is the case
-    drawn.
+    chance; a range of one value (a sweep of one C1) puts every case at it. Gravity is drawn
+    uniformly over the whole sphere or its caudal half (:data:`SPHERE_PARTS`, as
+    :func:`sphere_directions`). Each value is rounded to its case folder's precision (0.01
+    kPa, 0.1°) by :class:`Case`, so that the case solved is the case drawn.
 
     Raises:
-        InvalidParameterError: if ``n`` < 0, the range is not 0 < low < high, or ``part`` is
+        InvalidParameterError: if ``n`` < 0, the range is not 0 < low <= high, or ``part`` is
             not one of :data:`SPHERE_PARTS`.
     """
     lo, hi = (float(v) for v in c1_range)
     if n < 0:
         raise InvalidParameterError(f"the number of random cases must be >= 0, got {n}")
-    if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo < hi):
+    if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo <= hi):
         raise InvalidParameterError(
-            f"random cases need a C1 range 0 < low < high kPa, got [{lo:g}, {hi:g}]")
+            f"random cases need a C1 range 0 < low <= high kPa, got [{lo:g}, {hi:g}]")
     if part not in SPHERE_PARTS:
         raise InvalidParameterError(f"random directions: part must be one of {SPHERE_PARTS}, "
                                     f"got {part!r}")

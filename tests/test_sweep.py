@@ -173,7 +173,8 @@ def test_random_cases_are_seeded_within_the_range_and_uniform_in_compliance() ->
                       for c in random_cases(4000, 3, (1.0, 2.0), "whole")]) / 9.81
     assert np.abs(whole.mean(axis=0)).max() < 0.03 and whole[:, 2].max() > 0.99
     assert random_cases(0, 1, (1.0, 2.0)) == []
-    with pytest.raises(InvalidParameterError, match="C1 range 0 < low < high"):
+    assert {c.C1 for c in random_cases(5, 1, (1.0, 1.0))} == {1.0}  # a sweep of one C1
+    with pytest.raises(InvalidParameterError, match="C1 range 0 < low <= high"):
         random_cases(3, 1, (2.0, 1.0))
     with pytest.raises(InvalidParameterError, match="part must be one of"):
         random_cases(3, 1, (1.0, 2.0), "cranial")
