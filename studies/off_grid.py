@@ -24,7 +24,7 @@ from surrogate.predict import Surrogate
 
 GOALS_MM = {"mean": 0.05, "max": 0.5}
 """The goals off the grid (issue 23), mm: the mean over the cases of their mean point error,
-and the largest error at any material point of any case."""
+and the largest error of any case, at its material points or between them."""
 
 
 @dataclass(frozen=True, slots=True)
