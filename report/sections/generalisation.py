@@ -5,6 +5,7 @@ from __future__ import annotations
 from report.context import Context
 from report.html import fmt, h3, missing, para, pct, table
 from studies.held_out import CaseErrors, ErrorSpread
+from studies.postures import PostureRow
 
 
 def held_out_part(ctx: Context) -> str:
@@ -71,6 +72,16 @@ def _between(spread: CaseErrors | ErrorSpread | None) -> str:
     return " / ".join(fmt(v, ".3g") for v in (spread.mean_mm, spread.p95_mm, spread.max_mm))
 
 
+def _fe_row(label: str, row: PostureRow) -> list[str]:
+    """A table row of one case against FE: its errors, or "FE failed" where it did not solve."""
+    e = row.errors
+    head = [label, fmt(row.C1, "g"), f"{row.phi:g}° / {row.theta:g}°"]
+    if e is None:
+        return [*head, "FE failed", "", "", "", "", "", row.kind]
+    return [*head, fmt(e.fe_max_mm, ".3g"), fmt(e.mean_mm, ".3g"), fmt(e.p95_mm, ".3g"),
+            fmt(e.max_mm, ".3g"), pct(e.relative_max), _between(row.between), row.kind]
+
+
 def postures_part(ctx: Context) -> str:
     """The surrogate against FE in each posture of ``surrogate_study.postures``."""
     result = ctx.results.get("postures")
@@ -86,17 +97,7 @@ def postures_part(ctx: Context) -> str:
         "model was trained on; a posture outside them (standing and reclined are out of the "
         "paper's plane) is an extrapolation, and its error says what a sweep over the whole "
         "sphere of directions would buy." + BETWEEN, "caption")]
-    rows = []
-    for row in result.rows:
-        e = row.errors
-        phi_theta = f"{row.phi:g}° / {row.theta:g}°"
-        if e is None:
-            rows.append([row.posture, fmt(row.C1, "g"), phi_theta, "FE failed", "", "", "", "",
-                         "", row.kind])
-            continue
-        rows.append([row.posture, fmt(row.C1, "g"), phi_theta, fmt(e.fe_max_mm, ".3g"),
-                     fmt(e.mean_mm, ".3g"), fmt(e.p95_mm, ".3g"), fmt(e.max_mm, ".3g"),
-                     pct(e.relative_max), _between(row.between), row.kind])
+    rows = [_fe_row(row.posture, row) for row in result.rows]
     out.append(table(
         ["posture", "C1 (kPa)", "Φ / θ", "FE max |u| (mm)", "mean error (mm)",
          "p95 (mm)", "max (mm)", "max / FE max (%)",
@@ -127,17 +128,8 @@ def off_grid_part(ctx: Context) -> str:
         "gives the set's spread (mean of the means, 95th percentile of the 95th percentiles, "
         f"largest point error) against the goals of {goals['mean']:g} mm mean and "
         f"{goals['max']:g} mm at any point." + BETWEEN, "caption")]
-    rows = []
-    for row in sorted(result.rows, key=lambda r: (r.C1, r.phi, r.theta)):
-        e = row.errors
-        phi_theta = f"{row.phi:g}° / {row.theta:g}°"
-        if e is None:
-            rows.append([row.case, fmt(row.C1, "g"), phi_theta, "FE failed", "", "", "", "",
-                         "", row.kind])
-            continue
-        rows.append([row.case, fmt(row.C1, "g"), phi_theta, fmt(e.fe_max_mm, ".3g"),
-                     fmt(e.mean_mm, ".3g"), fmt(e.p95_mm, ".3g"), fmt(e.max_mm, ".3g"),
-                     pct(e.relative_max), _between(row.between), row.kind])
+    rows = [_fe_row(row.case, row)
+            for row in sorted(result.rows, key=lambda r: (r.C1, r.phi, r.theta))]
     spread = result.spread
     if spread is not None:
         verdict = "both goals met" if result.goals_met else "a goal missed"
