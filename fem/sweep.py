@@ -191,10 +191,13 @@ def sphere_directions(n: int, part: str = "whole") -> list[tuple[float, float]]:
     else:
         gz = -(i + 0.5) / n  # uniform in [-1, 0]: equal area bands of the caudal half
         ring = np.sqrt(1.0 - gz**2)
-        gx, gy = ring * np.cos(azimuth), ring * np.sin(azimuth)
-        phi = np.degrees(np.arccos(np.clip(gx, -1.0, 1.0)))
-        theta = np.degrees(np.arctan2(gz, gy))  # g = [cos Φ, sin Φ cos θ, sin Φ sin θ]
+        phi, theta = _angles(ring * np.cos(azimuth), ring * np.sin(azimuth), gz)
     return [(float(p), float(t)) for p, t in zip(phi, theta, strict=True)]
+
+
+def _angles(gx: np.ndarray, gy: np.ndarray, gz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Φ and θ (degrees) of unit gravity directions g = [cos Φ, sin Φ cos θ, sin Φ sin θ]."""
+    return np.degrees(np.arccos(np.clip(gx, -1.0, 1.0))), np.degrees(np.arctan2(gz, gy))
 
 
 def random_cases(
@@ -230,11 +233,9 @@ def random_cases(
     axial = rng.uniform(-1.0, 1.0, n) if part == "whole" else -rng.uniform(0.0, 1.0, n)
     ring = np.sqrt(1.0 - axial**2)
     if part == "whole":  # polar axis x, as sphere_directions' whole lattice
-        g = np.stack([axial, ring * np.cos(azimuth), ring * np.sin(azimuth)], axis=1)
+        phi, theta = _angles(axial, ring * np.cos(azimuth), ring * np.sin(azimuth))
     else:  # polar axis z, the caudal half
-        g = np.stack([ring * np.cos(azimuth), ring * np.sin(azimuth), axial], axis=1)
-    phi = np.degrees(np.arccos(np.clip(g[:, 0], -1.0, 1.0)))
-    theta = np.degrees(np.arctan2(g[:, 2], g[:, 1]))  # g = [cos Φ, sin Φ cos θ, sin Φ sin θ]
+        phi, theta = _angles(ring * np.cos(azimuth), ring * np.sin(azimuth), axial)
     return [Case(float(c), float(p), float(t)) for c, p, t in zip(c1, phi, theta, strict=True)]
 
 

@@ -72,6 +72,12 @@ def _between(spread: CaseErrors | ErrorSpread | None) -> str:
     return " / ".join(fmt(v, ".3g") for v in (spread.mean_mm, spread.p95_mm, spread.max_mm))
 
 
+#: The columns of :func:`_fe_row` after its label.
+FE_COLUMNS = ["C1 (kPa)", "Φ / θ", "FE max |u| (mm)", "mean error (mm)", "p95 (mm)", "max (mm)",
+              "max / FE max (%)", "between the points: mean / p95 / max (mm)",
+              "relative to the training data"]
+
+
 def _fe_row(label: str, row: PostureRow) -> list[str]:
     """A table row of one case against FE: its errors, or "FE failed" where it did not solve."""
     e = row.errors
@@ -98,11 +104,7 @@ def postures_part(ctx: Context) -> str:
         "paper's plane) is an extrapolation, and its error says what a sweep over the whole "
         "sphere of directions would buy." + BETWEEN, "caption")]
     rows = [_fe_row(row.posture, row) for row in result.rows]
-    out.append(table(
-        ["posture", "C1 (kPa)", "Φ / θ", "FE max |u| (mm)", "mean error (mm)",
-         "p95 (mm)", "max (mm)", "max / FE max (%)",
-         "between the points: mean / p95 / max (mm)", "relative to the training data"],
-        rows, table_id="postures"))
+    out.append(table(["posture", *FE_COLUMNS], rows, table_id="postures"))
     failed = [r for r in result.rows if r.errors is None]
     if failed:
         out.append(para("FE solves that failed (no comparison): " + "; ".join(
@@ -137,11 +139,7 @@ def off_grid_part(ctx: Context) -> str:
                      fmt(spread.mean_mm, ".3g"), fmt(spread.p95_mm, ".3g"),
                      fmt(spread.max_mm, ".3g"), pct(spread.relative_max),
                      _between(result.between), f"worst: {spread.worst_case}"])
-    out.append(table(
-        ["case", "C1 (kPa)", "Φ / θ", "FE max |u| (mm)", "mean error (mm)", "p95 (mm)",
-         "max (mm)", "max / FE max (%)", "between the points: mean / p95 / max (mm)",
-         "relative to the training data"],
-        rows, table_id="off-grid"))
+    out.append(table(["case", *FE_COLUMNS], rows, table_id="off-grid"))
     if result.failed:
         out.append(para(f"{len(result.failed)} of {len(result.rows)} FE solves failed (no "
                         "comparison): " + "; ".join(f"{r.case}: {r.fe_reason}"
