@@ -25,6 +25,7 @@ from fem.loading import LoadingResult, solve_incrementally
 from fem.overlap import self_overlap
 from fem.parameters import Material, SolverSettings
 from fem.problem import GravityProblem
+from fem.provenance import clock
 from fem.solver import NewtonSolver
 from fem.sweep import Case
 from meshes.io import read_mesh
@@ -259,6 +260,8 @@ class CaseRunner:
             summary["num_points"] = int(index.size)
         summary["wall_s"]["output"] = time.perf_counter() - start
         summary["wall_s"]["total"] = sum(summary["wall_s"][k] for k in ("setup", "solve", "output"))
+        # Unix times: the solving process's start (one per job) and this case's end
+        summary["clock"] = clock()
         writer.commit(summary)
         return summary
 

@@ -34,6 +34,9 @@ Layout (units in attributes; M cases, N material points)::
     /cases/cpu_s         (M,)   float64   solve CPU time of the case's process
     /cases/start_fraction (M,)  float64   where the load path started: 0 from rest, λ = C1/C1ₖ
                                           from a stiffer neighbour's solution (fem.chain)
+    /cases/process_start_s, finished_s (M,) float64  Unix time (UTC) when the case's solving
+                                          process started and when the case ended (its summary's
+                                          ``clock``); NaN for a summary without one
     /cases/max_disp_mm   (M,)   float64
     /displacement        (M, N, 3) float64  m; NaN for failed cases
     /splits/by_sample/{train,validation,test}   flat sample indices (case * N + point)
@@ -462,6 +465,9 @@ def build_dataset(
     start = np.array([(s.get("start") or {}).get("fraction", 0.0) for s in summaries],
                      dtype=float)
     iterations = np.array([sum(s.get("newton_iterations", [])) for s in summaries], dtype=np.int64)
+    clocks = np.array(
+        [[(s.get("clock") or {}).get(k, np.nan) for k in ("process_start", "finished")]
+         for s in summaries], dtype=float).reshape(-1, 2)
     fields = {
         "id": np.array([s["case"] for s in summaries], dtype=object),
         "C1": column("C1").astype(float),
@@ -486,6 +492,8 @@ def build_dataset(
         "wall_s": wall,
         "cpu_s": cpu,
         "start_fraction": start,
+        "process_start_s": clocks[:, 0],
+        "finished_s": clocks[:, 1],
         "max_disp_mm": column("max_disp_mm").astype(float),
     }
     units = {
@@ -496,6 +504,8 @@ def build_dataset(
         "wall_s": "s",
         "cpu_s": "s",
         "start_fraction": "1",
+        "process_start_s": "s (Unix time)",
+        "finished_s": "s (Unix time)",
         "max_disp_mm": "mm",
         "load_fraction": "1",
         "contact_force_N": "N",

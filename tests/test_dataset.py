@@ -5,6 +5,9 @@ from __future__ import annotations
 import json
 import os
 import stat
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import h5py
@@ -15,6 +18,8 @@ from fem.dataset import BOUNDARY, DatasetError, SplitFractions, build_dataset, w
 from fem.sweep import Case
 
 pytestmark = pytest.mark.unit
+
+REPO = Path(__file__).resolve().parent.parent
 
 N = 50
 
@@ -74,6 +79,7 @@ def test_dataset_schema_and_contents(tmp_path: Path) -> None:
             1: {"contact": contact},
             2: {"self_overlap": {"overlapping_vertices": 13}},
             4: {"self_overlap": None, "cpu_s": {"solve": 0.5},
+                "clock": {"process_start": 1.7e9, "finished": 1.7e9 + 12.5},
                 "start": {"from": "neighbours", "neighbours": ["c1=6.00_phi=120.0_theta=0.0"],
                           "fraction": 5 / 6}},
         },
@@ -99,6 +105,11 @@ def test_dataset_schema_and_contents(tmp_path: Path) -> None:
         # the solve's CPU time and where its load path started (a summary may lack both)
         assert np.isnan(h5["cases/cpu_s"][:4]).all() and h5["cases/cpu_s"][4] == 0.5
         assert list(h5["cases/start_fraction"][...]) == [0.0] * 4 + [5 / 6]
+        # when the case's process started and the case ended (NaN: a summary without a clock)
+        assert h5["cases/process_start_s"][4] == 1.7e9 and h5["cases/finished_s"][4] == 1.7e9 + 12.5
+        assert np.isnan(h5["cases/process_start_s"][:4]).all()
+        assert np.isnan(h5["cases/finished_s"][:4]).all()
+        assert h5["cases/finished_s"].attrs["units"] == "s (Unix time)"
         force = h5["cases/contact_force_N"]
         assert force.attrs["units"] == "N"
         assert force[1] == 0.25 and np.isnan(np.delete(force[...], 1)).all()
@@ -328,3 +339,17 @@ def test_a_dataset_without_the_group_splits_asks_for_a_rebuild(tmp_path: Path) -
 
     with pytest.raises(DatasetError, match="lacks the split /splits/by_direction.*rebuild"):
         read_dataset(tmp_path / "ds.h5")
+
+
+def test_the_clock_is_the_processes_start_not_the_imports() -> None:
+    """A summary's ``process_start`` includes what a job pays before the library is imported."""
+    before = time.time()
+    script = ("import time; time.sleep(1.0); from fem.provenance import clock; "
+              "import json; print(json.dumps(clock()))")
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                         check=True, cwd=REPO).stdout
+    record = json.loads(out)
+    after = time.time()
+    # the kernel's start time has clock-tick resolution (10 ms); the import came a second later
+    assert before - 0.05 <= record["process_start"] < before + 0.5
+    assert record["process_start"] + 1.0 <= record["finished"] <= after

@@ -179,3 +179,16 @@ def test_a_sphere_sweep_is_drawn_one_column_per_direction(tmp_path: Path) -> Non
     assert list(x) == [0, 1, 0, 1, 2, 3]  # the same direction in the same column
     plot_sweep_map(np.ones(6), phi, np.arange(6.0), tmp_path / "map.png", "s", theta=theta)
     assert (tmp_path / "map.png").stat().st_size > 0
+
+
+def test_the_solves_span_from_the_first_process_start_to_the_last_end() -> None:
+    """The sweep's wall time from its cases' clocks; none where a case has no clock."""
+    import numpy as np
+
+    from report.sections.sweep import solve_span
+
+    start = np.array([100.0, 100.0, 130.0])  # two cases of one chain's process, then another
+    end = np.array([110.0, 125.0, 160.0])
+    assert solve_span(start, end) == 60.0
+    assert solve_span(np.array([100.0, np.nan, 130.0]), end) is None  # an older summary
+    assert solve_span(None, end) is None and solve_span(start[:0], end[:0]) is None

@@ -257,7 +257,14 @@ def test_small_sweep_report(small_run: Path) -> None:
         converged = h5["cases/converged"][...]
         overlap = h5["cases/self_overlap"][...]
         force = h5["cases/contact_force_N"][...]
+        started, finished = h5["cases/process_start_s"][...], h5["cases/finished_s"][...]
     assert f"{int((~converged).sum())} of {converged.size} cases did not reach" in page
+    # the sweep's wall time, from its cases' clocks: every case ends after its process started
+    assert (started < finished).all()
+    from report.html import seconds
+
+    span = seconds(float(finished.max() - started.min()))
+    assert f"to the last case ending</td><td>{span}</td>" in html_table(page, "sweep-cost")
     # tests/config.yaml solves with contact: every converged case records its force, 0 N or more
     assert (force[converged] >= 0).all()
     touching = int((force > 0).sum())

@@ -42,6 +42,11 @@ def sweep_cost_section(ctx: Context) -> str:
     ]
     if cpu is not None and np.isfinite(cpu).any():
         rows.append(["solve CPU time, mean per case", seconds(float(np.nanmean(cpu)))])
+        rows.append(["solve CPU time, total", seconds(float(np.nansum(cpu)))])
+    span = solve_span(columns.get("process_start_s"), columns.get("finished_s"))
+    if span is not None:
+        rows.append(["wall time of the solves, from the first solving process starting to the "
+                     "last case ending", seconds(span)])
     if start is not None:
         rows.append(["cases started from a stiffer neighbour (chains)",
                      f"{int(np.sum(start > 0))} of {len(start)}"])
@@ -51,3 +56,18 @@ def sweep_cost_section(ctx: Context) -> str:
         rows.append(["Newton iterations (min–max)", f"{int(its.min())}–{int(its.max())}"])
     out.append(table(["sweep", "value"], rows, table_id="sweep-cost"))
     return "".join(out)
+
+
+def solve_span(process_start: np.ndarray | None, finished: np.ndarray | None) -> float | None:
+    """Seconds from the earliest solving process's start to the latest case's end.
+
+    The sweep's wall time as its jobs saw it, each job's interpreter start, imports and set-up
+    included (the mesh before and the aggregation after are not). None unless every case has
+    its clock (summaries written before it was recorded have none), since a part of the cases
+    would understate it. Cases solved in separate runs count the time between the runs too.
+    """
+    if process_start is None or finished is None or not len(finished):
+        return None
+    if not (np.isfinite(process_start).all() and np.isfinite(finished).all()):
+        return None
+    return float(finished.max() - process_start.min())
