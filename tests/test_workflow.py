@@ -124,6 +124,16 @@ def test_out_of_bounds_config_stops_before_any_job(
     assert not (tmp_path / "results").exists()
 
 
+def test_a_typed_value_given_inside_a_mapping_with_config_is_explained(tmp_path: Path) -> None:
+    """Snakemake's ``--config`` passes ``sweep={chains: false}``'s false on as text."""
+    run = snakemake(tmp_path, "-j1", "-n", "--config", "sweep={chains: false}")
+    said = run.stdout + run.stderr  # a dry run reports the error on stdout
+    assert run.returncode != 0
+    assert "sweep.chains: 'false' is not of type 'boolean'" in said
+    assert "set it in a file given with --configfile instead" in said
+    assert not (tmp_path / "results").exists()
+
+
 def test_inconsistent_geometry_stops_before_any_job(tmp_path: Path) -> None:
     config = yaml.safe_load((REPO / "tests" / "config.yaml").read_text())
     config["mesh"]["geometry"] = {"mound_radius_cranial": 0.11}

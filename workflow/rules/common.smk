@@ -16,7 +16,12 @@ ENV = "../envs/fenicsx-jax.yaml"
 try:
     CONFIG = WorkflowConfig.from_mapping(config, workflow.source_path("../schemas/config.schema.yaml"))
 except ConfigError as err:
-    raise WorkflowError(f"invalid configuration: {err}") from None
+    # `--config sweep={chains: false}` hands the workflow 'false', a string: Snakemake reads the
+    # values inside a mapping with YAML's BaseLoader, which types nothing
+    hint = ("; if it was given with --config inside a mapping (sweep={chains: false}), Snakemake "
+            "passed it on as text: set it in a file given with --configfile instead"
+            if re.search(r"'[^']*' is not of type '(boolean|number|integer)'", str(err)) else "")
+    raise WorkflowError(f"invalid configuration: {err}{hint}") from None
 # `config` itself becomes the validated mapping (defaults filled, keys sorted), so that anything
 # that still reads it agrees with CONFIG; the rules take their params from CONFIG.
 config.clear()
