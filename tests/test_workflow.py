@@ -274,7 +274,7 @@ def test_small_sweep_report(small_run: Path) -> None:
     from report.html import seconds
 
     span = seconds(float(finished.max() - started.min()))
-    assert f"to the last case ending</td><td>{span}</td>" in html_table(page, "sweep-cost")
+    assert f"between runs included)</td><td>{span}</td>" in html_table(page, "sweep-cost")
     # tests/config.yaml solves with contact: every converged case records its force, 0 N or more
     assert (force[converged] >= 0).all()
     touching = int((force > 0).sum())

@@ -46,7 +46,7 @@ def sweep_cost_section(ctx: Context) -> str:
     span = solve_span(columns.get("process_start_s"), columns.get("finished_s"))
     if span is not None:
         rows.append(["wall time of the solves, from the first solving process starting to the "
-                     "last case ending", seconds(span)])
+                     "last case ending (any pause between runs included)", seconds(span)])
     if start is not None:
         rows.append(["cases started from a stiffer neighbour (chains)",
                      f"{int(np.sum(start > 0))} of {len(start)}"])
