@@ -271,7 +271,7 @@ def grid(spec: Any, name: str) -> list[float]:
 
 @dataclass(frozen=True)
 class Refinement:
-    """A sweep's ``refine``: extra gravity directions solved in a band of soft C1 values.
+    """One band of a sweep's ``refine``: extra gravity directions solved at soft C1 values.
 
     Attributes:
         C1_min: the softest C1 (kPa) they are solved at (0: from the sweep's softest).
@@ -288,30 +288,41 @@ class Refinement:
         return self.C1_min - 1e-9 <= c1 <= self.C1_max + 1e-9
 
 
-def refine_directions(sweep: dict[str, Any]) -> Refinement:
-    """A sweep's ``refine: {C1_min, C1_max, directions}``: the extra directions of its soft cases.
+def refine_directions(sweep: dict[str, Any]) -> tuple[Refinement, ...]:
+    """A sweep's ``refine``: one band ``{C1_min, C1_max, directions}`` or a list of bands.
 
     Returns:
-        The refinement; one without directions where the sweep has no ``refine``.
+        The bands, in the config's order; none where the sweep has no ``refine``.
 
     Raises:
-        InvalidParameterError: for a C1_max that is not positive, a C1_min above it, or a
-            direction that is not a (Φ, θ) pair of finite degrees.
+        InvalidParameterError: for a band that is not such a mapping, a C1_max that is not
+            positive, a C1_min above it, or a direction that is not a (Φ, θ) pair of finite
+            degrees.
     """
     refine = resolve_sweep(sweep).get("refine")
     if not refine:
-        return Refinement(0.0, 0.0, ())
-    c1_min, c1_max = float(refine.get("C1_min", 0.0)), float(refine["C1_max"])
+        return ()
+    bands = [refine] if isinstance(refine, dict) else list(refine)
+    return tuple(_band(band, f"sweep.refine[{i}]" if len(bands) > 1 else "sweep.refine")
+                 for i, band in enumerate(bands))
+
+
+def _band(band: Any, name: str) -> Refinement:
+    """One ``refine`` band, checked (:func:`refine_directions`)."""
+    if not isinstance(band, dict) or "C1_max" not in band:
+        raise InvalidParameterError(
+            f"{name} must be a mapping {{C1_min, C1_max, directions}}, got {band!r}")
+    c1_min, c1_max = float(band.get("C1_min", 0.0)), float(band["C1_max"])
     if not math.isfinite(c1_max) or c1_max <= 0:
-        raise InvalidParameterError(f"sweep.refine.C1_max must be a positive kPa, got {c1_max}")
+        raise InvalidParameterError(f"{name}.C1_max must be a positive kPa, got {c1_max}")
     if not math.isfinite(c1_min) or not 0 <= c1_min <= c1_max:
         raise InvalidParameterError(
-            f"sweep.refine.C1_min must lie between 0 and C1_max = {c1_max:g} kPa, got {c1_min}")
+            f"{name}.C1_min must lie between 0 and C1_max = {c1_max:g} kPa, got {c1_min}")
     directions = []
-    for pair in refine.get("directions", []):
+    for pair in band.get("directions", []):
         if len(pair) != 2 or not all(math.isfinite(float(v)) for v in pair):
             raise InvalidParameterError(
-                f"sweep.refine.directions: {pair!r} is not a [phi, theta] pair in degrees")
+                f"{name}.directions: {pair!r} is not a [phi, theta] pair in degrees")
         directions.append((float(pair[0]), float(pair[1])))
     return Refinement(c1_min, c1_max, tuple(directions))
 
@@ -325,9 +336,9 @@ def sweep_cases(sweep: dict[str, Any]) -> list[Case]:
             or ``sphere: {n, part}`` (directions over the whole sphere or its caudal half,
             :func:`sphere_directions`), or both: the plane's directions and the sphere's;
             or a ``preset`` (:func:`resolve_sweep`). ``refine: {C1_min, C1_max, directions}``
-            adds its directions at the C1 values from ``C1_min`` (default: the softest) to
-            ``C1_max`` only: where a soft field changes fastest with direction
-            (:mod:`studies.direction_gaps` proposes them).
+            (or a list of such bands) adds its directions at the C1 values from ``C1_min``
+            (default: the softest) to ``C1_max`` only: where a soft field changes fastest
+            with direction (:mod:`studies.direction_gaps` proposes them).
 
     Raises:
         InvalidParameterError: if the sweep has more than :data:`MAX_CASES` cases, or two of
@@ -344,24 +355,27 @@ def sweep_cases(sweep: dict[str, Any]) -> list[Case]:
         directions += sphere_directions(int(sphere["n"]), sphere.get("part", "whole"))
     if not directions:
         raise InvalidParameterError("sweep needs phi_deg or sphere")
-    refine = refine_directions(sweep)
-    extra = list(refine.directions)
-    soft = [c for c in c1s if refine.covers(c)]
-    if extra and not soft:
-        raise InvalidParameterError(
-            f"sweep.refine: no C1 of the sweep lies between C1_min = {refine.C1_min:g} and "
-            f"C1_max = {refine.C1_max:g} kPa: its directions would have no case")
-    n_cases = len(c1s) * len(directions) + len(soft) * len(extra)
+    refined: set[tuple[float, float, float]] = set()  # (C1, Φ, θ) of the bands' cases
+    for index, band in enumerate(refine_directions(sweep)):
+        soft = [c for c in c1s if band.covers(c)]
+        if band.directions and not soft:
+            raise InvalidParameterError(
+                f"sweep.refine band {index + 1}: no C1 of the sweep lies between C1_min = "
+                f"{band.C1_min:g} and C1_max = {band.C1_max:g} kPa: its directions would have "
+                "no case")
+        refined |= {(c, p, t) for c in soft for p, t in band.directions}
+    extra = sorted({(p, t) for _, p, t in refined})
+    n_cases = len(c1s) * len(directions) + len(refined)
     if n_cases > MAX_CASES:
-        refined = f" and {len(extra)} refined ones at {len(soft)}" if extra else ""
+        more = f" and {len(refined)} refined cases" if refined else ""
         raise InvalidParameterError(
-            f"sweep: {len(c1s)} C1 values x {len(directions)} gravity directions{refined} is "
+            f"sweep: {len(c1s)} C1 values x {len(directions)} gravity directions{more} is "
             f"{n_cases} cases, more than {MAX_CASES}"
         )
     _distinct_folders("sweep.C1_kPa", c1s, 2, "kPa")
     _distinct_folders("sweep gravity directions (phi, theta)", directions + extra, 1, "deg")
     return sorted({Case(c, p, t) for c in c1s for p, t in directions}
-                  | {Case(c, p, t) for c in soft for p, t in extra})
+                  | {Case(c, p, t) for c, p, t in refined})
 
 
 def _distinct_folders(name: str, values: Sequence[Any], digits: int, unit: str) -> None:

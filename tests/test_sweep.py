@@ -210,6 +210,29 @@ def test_refined_directions_are_solved_at_the_soft_c1_values_only() -> None:
                         "preset": "paper"}) == sweep_cases({"preset": "paper"})
 
 
+def test_refine_bands_each_add_their_directions_at_their_own_c1_values() -> None:
+    base = {"C1_kPa": [0.8, 1.0, 1.2, 2.0], "phi_deg": [0.0, 90.0, 180.0]}
+    one = {"C1_min": 1.0, "C1_max": 1.2, "directions": [[60.0, -90.0], [30.5, -45.25]]}
+    two = {"C1_max": 0.8, "directions": [[-47.5, 0.0], [60.0, -90.0]]}
+    cases = sweep_cases({**base, "refine": [one, two]})
+    c1_of: dict[tuple[float, float], set[float]] = {}
+    for case in cases:
+        c1_of.setdefault((case.phi, case.theta), set()).add(case.C1)
+    assert c1_of[(30.5, -45.2)] == {1.0, 1.2} and c1_of[(-47.5, 0.0)] == {0.8}
+    assert c1_of[(60.0, -90.0)] == {0.8, 1.0, 1.2}  # in both bands: the union, once each
+    assert len(cases) == 4 * 3 + 3 + 2 + 1
+    # one band in a list is that band
+    assert sweep_cases({**base, "refine": [one]}) == sweep_cases({**base, "refine": one})
+    with pytest.raises(InvalidParameterError, match=r"refine band 2: no C1 of the sweep"):
+        sweep_cases({**base, "refine": [one, {**two, "C1_min": 0.3, "C1_max": 0.5}]})
+    with pytest.raises(InvalidParameterError, match=r"sweep.refine\[1\] must be a mapping"):
+        sweep_cases({**base, "refine": [one, [[-47.5, 0.0]]]})
+    with pytest.raises(InvalidParameterError, match=r"sweep.refine\[0\].C1_min must lie"):
+        sweep_cases({**base, "refine": [{**one, "C1_min": 1.5}, two]})
+    with pytest.raises(InvalidParameterError, match="share one case folder"):
+        sweep_cases({**base, "refine": [one, {**two, "directions": [[60.01, -90.0]]}]})
+
+
 def test_the_paper_preset_replaces_every_key_that_chooses_cases() -> None:
     from fem.sweep import resolve_sweep
 

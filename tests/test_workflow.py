@@ -82,7 +82,7 @@ def test_a_sphere_sweep_chains_each_direction_and_only_its_directions(tmp_path: 
 
 
 def test_refined_directions_are_chains_of_their_soft_c1_values(tmp_path: Path) -> None:
-    """sweep.refine's directions: one chain each of the C1 values up to C1_max."""
+    """sweep.refine's directions: one chain each of their band's C1 values, a rule per set."""
     config = yaml.safe_load((REPO / "config.yaml").read_text())
     config["sweep"] = {"C1_kPa": [1.0, 1.2, 1.4, 5.0], "phi_deg": [0.0, 90.0, 180.0],
                        "refine": {"C1_max": 1.2, "directions": [[81.0, -82.5], [75.1, -101.3]]}}
@@ -99,6 +99,26 @@ def test_refined_directions_are_chains_of_their_soft_c1_values(tmp_path: Path) -
     cases = set(re.findall(r"results/cases/[^,\s]+/summary\.json", text))
     assert len(cases) == 4 * 3 + 2 * 2 + 1
     assert "results/cases/c1=1.00_phi=81.0_theta=-82.5/summary.json" in cases
+    # bands: 1.0-1.2 kPa and 0.8 kPa. A rule for each set of C1 values, the most directions
+    # first: the 0.8 kPa band's (one case each), the 1.0-1.2 band's, and that of the direction
+    # in both bands (a chain of every C1 it has)
+    config["sweep"]["C1_kPa"] = [0.8, 1.0, 1.2, 1.4, 5.0]
+    config["sweep"]["refine"] = [{**config["sweep"]["refine"], "C1_min": 1.0}, {
+        "C1_max": 0.8, "directions": [[-47.5, 0.0], [-25.0, 0.0], [75.1, -101.3]]}]
+    (tmp_path / "bands.yaml").write_text(yaml.safe_dump(config))
+    run = snakemake(tmp_path, "-n", "-j2", "results/dataset/dataset.h5",
+                    config=tmp_path / "bands.yaml")
+    assert run.returncode == 0, run.stderr
+    text = run.stdout + run.stderr
+    counts = job_counts(text)
+    assert [counts[f"solve_{rule}"] for rule in (
+        "chain", "refine_chain", "refine_chain_2", "refine_chain_3")] == [3, 2, 1, 1]
+    assert "solve" not in counts
+    cases = set(re.findall(r"results/cases/[^,\s]+/summary\.json", text))
+    assert len(cases) == 5 * 3 + 2 + 2 + 3
+    assert "results/cases/c1=0.80_phi=75.1_theta=-101.3/summary.json" in cases
+    assert "results/cases/c1=0.80_phi=-47.5_theta=0.0/summary.json" in cases
+    assert "results/cases/c1=1.00_phi=-47.5_theta=0.0/summary.json" not in cases
 
 
 @pytest.mark.parametrize(

@@ -1,6 +1,7 @@
 # The configuration, validated and parsed once (studies.config.WorkflowConfig), the wildcard
 # constraints, and the small helpers that derive targets, so that the rule files hold rules only.
 import re
+from collections import namedtuple
 
 from snakemake.exceptions import WorkflowError
 from snakemake.logging import logger
@@ -66,25 +67,33 @@ def case_files(name):
 # A chain job's cases: every C1 of the sweep at one direction (solve.smk). Its one wildcard,
 # {direction} = "phi=<deg>_theta=<deg>", matches the sweep's directions only (as pairs: a sphere's
 # Phi and theta values combine into directions it lacks), so a case at another direction is
-# solved alone. The directions of sweep.refine, solved at the soft C1 values only, are chains of
-# those values (solve_refine_chain).
-def _chain_groups():
+# solved alone. The directions of sweep.refine, solved at their bands' soft C1 values only, are
+# chains of those values: one rule for each set of C1 values (solve_refine_chain, then
+# solve_refine_chain_2, ... for further bands, the most directions first).
+ChainRule = namedtuple("ChainRule", "name c1s direction")
+
+
+def _chain_rules():
     c1_of = {}
     for case in CONFIG.cases:
         c1_of.setdefault(f"phi={case.phi:.1f}_theta={case.theta:.1f}", set()).add(
             f"{case.C1:.2f}")
     every = set().union(*c1_of.values())
-    refined = {d: c1s for d, c1s in c1_of.items() if c1s != every}
-    return (sorted(every, key=float), sorted(set(c1_of) - set(refined)),
-            sorted(set().union(*refined.values()), key=float), sorted(refined))
+    groups = {}
+    for direction, c1s in c1_of.items():
+        groups.setdefault(frozenset(c1s), []).append(direction)
+    full = groups.pop(frozenset(every))
+    refined = sorted(groups.items(), key=lambda group: (-len(group[1]), sorted(group[0])))
+    names = ["solve_chain", "solve_refine_chain"] + [
+        f"solve_refine_chain_{i}" for i in range(2, len(refined) + 1)]
+    return [ChainRule(name, sorted(c1s, key=float), "|".join(map(re.escape, sorted(dirs))))
+            for name, (c1s, dirs) in zip(names, [(every, full)] + refined)]
 
 
-CHAIN_C1, _FULL_DIRECTIONS, REFINE_C1, _REFINE_DIRECTIONS = _chain_groups()
-CHAIN_DIRECTION = "|".join(re.escape(d) for d in _FULL_DIRECTIONS)
-REFINE_DIRECTION = "|".join(re.escape(d) for d in _REFINE_DIRECTIONS)
+CHAIN_RULES = _chain_rules()
 
 
-def chain_files(name, c1s=CHAIN_C1):
+def chain_files(name, c1s):
     """File ``name`` of every case of one direction's chain ({direction} left open)."""
     return [f"results/cases/c1={c1}_{{direction}}/{name}" for c1 in c1s]
 

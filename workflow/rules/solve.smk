@@ -3,8 +3,9 @@
 # With sweep.chains (the default), the sweep's cases of one gravity direction are one job,
 # `solve_chain`: the stiffest first, each case from its neighbours' solutions (fem.chain), every
 # case still written to its own folder (`solve_refine_chain` for sweep.refine's directions, at
-# their soft C1 values). Asking for a sweep case's file runs its direction's chain; `solve` runs
-# any other case (and every case with chains off) alone, from rest.
+# their band's soft C1 values; `solve_refine_chain_2`, ... for further bands). Asking for a
+# sweep case's file runs its direction's chain; `solve` runs any other case (and every case
+# with chains off) alone, from rest.
 #
 # The case's files are update() outputs: Snakemake keeps a case's previous files while it is
 # solved again (fem.io.CaseWriter replaces them at the end, summary.json last) and restores them
@@ -38,24 +39,28 @@ rule solve:
         "../scripts/solve_case.py"
 
 
-if CONFIG.chains:
+# solve_chain, solve_refine_chain, ... (common.smk: CHAIN_RULES): one rule per set of C1
+# values that directions share, each preferred to `solve` for the cases it writes. (The loop
+# stands at the top level: Snakemake records a rule's `script` line with its indentation as
+# its code, and reruns every case already solved when that changes.)
+for chain_rule in CHAIN_RULES if CONFIG.chains else ():
 
-    ruleorder: solve_chain > solve
-
-    rule solve_chain:
+    rule:
+        name:
+            chain_rule.name
         input:
             mesh=MESH,
         output:
-            summaries=update(chain_files("summary.json")),
-            points=update(chain_files("points.h5")),
-            fields=update(chain_files("fields.xdmf")),
-            fields_h5=update(chain_files("fields.h5")),
+            summaries=update(chain_files("summary.json", chain_rule.c1s)),
+            points=update(chain_files("points.h5", chain_rule.c1s)),
+            fields=update(chain_files("fields.xdmf", chain_rule.c1s)),
+            fields_h5=update(chain_files("fields.h5", chain_rule.c1s)),
         params:
             fe=CONFIG.solve_fe,
             material=CONFIG.section("material"),
             fixed=CONFIG.section("mesh", "fixed"),
         wildcard_constraints:
-            direction=CHAIN_DIRECTION,
+            direction=chain_rule.direction,
         log:
             "results/logs/solve_chain/{direction}.log",
         benchmark:
@@ -68,19 +73,7 @@ if CONFIG.chains:
         script:
             "../scripts/solve_chain.py"
 
-    if REFINE_DIRECTION:
-
-        ruleorder: solve_refine_chain > solve
-
-        # sweep.refine's directions: chains of the soft C1 values only
-        use rule solve_chain as solve_refine_chain with:
-            output:
-                summaries=update(chain_files("summary.json", REFINE_C1)),
-                points=update(chain_files("points.h5", REFINE_C1)),
-                fields=update(chain_files("fields.xdmf", REFINE_C1)),
-                fields_h5=update(chain_files("fields.h5", REFINE_C1)),
-            wildcard_constraints:
-                direction=REFINE_DIRECTION,
+    workflow.ruleorder(chain_rule.name, "solve")
 
 
 # FE cases outside the sweep (the surrogate's extrapolation study): the same job, in their own
