@@ -374,6 +374,7 @@ def sweep_cases(sweep: dict[str, Any]) -> list[Case]:
         )
     _distinct_folders("sweep.C1_kPa", c1s, 2, "kPa")
     _distinct_folders("sweep gravity directions (phi, theta)", directions + extra, 1, "deg")
+    _one_label_per_direction(directions, extra)
     return sorted({Case(c, p, t) for c in c1s for p, t in directions}
                   | {Case(c, p, t) for c, p, t in refined})
 
@@ -389,6 +390,30 @@ def _distinct_folders(name: str, values: Sequence[Any], digits: int, unit: str) 
                 f"{digits} decimal(s) of {unit}): drop one or space them further apart"
             )
         seen[key] = value
+
+
+def _one_label_per_direction(directions: Sequence[tuple[float, float]],
+                             extra: Sequence[tuple[float, float]]) -> None:
+    """Refuse a refined direction that another (Φ, θ) of the sweep or of a band already names.
+
+    One gravity direction has many names: θ = ±180° mirrors Φ ((75, -180) is (-75, 0)), and
+    at Φ = 0 or 180° every θ is the same pole. Listed twice, it is solved twice, in two case
+    folders.
+    """
+    from fem.dataset import direction_keys
+
+    named: dict[str, tuple[float, float]] = {}
+    for pair in [*directions, *extra]:
+        named.setdefault(str(direction_keys(np.array([pair[0]]), np.array([pair[1]]))[0]),
+                         pair)
+    for pair in extra:
+        first = named[str(direction_keys(np.array([pair[0]]), np.array([pair[1]]))[0])]
+        if first != pair:
+            raise InvalidParameterError(
+                f"sweep.refine: [{pair[0]:g}, {pair[1]:g}] is the gravity direction "
+                f"[{first[0]:g}, {first[1]:g}] (phi, theta) that the sweep already lists (theta "
+                "= +-180 mirrors phi; at phi = 0 or 180 every theta is the same pole): list it "
+                "once, under one name")
 
 
 def clinical_cases(clinical: list[dict[str, Any]]) -> list[Case]:

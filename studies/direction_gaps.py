@@ -103,6 +103,9 @@ def leave_one_out(ds: Dataset, C1: float, limit_mm: float = DEFAULT_LIMIT_MM) ->
     from scipy.interpolate import RBFInterpolator
 
     cases = np.flatnonzero(np.isclose(ds.C1, C1) & ds.converged)
+    # one case per direction: a direction under two names (the pole at every θ) is one node
+    _, first = np.unique(direction_keys(ds.phi[cases], ds.theta[cases]), return_index=True)
+    cases = cases[np.sort(first)]
     if len(cases) < 5:
         raise ValueError(f"C1 = {C1:g} kPa has {len(cases)} converged directions; leaving one "
                          "out needs five")
@@ -175,8 +178,21 @@ def propose(ds: Dataset, gaps: DirectionGaps, k: int) -> list[tuple[float, float
         chosen.append(mid)
         if len(chosen) == k:
             break
-    return [(round(float(np.degrees(np.arccos(np.clip(c[0], -1.0, 1.0)))), 1),
-             round(float(np.degrees(np.arctan2(c[2], c[1]))), 1)) for c in chosen]
+    return [direction_angles(c) for c in chosen]
+
+
+def direction_angles(g: np.ndarray) -> tuple[float, float]:
+    """(Φ, θ) in degrees, to 0.1°, of the unit gravity direction ``g`` (fem.dataset's Eq. 1).
+
+    A direction in the paper's plane is named as the plane names it, (Φ, 0) with Φ in
+    (-180, 180]: not (-Φ, ±180), which is the same direction under another name (a sweep
+    refuses a direction listed under two).
+    """
+    if abs(g[2]) < 1e-9:
+        phi = round(float(np.degrees(np.arctan2(g[1], g[0]))), 1) + 0.0
+        return (180.0 if phi == -180.0 else phi), 0.0
+    return (round(float(np.degrees(np.arccos(np.clip(g[0], -1.0, 1.0)))), 1),
+            round(float(np.degrees(np.arctan2(g[2], g[1]))), 1))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -7,7 +7,7 @@ import pytest
 
 from fem.dataset import Dataset, gravity_direction
 from fem.sweep import sphere_directions
-from studies.direction_gaps import direction_gaps, leave_one_out, main
+from studies.direction_gaps import direction_angles, direction_gaps, leave_one_out, main
 
 pytestmark = pytest.mark.unit
 
@@ -51,6 +51,37 @@ def test_a_field_that_changes_fast_with_direction_is_found_where_it_does() -> No
     assert stiff.max_mm < 1e-8  # the bump is at the soft C1 only
     with pytest.raises(ValueError, match="needs five"):
         leave_one_out(_dataset(bump=0.0), 2.0)
+
+
+def test_a_direction_under_two_names_is_one_node_of_the_interpolant() -> None:
+    ds = _dataset(bump=0.0)
+    twin = 0  # the first direction again, named (-phi, theta - 180): the same vector
+    phi, theta = ds.phi[twin], ds.theta[twin]
+    named = (-phi, theta - 180.0 if theta > 0 else theta + 180.0)
+    same = gravity_direction(np.array(named[0]), np.array(named[1]))
+    assert np.allclose(same, ds.direction[twin])
+    more = Dataset(X=ds.X, boundary=ds.boundary, C1=np.append(ds.C1, ds.C1[twin]),
+                   phi=np.append(ds.phi, named[0]), theta=np.append(ds.theta, named[1]),
+                   direction=np.vstack([ds.direction, ds.direction[twin]]),
+                   displacement=np.concatenate([ds.displacement, ds.displacement[twin:twin + 1]]),
+                   converged=np.ones(len(ds.C1) + 1, bool), splits={},
+                   ids=np.append(ds.ids, "twin"))
+    soft = leave_one_out(more, 1.0)
+    assert soft.directions == 24 and soft.max_mm < 1e-8
+
+
+@pytest.mark.parametrize("phi, theta, named", [
+    (75.0, -180.0, (-75.0, 0.0)),  # in the plane: named as the plane names it
+    (165.0, 180.0, (-165.0, 0.0)),
+    (-35.0, 0.0, (-35.0, 0.0)),
+    (180.0, 0.0, (180.0, 0.0)),
+    (0.0, -60.0, (0.0, 0.0)),  # the pole
+    (60.0, -90.0, (60.0, -90.0)),
+    (30.5, -45.2, (30.5, -45.2)),
+])
+def test_proposed_directions_in_the_plane_are_named_as_the_plane_names_them(
+        phi: float, theta: float, named: tuple[float, float]) -> None:
+    assert direction_angles(gravity_direction(np.array(phi), np.array(theta))) == named
 
 
 def test_the_command_names_a_missing_dataset(tmp_path, capsys) -> None:

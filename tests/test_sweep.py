@@ -27,7 +27,7 @@ def test_case_id_rejects_garbage() -> None:
         Case.from_id("c1=1_phi=0")
 
 
-def test_default_config_is_the_papers_plane_the_caudal_half_and_40_soft_directions() -> None:
+def test_default_config_is_the_papers_plane_the_caudal_half_and_66_soft_directions() -> None:
     from fem.sweep import sphere_directions
 
     config = yaml.safe_load((REPO / "config.yaml").read_text())
@@ -38,8 +38,11 @@ def test_default_config_is_the_papers_plane_the_caudal_half_and_40_soft_directio
     every_c1 = {(phi, theta) for phi, theta in {(c.phi, c.theta) for c in cases}
                 if sum(1 for c in cases if (c.phi, c.theta) == (phi, theta)) == 22}
     refined = {(c.phi, c.theta) for c in cases} - every_c1
-    assert len(every_c1) == 32 and len(refined) == 40 and len(cases) == 22 * 32 + 2 * 40
-    assert {c.C1 for c in cases if (c.phi, c.theta) in refined} == {1.0, 1.2}
+    assert len(every_c1) == 32 and len(refined) == 38 + 28
+    assert len(cases) == 22 * 32 + 2 * 38 + 3 * 28
+    c1_of = {d: {c.C1 for c in cases if (c.phi, c.theta) == d} for d in refined}
+    assert sorted(map(sorted, c1_of.values())).count([1.0, 1.2]) == 38
+    assert sorted(map(sorted, c1_of.values())).count([0.8, 1.0, 1.2]) == 28
     directions = every_c1
     assert {(phi, 0.0) for phi in PAPER_PHI_DEG} <= directions  # the paper's plane, whole
     lattice = (Case(1.0, phi, theta) for phi, theta in sphere_directions(16, "caudal"))
@@ -231,6 +234,11 @@ def test_refine_bands_each_add_their_directions_at_their_own_c1_values() -> None
         sweep_cases({**base, "refine": [{**one, "C1_min": 1.5}, two]})
     with pytest.raises(InvalidParameterError, match="share one case folder"):
         sweep_cases({**base, "refine": [one, {**two, "directions": [[60.01, -90.0]]}]})
+    # one direction under two names: theta = -180 mirrors phi; every theta at the pole
+    for pair, named in (([47.5, -180.0], "-47.5, 0"), ([0.0, -60.0], "0, 0")):
+        with pytest.raises(InvalidParameterError, match=rf"is the gravity direction \[{named}\]"):
+            sweep_cases({**base, "refine": [
+                one, {**two, "directions": [*two["directions"], pair]}]})
 
 
 def test_the_paper_preset_replaces_every_key_that_chooses_cases() -> None:
