@@ -9,10 +9,16 @@ cells' centroids, between them (:func:`studies.postures.evaluate_postures`); the
 is set beside the goals of issue 23: a mean point error of 0.05 mm and a largest point error
 of 0.5 mm at any case off the grid, the largest taken at the material points and between them
 (a tumour lies anywhere).
+
+``python -m studies.off_grid MODEL CASE_DIR... [--json OUT]`` does the same for any case
+folders solved outside the workflow (``python -m fem.chain`` or ``fem.cli``): each case's
+errors, and their spread per C1 value and over all, beside the goals.
 """
 
 from __future__ import annotations
 
+import argparse
+import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -89,3 +95,61 @@ def evaluate_off_grid(
         goals_mm=goals,
         goals_met=bool(met),
     )
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command line: see the module's docstring."""
+    from studies.results import write_json
+
+    parser = argparse.ArgumentParser(prog="python -m studies.off_grid",
+                                     description="A model's errors against FE at case folders "
+                                     "(summary.json, points.h5 and, for the errors between "
+                                     "the points, fields.h5).")
+    parser.add_argument("model", type=Path, help="model folder")
+    parser.add_argument("cases", type=Path, nargs="+", help="FE case folders")
+    parser.add_argument("--json", type=Path, help="write the evaluation here too")
+    args = parser.parse_args(argv)
+    missing = [str(c) for c in args.cases if not (c / "summary.json").is_file()]
+    if missing:
+        print(f"error: no summary.json in {', '.join(missing)}", file=sys.stderr)
+        return 2
+    try:
+        model = Surrogate.load(args.model)
+        cases = [(c / "summary.json", c / "points.h5",
+                  c / "fields.h5" if (c / "fields.h5").is_file() else None) for c in args.cases]
+        evaluation = evaluate_off_grid(model, cases)
+    except (OSError, ValueError) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    compared = [row for row in evaluation.rows if row.errors is not None]
+    for row in evaluation.rows:
+        if row.errors is None:
+            print(f"{row.case}: FE {row.fe_status} ({row.fe_reason}), not compared")
+        else:
+            e = row.errors
+            between = f", between the points {row.between.max_mm:.3f}" if row.between else ""
+            print(f"{row.case}: mean {e.mean_mm:.4f} / p95 {e.p95_mm:.3f} / max {e.max_mm:.3f} "
+                  f"mm of {e.fe_max_mm:.1f}{between}")
+    from studies.held_out import ErrorSpread
+
+    def show(label: str, rows: Sequence) -> None:
+        spread = ErrorSpread.over([r.errors for r in rows])
+        over = sum(max(r.errors.max_mm, r.between.max_mm if r.between else 0.0)
+                   > evaluation.goals_mm["max"] for r in rows)
+        print(f"{label}: {len(rows)} cases, mean {spread.mean_mm:.4f} / p95 {spread.p95_mm:.3f} "
+              f"/ max {spread.max_mm:.3f} mm ({spread.worst_case}); {over} over "
+              f"{evaluation.goals_mm['max']:g} mm at the points or between them")
+
+    for c1 in sorted({round(r.C1, 6) for r in compared}):
+        show(f"C1 = {c1:g} kPa", [r for r in compared if round(r.C1, 6) == c1])
+    if compared:
+        show("all", compared)
+    print(f"goals (mean {evaluation.goals_mm['mean']:g} mm, max {evaluation.goals_mm['max']:g} "
+          f"mm): {'met' if evaluation.goals_met else 'not met'}")
+    if args.json:
+        write_json(args.json, evaluation.to_json())
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -339,6 +339,37 @@ def test_the_off_grid_set_is_judged_against_its_goals_and_lists_failed_solves(
     assert f"{bad.spread.max_mm:.3g}</td>" in page
 
 
+def test_the_off_grid_command_compares_a_model_folder_with_case_folders(
+        sweep, models, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``python -m studies.off_grid MODEL CASE...``: per case, per C1 and over all."""
+    import shutil
+
+    from studies.off_grid import OffGridEvaluation, main
+
+    folder, summaries, points, fields = sweep
+    failed = tmp_path / "failed"
+    failed.mkdir()
+    shutil.copy(points[3], failed / "points.h5")
+    (failed / "summary.json").write_text(json.dumps({
+        **json.loads(summaries[3].read_text()), "status": "failed",
+        "reason": "step cut below min_step at λ=0.5"}))
+    cases = [summaries[5].parent, failed, summaries[11].parent]
+    out = tmp_path / "eval.json"
+    assert main([str(models[1] / "quadratic"), *map(str, cases), "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    evaluation = OffGridEvaluation.read(out)
+    assert [row.case for row in evaluation.rows] == [json.loads(
+        (c / "summary.json").read_text())["case"] for c in cases]
+    first = evaluation.rows[0].errors
+    assert f"{first.case}: mean {first.mean_mm:.4f}" in text
+    assert f"{evaluation.rows[1].case}: FE failed (step cut below min_step" in text
+    c1s = {round(r.C1, 6) for r in evaluation.rows if r.errors is not None}
+    assert all(f"C1 = {c1:g} kPa: " in text for c1 in c1s)
+    assert f"all: 2 cases, mean {evaluation.spread.mean_mm:.4f}" in text
+    assert main([str(models[1] / "quadratic"), str(tmp_path / "none")]) == 2
+    assert "no summary.json in" in capsys.readouterr().err
+
+
 def test_a_held_out_block_without_cases_the_by_sample_model_trained_on(
         sweep, models, tmp_path: Path) -> None:
     """Where the by-sample model trained on none of a split's test cases, no row says it did."""
