@@ -16,21 +16,25 @@ from tests.conftest import REPO, job_counts, snakemake
 pytestmark = pytest.mark.workflow
 
 
-def test_full_config_plans_784_solves_in_72_chains_and_the_paper_preset_688_in_16(
+def test_full_config_plans_864_solves_in_98_chains_and_the_paper_preset_688_in_16(
     tmp_path: Path,
 ) -> None:
-    """The default: 22 C1 values x 32 directions, and 40 refined directions at 1.0, 1.2 kPa."""
+    """The default: 22 C1 values x 32 directions, and refined ones at the soft end.
+
+    38 refined directions at 1.0 and 1.2 kPa, 28 at 0.8 to 1.2 kPa.
+    """
     run = snakemake(tmp_path, "-n", "-j2", config=REPO / "config.yaml")
     assert run.returncode == 0, run.stderr
     text = run.stdout + run.stderr
     counts = job_counts(text)
     assert counts["solve_chain"] == 32 and "solve" not in counts  # 16 in the plane, 16 caudal
-    assert counts["solve_refine_chain"] == 40
+    assert counts["solve_refine_chain"] == 38 and counts["solve_refine_chain_2"] == 28
     summaries = set(re.findall(r"results/cases/[^,\s]+/summary\.json", text))
-    assert len(summaries) == 22 * 32 + 2 * 40
-    refined = {s for s in summaries if "phi=81.0_theta=-82.5" in s}
-    assert refined == {f"results/cases/c1={c1}_phi=81.0_theta=-82.5/summary.json"
-                       for c1 in ("1.00", "1.20")}
+    assert len(summaries) == 22 * 32 + 2 * 38 + 3 * 28
+    for direction, c1s in (("phi=81.0_theta=-82.5", ("1.00", "1.20")),
+                           ("phi=-47.5_theta=0.0", ("0.80", "1.00", "1.20"))):
+        assert {s for s in summaries if direction in s} == {
+            f"results/cases/c1={c1}_{direction}/summary.json" for c1 in c1s}
     # the paper's own sweep, on the same config
     run = snakemake(tmp_path, "-n", "-j2", "--config", "sweep={preset: paper}",
                     config=REPO / "config.yaml")
@@ -45,8 +49,8 @@ def test_full_config_plans_784_solves_in_72_chains_and_the_paper_preset_688_in_1
     run = snakemake(tmp_path, "-n", "-j2", config=tmp_path / "per_case.yaml")
     assert run.returncode == 0, run.stderr
     counts = job_counts(run.stdout + run.stderr)
-    assert counts["solve"] == 22 * 32 + 2 * 40 and "solve_chain" not in counts
-    assert "solve_refine_chain" not in counts
+    assert counts["solve"] == 22 * 32 + 2 * 38 + 3 * 28 and "solve_chain" not in counts
+    assert "solve_refine_chain" not in counts and "solve_refine_chain_2" not in counts
     assert counts["mesh"] == counts["aggregate"] == counts["select_model"] == counts["report"] == 1
 
 
