@@ -50,7 +50,8 @@ def read(name: str) -> dict[str, Any]:
 
 def test_the_default_config_parses_into_every_layer() -> None:
     config = WorkflowConfig.from_mapping(read("config.yaml"))
-    assert len(config.cases) == 22 * 32 + 2 * 40 and config.cases == tuple(sorted(config.cases))
+    assert len(config.cases) == 22 * 32 + 2 * 38 + 3 * 28
+    assert config.cases == tuple(sorted(config.cases))
     assert [case.id for case in config.clinical] == [
         "c1=1.00_phi=180.0_theta=0.0", "c1=5.00_phi=180.0_theta=0.0",
         "c1=1.00_phi=0.0_theta=0.0", "c1=5.00_phi=0.0_theta=0.0"]
@@ -61,8 +62,9 @@ def test_the_default_config_parses_into_every_layer() -> None:
     assert study.architectures[0] == "2x32" and len(study.architectures) == 9
     assert {v.name for v in study.variants} == {"paper_protocol", "vector_output", "separable",
                                                 "pointwise"}
-    # three extrapolation blocks: 6 x 2 + 2 x 6 + 2 x 1 cases, none of them in the sweep
-    assert len(study.extrapolation) == 26 and not set(study.extrapolation) & set(config.cases)
+    # three extrapolation blocks: 6 x 2 + 2 x 6 + 2 x 1 cases, less those in the sweep (1.0 kPa
+    # at -105 deg, a refined direction)
+    assert len(study.extrapolation) == 25 and not set(study.extrapolation) & set(config.cases)
     assert config.fe_study.reference.element == "p2p1"
     assert config.fe_study.reference.mesh == MeshSpec(0.008, 0.0053, 2, 0.0025)
     assert len(config.fe_study.variants) == len({v.id for v in config.fe_study.variants})
