@@ -82,7 +82,7 @@ def _chain_rules():
     groups = {}
     for direction, c1s in c1_of.items():
         groups.setdefault(frozenset(c1s), []).append(direction)
-    full = groups.pop(frozenset(every))
+    full = groups.pop(frozenset(every), [])
     refined = sorted(groups.items(), key=lambda group: (-len(group[1]), sorted(group[0])))
     names = ["solve_chain", "solve_refine_chain"] + [
         f"solve_refine_chain_{i}" for i in range(2, len(refined) + 1)]
