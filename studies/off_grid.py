@@ -25,7 +25,7 @@ from pathlib import Path
 
 from studies.held_out import ErrorSpread
 from studies.postures import PostureRow, evaluate_postures
-from studies.results import Result
+from studies.results import Result, write_json
 from surrogate.predict import Surrogate
 
 GOALS_MM = {"mean": 0.05, "max": 0.5}
@@ -99,8 +99,6 @@ def evaluate_off_grid(
 
 def main(argv: list[str] | None = None) -> int:
     """Command line: see the module's docstring."""
-    from studies.results import write_json
-
     parser = argparse.ArgumentParser(prog="python -m studies.off_grid",
                                      description="A model's errors against FE at case folders "
                                      "(summary.json, points.h5 and, for the errors between "
@@ -130,9 +128,7 @@ def main(argv: list[str] | None = None) -> int:
             between = f", between the points {row.between.max_mm:.3f}" if row.between else ""
             print(f"{row.case}: mean {e.mean_mm:.4f} / p95 {e.p95_mm:.3f} / max {e.max_mm:.3f} "
                   f"mm of {e.fe_max_mm:.1f}{between}")
-    from studies.held_out import ErrorSpread
-
-    def show(label: str, rows: Sequence) -> None:
+    def show(label: str, rows: Sequence[PostureRow]) -> None:
         spread = ErrorSpread.over([r.errors for r in rows])
         over = sum(max(r.errors.max_mm, r.between.max_mm if r.between else 0.0)
                    > evaluation.goals_mm["max"] for r in rows)
