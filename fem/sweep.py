@@ -402,12 +402,13 @@ def _one_label_per_direction(directions: Sequence[tuple[float, float]],
     """
     from fem.dataset import direction_keys
 
+    pairs = [*directions, *extra]
+    keys = direction_keys(np.array([p for p, _ in pairs]), np.array([t for _, t in pairs]))
     named: dict[str, tuple[float, float]] = {}
-    for pair in [*directions, *extra]:
-        named.setdefault(str(direction_keys(np.array([pair[0]]), np.array([pair[1]]))[0]),
-                         pair)
-    for pair in extra:
-        first = named[str(direction_keys(np.array([pair[0]]), np.array([pair[1]]))[0])]
+    for key, pair in zip(keys, pairs, strict=True):
+        named.setdefault(str(key), pair)
+    for key, pair in zip(keys[len(directions):], extra, strict=True):
+        first = named[str(key)]
         if first != pair:
             raise InvalidParameterError(
                 f"sweep.refine: [{pair[0]:g}, {pair[1]:g}] is the gravity direction "
