@@ -1,0 +1,111 @@
+"""Whether an equilibrium is stable: the inertia of its tangent.
+
+A converged Newton solve is an equilibrium, not necessarily a stable one: on the far side of
+a fold of the load path, or where a mesh lets a crease form, Newton can land on a state that
+a small disturbance would leave. The second variation of the potential tells them apart. For
+the Taylor–Hood element the tangent is a saddle-point matrix
+
+    K = [[A, Bᵀ], [B, 0]],
+
+whose inertia (Sylvester's law) is that of A restricted to incompressible motions, plus one
+negative eigenvalue per pressure unknown (when B has full rank, which the inf-sup stable
+element gives). So the state is stable exactly when K has as many negative eigenvalues as
+there are pressure unknowns; each one more is an unstable mode of the body. For the P1
+penalty element (no pressure field) K must be positive definite. Dirichlet rows (a unit
+diagonal) and the contact penalty's curvature are positive and change nothing of this count.
+
+:func:`tangent_inertia` counts them from the MUMPS LDLᵀ factorisation of the assembled tangent
+at the problem's current state (one assembly and factorisation, as much as one exact Newton
+iteration), with MUMPS's null-pivot detection on so that it reports zero pivots as well: a
+state on a fold has one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from petsc4py import PETSc
+
+from fem.exceptions import InvalidParameterError
+
+
+@dataclass(frozen=True, slots=True)
+class Inertia:
+    """The signs of the tangent's eigenvalues at one state.
+
+    Attributes:
+        negative: negative eigenvalues.
+        zero: null pivots (MUMPS's detection, relative to the matrix's norm).
+        positive: positive eigenvalues.
+        pressure_dofs: the pressure unknowns, each of which adds one negative eigenvalue to a
+            stable saddle-point tangent.
+    """
+
+    negative: int
+    zero: int
+    positive: int
+    pressure_dofs: int
+
+    def __post_init__(self) -> None:
+        if min(self.negative, self.zero, self.positive, self.pressure_dofs) < 0:
+            raise InvalidParameterError(f"an inertia counts eigenvalues, got {self}")
+
+    @property
+    def unstable_modes(self) -> int:
+        """Negative eigenvalues beyond the pressure's: the body's unstable modes."""
+        return self.negative - self.pressure_dofs
+
+    @property
+    def stable(self) -> bool:
+        """No unstable mode and no null pivot: a strict local minimum of the potential."""
+        return self.unstable_modes == 0 and self.zero == 0
+
+    def as_dict(self) -> dict[str, Any]:
+        """The counts and the verdict, for a JSON record."""
+        return {"negative": self.negative, "zero": self.zero, "positive": self.positive,
+                "pressure_dofs": self.pressure_dofs, "unstable_modes": self.unstable_modes,
+                "stable": self.stable}
+
+
+def tangent_inertia(problem: Any) -> Inertia:
+    """The inertia of ``problem``'s tangent at its current state (:mod:`fem.stability`).
+
+    Args:
+        problem: a :class:`fem.problem.GravityProblem` whose case and load are set (its
+            state ``w`` is the one judged).
+
+    Raises:
+        InvalidParameterError: if the problem's tangent is not symmetric (the inertia of an
+            LDLᵀ factorisation needs it).
+    """
+    import dolfinx.fem.petsc as fem_petsc
+
+    if not problem.symmetric:
+        raise InvalidParameterError("the inertia needs a symmetric tangent (LDLᵀ)")
+    A = fem_petsc.assemble_matrix(problem.tangent, bcs=problem.bcs)
+    A.assemble()
+    A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+    ksp = PETSc.KSP().create(problem.mesh.comm)
+    try:
+        ksp.setOperators(A)
+        ksp.setType("preonly")
+        pc = ksp.getPC()
+        pc.setType("cholesky")
+        pc.setFactorSolverType("mumps")
+        pc.setFactorSetUpSolverType()
+        factor = pc.getFactorMatrix()
+        factor.setMumpsIcntl(24, 1)  # null-pivot detection: PETSc's inertia needs it
+        factor.setMumpsIcntl(13, 1)  # and, in parallel, the root front on one process
+        ksp.setUp()
+        negative, zero, positive = (int(n) for n in factor.getInertia())
+    finally:
+        ksp.destroy()
+        A.destroy()
+    pressure = 0
+    if problem.mixed:  # counted over the processes, each shared unknown once
+        pressure = problem.W.sub(1).collapse()[0].dofmap.index_map.size_global
+    return Inertia(negative, zero, positive, int(pressure))
+
+
+__all__ = ["Inertia", "tangent_inertia"]
