@@ -15,6 +15,7 @@ from report.common import case_id
 from report.html import figure
 from studies.architecture import ArchitectureTable, VariantComparison
 from studies.corpus import CorpusTable
+from studies.failure_edge import SweepEdges
 from studies.fe_benchmark import ClinicalBenchmark
 from studies.fe_speed_accuracy import SpeedAccuracy
 from studies.held_out import HeldOutEvaluation
@@ -37,7 +38,7 @@ INPUT_NAMES = (
     "dataset", "quality", "mesh_png", "model", "history", "table2", "variants", "clinical",
     "extrapolation", "benchmark", "clinical_fields", "fe_clinical", "fe_speed_accuracy",
     "fe_stability", "corpus", "reference_roundtrip", "reference_record", "tracking", "stiffness",
-    "viewer", "held_out", "postures", "off_grid",
+    "viewer", "held_out", "postures", "off_grid", "fe_failure_edges",
 )
 
 
@@ -55,6 +56,7 @@ RESULT_TYPES: dict[str, Callable[[Path], Any]] = {
     "fe_clinical": ClinicalBenchmark.read,
     "fe_speed_accuracy": SpeedAccuracy.read,
     "fe_stability": StabilityMap.read,
+    "fe_failure_edges": SweepEdges.read,
     "corpus": CorpusTable.read,
     "reference_roundtrip": RoundTripTable.read,
     "reference_record": ReferenceRecord.read,

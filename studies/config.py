@@ -206,6 +206,28 @@ def default_variant(mesh: Mapping[str, Any], fe: Mapping[str, Any]) -> Variant:
 
 
 @dataclass(frozen=True, slots=True)
+class FailureEdgesConfig:
+    """The sweep's failed cases traced (``fe_study.failure_edges``, :mod:`studies.failure_edge`).
+
+    Attributes:
+        n: how many failed cases to trace (0: none).
+        step_deg: the turn's longest step (degrees).
+        resolution_deg: its shortest step before the edge is called (degrees, at most the step).
+    """
+
+    n: int
+    step_deg: float
+    resolution_deg: float
+
+    def __post_init__(self) -> None:
+        if self.n < 0:
+            raise ValueError(f"n must be 0 or more, got {self.n}")
+        if not 0 < self.resolution_deg <= self.step_deg:
+            raise ValueError(f"resolution_deg ({self.resolution_deg}) must be positive and at "
+                             f"most step_deg ({self.step_deg})")
+
+
+@dataclass(frozen=True, slots=True)
 class FEStudyConfig:
     """The FE study (``fe_study``): what is compared with what.
 
@@ -215,6 +237,7 @@ class FEStudyConfig:
         target: the accuracy target of the speed-accuracy study (relative error).
         max_dofs: variants with more unknowns are skipped, not solved.
         stability_mesh: the mesh sizes of the stability maps.
+        failure_edges: how the sweep's failed cases are traced.
         default_variant: the variant the workflow's own mesh and ``fe`` settings amount to.
         base_config: the ``fe``, ``material`` and ``mesh`` sections that the reference and the
             variants depend on, without the default's discretisation and solver preset, which
@@ -226,6 +249,7 @@ class FEStudyConfig:
     target: float
     max_dofs: int
     stability_mesh: MeshSpec
+    failure_edges: FailureEdgesConfig
     default_variant: Variant
     base_config: dict[str, Any]
 
@@ -241,11 +265,15 @@ class FEStudyConfig:
             variants = tuple(expand_variants(study["speed_accuracy"]["variants"]))
         with _section("fe_study.stability.mesh"):
             stability_mesh = MeshSpec.from_mapping(study["stability"]["mesh"])
+        with _section("fe_study.failure_edges"):
+            edges = study["failure_edges"]
+            failure_edges = FailureEdgesConfig(edges["n"], edges["step_deg"],
+                                               edges["resolution_deg"])
         with _section("mesh.size"):
             default = default_variant(sections["mesh"], sections["fe"])
         speed_accuracy = study["speed_accuracy"]
         return cls(reference, variants, speed_accuracy["target"], speed_accuracy["max_dofs"],
-                   stability_mesh, default, Variant.base_config(sections))
+                   stability_mesh, failure_edges, default, Variant.base_config(sections))
 
 
 @dataclass(frozen=True, slots=True)

@@ -17,6 +17,11 @@ the edge is where that history has no nearby equilibrium; whether a state exists
 
 ``python -m studies.failure_edge MESH --c1 0.8 --from -75 0 --to -90 0 [--via 1.2 1.0]
 [--config config.yaml] [--step 1.0] [--resolution 0.05] [--json OUT]``
+
+In the workflow (``fe_study.failure_edges``, ``results/fe_study/failure_edges.json``, the
+report's stability section), :func:`sweep_edges` traces the sweep's own failed cases: each from
+the nearest direction of the dataset that converged at the same C1, reached through the two
+next stiffer C1 values that converged there (as its chain reached it).
 """
 
 from __future__ import annotations
@@ -33,6 +38,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from fem.dataset import gravity_direction
 from fem.exceptions import InvalidParameterError
 from fem.parameters import Gravity, SolverSettings
 from fem.sweep import Case
@@ -254,6 +260,107 @@ def turn(
         machine=machine_state().to_json())
 
 
+@dataclass(frozen=True, slots=True)
+class TracedFailure(Record):
+    """One failed case of the sweep, traced from its nearest converged direction.
+
+    Attributes:
+        case: the failed case's id.
+        load_fraction: the load it reached in the sweep.
+        start_case: the converged case the turn starts from (same C1).
+        edge: the turn (:class:`FailureEdge`).
+    """
+
+    case: str
+    load_fraction: float
+    start_case: str
+    edge: FailureEdge
+
+
+@dataclass(frozen=True, slots=True)
+class SweepEdges(Result):
+    """``results/fe_study/failure_edges.json``: the sweep's failed cases, traced.
+
+    Attributes:
+        failed: how many cases of the sweep failed.
+        traced: the first ``n`` of them (softest first, the paper's plane first), traced; a
+            failed case with no converged case at its C1 is left out.
+        seconds: the study's wall time.
+    """
+
+    failed: int
+    traced: list[TracedFailure]
+    seconds: float
+
+
+@dataclass(frozen=True, slots=True)
+class Trace:
+    """What :func:`choose_traces` picks for one failed case (indices into the columns)."""
+
+    failed: int
+    start: int
+    via: tuple[float, ...]
+
+
+def choose_traces(columns: dict[str, np.ndarray], n: int) -> list[Trace]:
+    """The first ``n`` failed cases and where each is traced from (see :func:`sweep_edges`).
+
+    Args:
+        columns: the dataset's per-case columns (:func:`fem.dataset.read_case_columns`):
+            ``C1``, ``phi``, ``theta``, ``converged``.
+        n: how many failed cases at most.
+
+    Failed cases are taken softest first, those in the paper's plane (θ = 0) before the others,
+    then by Φ and θ. Each starts from the converged case of the same C1 whose gravity is nearest
+    (the smallest angle), reached through the next two stiffer C1 values that converged at that
+    direction. A failed case whose C1 has no converged case is skipped.
+    """
+    c1 = np.asarray(columns["C1"], dtype=float)
+    phi, theta = np.asarray(columns["phi"], dtype=float), np.asarray(columns["theta"], dtype=float)
+    converged = np.asarray(columns["converged"], dtype=bool)
+    g = gravity_direction(phi, theta)
+    failed = sorted(np.flatnonzero(~converged),
+                    key=lambda i: (round(c1[i], 9), theta[i] != 0.0, phi[i], theta[i]))
+    traces = []
+    for i in failed:
+        if len(traces) == n:
+            break
+        same = np.flatnonzero(converged & np.isclose(c1, c1[i], rtol=0, atol=1e-9))
+        if same.size == 0:
+            continue
+        start = int(same[np.argmax(g[same] @ g[i])])
+        along = np.flatnonzero(converged & (np.abs(g - g[start]).max(axis=1) < 1e-9)
+                               & (c1 > c1[i] + 1e-9))
+        via = tuple(sorted(float(c1[k]) for k in along)[:2])
+        traces.append(Trace(int(i), start, via))
+    return traces
+
+
+def sweep_edges(
+    mesh: str | Path,
+    settings: SolverSettings,
+    columns: dict[str, np.ndarray],
+    n: int,
+    step_deg: float = 1.0,
+    resolution_deg: float = 0.05,
+) -> SweepEdges:
+    """Trace the first ``n`` failed cases of a sweep (:func:`choose_traces`) with :func:`turn`."""
+    clock = time.perf_counter()
+    traced = []
+    ids = np.asarray(columns["id"]).astype(str)
+    for trace in choose_traces(columns, n):
+        i, k = trace.failed, trace.start
+        log.info("%s: from %s through %s", ids[i], ids[k], trace.via or "nothing stiffer")
+        edge = turn(mesh, settings, float(columns["C1"][i]),
+                    (float(columns["phi"][k]), float(columns["theta"][k])),
+                    (float(columns["phi"][i]), float(columns["theta"][i])),
+                    trace.via, step_deg, resolution_deg)
+        traced.append(TracedFailure(str(ids[i]), float(columns["load_fraction"][i]),
+                                    str(ids[k]), edge))
+    return SweepEdges(failed=int((~np.asarray(columns["converged"], dtype=bool)).sum()),
+                      traced=traced, seconds=time.perf_counter() - clock)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the study and print the turn, the edge and the stability of every state."""
     parser = argparse.ArgumentParser(prog="python -m studies.failure_edge",
@@ -300,4 +407,5 @@ if __name__ == "__main__":
     raise SystemExit(main())
 
 
-__all__ = ["EdgeFailure", "EdgeState", "FailureEdge", "direction_angles", "great_circle", "turn"]
+__all__ = ["EdgeFailure", "EdgeState", "FailureEdge", "SweepEdges", "Trace", "TracedFailure",
+           "choose_traces", "direction_angles", "great_circle", "sweep_edges", "turn"]

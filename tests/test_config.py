@@ -108,6 +108,15 @@ def test_the_off_grid_set_is_drawn_within_the_sweep_and_off_its_grid() -> None:
         WorkflowConfig.from_mapping(raw)
 
 
+def test_the_failure_edges_are_typed_and_their_resolution_checked() -> None:
+    raw = read("config.yaml")
+    edges = WorkflowConfig.from_mapping(raw).fe_study.failure_edges
+    assert (edges.n, edges.step_deg, edges.resolution_deg) == (2, 1.0, 0.05)
+    raw["fe_study"]["failure_edges"] = {"n": 1, "step_deg": 0.5, "resolution_deg": 1.0}
+    with pytest.raises(ConfigError, match=r"fe_study\.failure_edges.*at most step_deg \(0\.5\)"):
+        WorkflowConfig.from_mapping(raw)
+
+
 def test_variants_override_the_surrogate_settings() -> None:
     raw = read("config.yaml")
     config = WorkflowConfig.from_mapping(raw)

@@ -117,3 +117,58 @@ def test_a_turn_whose_steps_fail_stops_at_the_resolution(tiny_mesh: Path) -> Non
              (150.0, 0.0), step_deg=8.0, resolution_deg=1.0)
     with pytest.raises(InvalidParameterError, match="stiffer than 1.0 kPa"):
         turn(tiny_mesh, SolverSettings(), 1.0, (180.0, 0.0), (150.0, 0.0), via=(0.8,))
+
+
+def _columns(rows: list[tuple[float, float, float, bool]]) -> dict[str, np.ndarray]:
+    c1, phi, theta, converged = (np.array(col) for col in zip(*rows, strict=True))
+    ids = np.array([f"c1={a:.2f}_phi={b:.1f}_theta={c:.1f}" for a, b, c, _ in rows])
+    return {"C1": c1, "phi": phi, "theta": theta, "converged": converged, "id": ids,
+            "load_fraction": np.where(converged, 1.0, 0.5)}
+
+
+@pytest.mark.unit
+def test_the_sweeps_failures_are_traced_softest_first_from_the_nearest_converged_case() -> None:
+    from studies.failure_edge import choose_traces
+
+    columns = _columns([
+        (1.2, -75.0, 0.0, True), (1.0, -75.0, 0.0, True), (0.9, -75.0, 0.0, False),
+        (0.8, -75.0, 0.0, True),     # 0-3: a chain with a failure inside it
+        (0.8, -90.0, 0.0, False),    # 4: 15° from -75, 30° from -60 and from (-85, 30)
+        (0.8, -60.0, 0.0, True),
+        (0.8, 100.0, -120.0, False),  # 6: off the plane, so after 4; nearest to (-85, 30)
+        (0.7, -90.0, 0.0, False),    # 7: nothing converged at 0.7: skipped
+        (1.0, -90.0, 0.0, False),    # 8: stiffer, so last; from -75 at 1.0
+        (0.8, -85.0, 30.0, True),
+    ])
+    traces = choose_traces(columns, 10)
+    assert [(t.failed, t.start, t.via) for t in traces] == [
+        (4, 3, (1.0, 1.2)),  # through the converged stiffer cases only (0.9 failed)
+        (6, 9, ()),
+        (8, 1, (1.2,)),
+    ]
+    assert [t.failed for t in choose_traces(columns, 1)] == [4]
+    assert choose_traces(columns, 0) == []
+
+
+@pytest.mark.solve
+def test_a_traced_sweep_is_written_read_and_shown(tiny_mesh: Path, tmp_path: Path) -> None:
+    """The record of a sweep's traces round-trips, and the report's table shows it."""
+    from report.sections.stability import failure_edges_section
+    from studies.failure_edge import SweepEdges, sweep_edges
+
+    # a "failed" case that the turn reaches: the record says so, and names its start
+    columns = _columns([(1.0, 180.0, 0.0, True), (1.0, 160.0, 0.0, False)])
+    edges = sweep_edges(tiny_mesh, SolverSettings(), columns, 2, step_deg=10.0,
+                        resolution_deg=1.0)
+    assert edges.failed == 1 and len(edges.traced) == 1
+    traced = edges.traced[0]
+    assert traced.start_case == "c1=1.00_phi=180.0_theta=0.0" and traced.load_fraction == 0.5
+    assert traced.edge.reached_target and traced.edge.span_deg == pytest.approx(20.0)
+    edges.write(tmp_path / "failure_edges.json")
+    back = SweepEdges.read(tmp_path / "failure_edges.json")
+    assert back == edges
+    page = failure_edges_section(back)
+    assert 'id="failure-edges"' in page and "<td>reached</td>" in page
+    assert "1 of the sweep&#x27;s 1 failed cases" in page
+    assert "none failed" in failure_edges_section(SweepEdges(failed=0, traced=[], seconds=0.0))
+    assert "was not found" in failure_edges_section(None)

@@ -422,6 +422,13 @@ def test_fe_study_rules_run_end_to_end(small_run: Path) -> None:
     assert "down to 0.0156, then a last resort from rest down to 0.0625" in page
     assert len(stability["records"]) == 2 * 2 * 2
     assert stability["lowest_converging"]["adaptive"]["all_phi"] is not None
+    # the sweep's failures traced (the small sweep's stiff cases converge: none to trace)
+    from fem.dataset import read_case_columns
+
+    failed = int((~read_case_columns(small_run / "results/dataset/dataset.h5")["converged"]).sum())
+    edges = json.loads((study / "failure_edges.json").read_text())
+    assert edges["failed"] == failed and len(edges["traced"]) <= min(failed, 2)
+    assert "Where the sweep&#x27;s failures begin" in page
 
 
 @pytest.mark.parametrize(

@@ -71,6 +71,8 @@ def stability_section(ctx: Context) -> str:
             out.append(para("Every case of the stability grid converged under every scheme."))
     out.append(h3("The sweep on its own mesh"))
     out.append(_sweep_stability(ctx))
+    out.append(h3("Where the sweep's failures begin"))
+    out.append(failure_edges_section(ctx.results.get("fe_failure_edges")))
     out.append(h3("Surrogate outside its training data"))
     out.append(extrapolation_section(ctx))
     return "".join(out)
@@ -170,3 +172,40 @@ def sweep_contact_and_overlap(columns: dict[str, np.ndarray], failed: np.ndarray
         else:
             out.append("No case ends passing through itself.")
     return para(" ".join(out), "caption") if out else ""
+
+
+def failure_edges_section(edges: Any) -> str:
+    """The sweep's failed cases traced from their nearest converged direction (a table)."""
+    if edges is None:
+        return missing("results/fe_study/failure_edges.json")
+    if not edges.traced:
+        return para("No failed case of the sweep was traced (none failed, or "
+                    "fe_study.failure_edges.n is 0).", "note")
+    out = [para(
+        f"{len(edges.traced)} of the sweep's {edges.failed} failed cases, each traced from the "
+        "converged case of the same C1 whose gravity is nearest: gravity turned at full load "
+        "along the great circle towards the failed direction, each step a Newton solve from the "
+        "last state, a failed step halved down to the resolution. The edge is the angle from "
+        "the start where the solution was last found; stable means that every state up to it "
+        "is a strict minimum of the potential (the tangent has one negative eigenvalue per "
+        "pressure unknown and no null pivot, fem.stability). A turn of gravity is the history "
+        "of a patient rolling over: past the edge that history has no nearby equilibrium. "
+        f"{edges.seconds:.0f} s in all.", "caption")]
+    rows = []
+    for t in edges.traced:
+        e = t.edge
+        last = e.states[-1]
+        rows.append([
+            t.case, pct(t.load_fraction), t.start_case, fmt(e.span_deg, ".1f"),
+            "reached" if e.reached_target else fmt(e.edge_deg, ".2f"),
+            "—" if e.first_failure_deg is None else fmt(e.first_failure_deg, ".2f"),
+            f"{last.phi:.2f} / {last.theta:.2f}", fmt(last.max_displacement_mm, ".1f"),
+            fmt(min(s.min_detF for s in e.states), ".3f"),
+            "yes" if e.all_stable else "no",
+        ])
+    out.append(table(
+        ["failed case", "its load reached in the sweep (%)", "turned from", "angle to it (deg)",
+         "edge (deg from the start)", "first step that failed (deg)",
+         "last solution Φ / θ (deg)", "its max |u| (mm)", "smallest det F on the way",
+         "every state stable"], rows, table_id="failure-edges"))
+    return "".join(out)

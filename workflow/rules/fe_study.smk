@@ -137,3 +137,28 @@ rule fe_stability:
         ENV
     script:
         "../scripts/fe_stability.py"
+
+
+# The sweep's failed cases traced from their nearest converged direction (studies.failure_edge):
+# where the solution ends, and whether every state before it is stable. It reads the sweep's
+# dataset, so it is not part of `snakemake fe_study`; the report asks for it.
+rule fe_failure_edges:
+    input:
+        mesh=MESH,
+        dataset=DATASET,
+    output:
+        FE_FAILURE_EDGES_JSON,
+    params:
+        config=CONFIG.sections_of("fe", "material", "mesh"),
+        n=CONFIG.fe_study.failure_edges.n,
+        step_deg=CONFIG.fe_study.failure_edges.step_deg,
+        resolution_deg=CONFIG.fe_study.failure_edges.resolution_deg,
+    log:
+        "results/logs/fe_study/failure_edges.log",
+    threads: 1
+    resources:
+        mem_mb=4000,
+    conda:
+        ENV
+    script:
+        "../scripts/fe_failure_edges.py"

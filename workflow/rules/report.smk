@@ -22,6 +22,7 @@ rule report:
         fe_clinical=FE_CLINICAL_JSON,
         fe_speed_accuracy=FE_SPEED_ACCURACY_JSON,
         fe_stability=FE_STABILITY_JSON,
+        fe_failure_edges=FE_FAILURE_EDGES_JSON,
         corpus=CORPUS_JSON,
         reference_roundtrip=REFERENCE_ROUNDTRIP_JSON,
         # the imaged chain's results where reference_state.imaged is set (else empty)
