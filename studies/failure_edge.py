@@ -312,8 +312,9 @@ def choose_traces(columns: dict[str, np.ndarray], n: int) -> list[Trace]:
 
     Failed cases are taken softest first, those in the paper's plane (θ = 0) before the others,
     then by Φ and θ. Each starts from the converged case of the same C1 whose gravity is nearest
-    (the smallest angle), reached through the next two stiffer C1 values that converged at that
-    direction. A failed case whose C1 has no converged case is skipped.
+    (the smallest angle; the opposite direction is no start), reached through the next two
+    stiffer C1 values that converged at that direction. A failed case whose C1 has no other
+    converged case is skipped.
     """
     c1 = np.asarray(columns["C1"], dtype=float)
     phi, theta = np.asarray(columns["phi"], dtype=float), np.asarray(columns["theta"], dtype=float)
@@ -326,9 +327,11 @@ def choose_traces(columns: dict[str, np.ndarray], n: int) -> list[Trace]:
         if len(traces) == n:
             break
         same = np.flatnonzero(converged & np.isclose(c1, c1[i], rtol=0, atol=1e-9))
+        cos = g[same] @ g[i]
+        same, cos = same[cos > -1 + 1e-9], cos[cos > -1 + 1e-9]  # no great circle to the opposite
         if same.size == 0:
             continue
-        start = int(same[np.argmax(g[same] @ g[i])])
+        start = int(same[np.argmax(cos)])
         along = np.flatnonzero(converged & (np.abs(g - g[start]).max(axis=1) < 1e-9)
                                & (c1 > c1[i] + 1e-9))
         via = tuple(sorted(float(c1[k]) for k in along)[:2])

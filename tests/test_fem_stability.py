@@ -139,6 +139,7 @@ def test_the_sweeps_failures_are_traced_softest_first_from_the_nearest_converged
         (0.7, -90.0, 0.0, False),    # 7: nothing converged at 0.7: skipped
         (1.0, -90.0, 0.0, False),    # 8: stiffer, so last; from -75 at 1.0
         (0.8, -85.0, 30.0, True),
+        (2.0, 0.0, 0.0, False), (2.0, 180.0, 0.0, True),  # 10, 11: only the opposite: skipped
     ])
     traces = choose_traces(columns, 10)
     assert [(t.failed, t.start, t.via) for t in traces] == [
