@@ -34,6 +34,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import yaml
@@ -62,6 +63,7 @@ class EdgeState(Record):
         negative, zero, pressure_dofs: the tangent's negative eigenvalues and null pivots, and
             the pressure unknowns (a stable state has as many negatives as these).
         stable: no unstable mode and no null pivot.
+        contact_vertices: the skin vertices touching the chest (None without contact).
     """
 
     angle_deg: float
@@ -74,6 +76,7 @@ class EdgeState(Record):
     zero: int
     pressure_dofs: int
     stable: bool
+    contact_vertices: int | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -167,6 +170,107 @@ def direction_angles(g: np.ndarray) -> tuple[float, float]:
     return phi, theta
 
 
+def _check_steps(c1: float, via: tuple[float, ...], step_deg: float, resolution_deg: float) -> None:
+    if not (step_deg > 0 and resolution_deg > 0 and resolution_deg <= step_deg):
+        raise InvalidParameterError(
+            f"the step ({step_deg}°) and resolution ({resolution_deg}°) must be positive, the "
+            "resolution no longer than the step")
+    if any(v <= c1 for v in via):
+        raise InvalidParameterError(f"--via takes C1 values stiffer than {c1} kPa, got {via}")
+
+
+def reach(
+    runner: Any, c1: float, direction: tuple[float, float], via: tuple[float, ...] = ()
+) -> Any:
+    """Solve C1 = ``c1`` at ``direction`` as a chain does: through ``via``, stiffest first.
+
+    The runner's state holds the answer after. Returns the last case's loading result.
+
+    Raises:
+        InvalidParameterError: if a case of the chain does not converge.
+    """
+    from fem.chain import Neighbours
+
+    neighbours = Neighbours(runner.problem.pressure_dofs)
+    for value in (*sorted(via, reverse=True), c1):
+        case = Case(value, *direction)
+        path, _ = neighbours.path(case)
+        result, _ = runner.solve(case, path=path)
+        if not result.converged:
+            raise InvalidParameterError(
+                f"the case {case.id} did not converge ({result.reason}): start from a "
+                "direction the sweep solves")
+        neighbours.add(case, runner.problem.w.x.array)
+    return result
+
+
+def turn_runner(
+    runner: Any,
+    c1: float,
+    start: tuple[float, float],
+    target: tuple[float, float],
+    via: tuple[float, ...] = (),
+    step_deg: float = 1.0,
+    resolution_deg: float = 0.05,
+    newton: dict | None = None,
+) -> FailureEdge:
+    """:func:`turn` on an open :class:`fem.case.CaseRunner`; its state holds the last solution."""
+    from fem.stability import tangent_inertia
+
+    _check_steps(c1, via, step_deg, resolution_deg)
+    g0, g1 = _unit(*start), _unit(*target)
+    span, at = great_circle(g0, g1)
+    clock = time.perf_counter()
+    problem, solver, settings = runner.problem, runner.solver, runner.settings
+    result = reach(runner, c1, start, via)
+    material = Case(c1, *start).material(settings.density)
+
+    def record(angle: float, g: np.ndarray, iterations: int) -> EdgeState:
+        inertia = tangent_inertia(problem)
+        u = problem.displacement().x.array.reshape(-1, 3)
+        phi, theta = direction_angles(g)
+        contact = problem.contact_status()
+        return EdgeState(angle, phi, theta, iterations,
+                         1e3 * float(np.linalg.norm(u, axis=1).max(initial=0.0)),
+                         problem.min_detF(), inertia.negative, inertia.zero,
+                         inertia.pressure_dofs, inertia.stable,
+                         None if contact is None else contact["vertices_in_contact"])
+
+    states = [record(0.0, g0, sum(result.newton_iterations))]
+    failures: list[EdgeFailure] = []
+    angle, step, state = 0.0, min(step_deg, span), problem.w.x.array.copy()
+    while angle < span - 1e-12 and step >= resolution_deg:
+        goal = min(angle + step, span)
+        g = at(goal)
+        problem.set_case(material, Gravity(*direction_angles(g), magnitude=settings.gravity))
+        problem.w.x.array[:] = state
+        solver.scale_to_load()
+        problem.set_load_fraction(1.0)
+        outcome = solver.solve(newton)
+        if outcome.converged:
+            angle, state = goal, problem.w.x.array.copy()
+            states.append(record(angle, g, outcome.iterations))
+            log.info("%.3f°: converged in %d its, max |u| %.3f mm, %s", angle,
+                     outcome.iterations, states[-1].max_displacement_mm,
+                     "stable" if states[-1].stable else "unstable")
+            step = min(2 * step, step_deg)
+        else:
+            failures.append(EdgeFailure(goal, outcome.reason))
+            log.info("%.3f°: %s", goal, outcome.reason)
+            step /= 2
+    problem.w.x.array[:] = state  # the last solution, not the last failed iterate
+    reached = angle >= span - 1e-12
+    return FailureEdge(
+        mesh=str(runner.mesh_path), C1=c1, start=list(start), target=list(target), via=list(via),
+        start_load_path=result.reason, span_deg=span, edge_deg=angle,
+        first_failure_deg=None if reached else min(
+            f.angle_deg for f in failures if f.angle_deg > angle),
+        reached_target=reached, all_stable=all(s.stable for s in states), states=states,
+        failures=failures, resolution_deg=resolution_deg,
+        seconds=time.perf_counter() - clock, settings=settings.describe(solver.options),
+        machine=machine_state().to_json())
+
+
 def turn(
     mesh: str | Path,
     settings: SolverSettings,
@@ -189,75 +293,87 @@ def turn(
             not converge.
     """
     from fem.case import CaseRunner
-    from fem.chain import Neighbours
+
+    _check_steps(c1, via, step_deg, resolution_deg)
+    with CaseRunner(mesh, settings) as runner:
+        return turn_runner(runner, c1, start, target, via, step_deg, resolution_deg, newton)
+
+
+@dataclass(frozen=True, slots=True)
+class Meeting(Result):
+    """One direction reached three ways at one C1: is the equilibrium unique there?
+
+    Attributes:
+        C1: the stiffness (kPa).
+        at: the direction ``[Φ, θ]`` (degrees) the turns meet at.
+        turns: gravity turned to ``at`` from each side (:class:`FailureEdge`, its last state
+            the one compared).
+        chain_converged: whether the case solved as the sweep solves it (from rest through
+            ``via``) converged.
+        max_difference_mm: the largest point difference (at the displacement's nodes) between
+            each pair of the states that were found, keyed ``"a|b"`` with ``a``, ``b`` among
+            ``from <Φ>/<θ>`` and ``chain``.
+        mean_difference_mm: the mean point difference of each pair.
+        stable: whether each state found is a stable equilibrium, by the same keys.
+    """
+
+    C1: float
+    at: list[float]
+    turns: list[FailureEdge]
+    chain_converged: bool
+    max_difference_mm: dict[str, float]
+    mean_difference_mm: dict[str, float]
+    stable: dict[str, bool]
+
+
+def meet(
+    mesh: str | Path,
+    settings: SolverSettings,
+    c1: float,
+    sides: tuple[tuple[float, float], ...],
+    at: tuple[float, float],
+    via: tuple[float, ...] = (),
+    step_deg: float = 1.0,
+    resolution_deg: float = 0.05,
+) -> Meeting:
+    """Reach ``at`` by turning gravity from each of ``sides`` and as the sweep does; compare.
+
+    Two stable states that differ at one direction are two equilibria of one load: the answer
+    there depends on the patient's history (a fold's hysteresis), which no single-valued model
+    of (C1, direction) can follow. A turn that stops before ``at`` is recorded, not compared.
+    """
+    from fem.case import CaseRunner
     from fem.stability import tangent_inertia
 
-    if not (step_deg > 0 and resolution_deg > 0 and resolution_deg <= step_deg):
-        raise InvalidParameterError(
-            f"the step ({step_deg}°) and resolution ({resolution_deg}°) must be positive, the "
-            "resolution no longer than the step")
-    if any(v <= c1 for v in via):
-        raise InvalidParameterError(f"--via takes C1 values stiffer than {c1} kPa, got {via}")
-    g0, g1 = _unit(*start), _unit(*target)
-    span, at = great_circle(g0, g1)
-    clock = time.perf_counter()
+    _check_steps(c1, via, step_deg, resolution_deg)
+    fields: dict[str, np.ndarray] = {}
+    stable: dict[str, bool] = {}
+    turns = []
     with CaseRunner(mesh, settings) as runner:
-        problem, solver = runner.problem, runner.solver
-        neighbours = Neighbours(problem.pressure_dofs)
-        for value in (*sorted(via, reverse=True), c1):
-            case = Case(value, *start)
-            path, _ = neighbours.path(case)
-            result, _ = runner.solve(case, path=path)
-            if not result.converged:
-                raise InvalidParameterError(
-                    f"the start case {case.id} did not converge ({result.reason}): start from a "
-                    "direction the sweep solves")
-            neighbours.add(case, problem.w.x.array)
-        material = Case(c1, *start).material(settings.density)
-
-        def record(angle: float, g: np.ndarray, iterations: int) -> EdgeState:
-            inertia = tangent_inertia(problem)
-            u = problem.displacement().x.array.reshape(-1, 3)
-            phi, theta = direction_angles(g)
-            return EdgeState(angle, phi, theta, iterations,
-                             1e3 * float(np.linalg.norm(u, axis=1).max(initial=0.0)),
-                             problem.min_detF(), inertia.negative, inertia.zero,
-                             inertia.pressure_dofs, inertia.stable)
-
-        states = [record(0.0, g0, sum(result.newton_iterations))]
-        failures: list[EdgeFailure] = []
-        angle, step, state = 0.0, min(step_deg, span), problem.w.x.array.copy()
-        while angle < span - 1e-12 and step >= resolution_deg:
-            goal = min(angle + step, span)
-            g = at(goal)
-            problem.set_case(material, Gravity(*direction_angles(g),
-                                               magnitude=settings.gravity))
-            problem.w.x.array[:] = state
-            solver.scale_to_load()
-            problem.set_load_fraction(1.0)
-            outcome = solver.solve(newton)
-            if outcome.converged:
-                angle, state = goal, problem.w.x.array.copy()
-                states.append(record(angle, g, outcome.iterations))
-                log.info("%.3f°: converged in %d its, max |u| %.3f mm, %s", angle,
-                         outcome.iterations, states[-1].max_displacement_mm,
-                         "stable" if states[-1].stable else "unstable")
-                step = min(2 * step, step_deg)
-            else:
-                failures.append(EdgeFailure(goal, outcome.reason))
-                log.info("%.3f°: %s", goal, outcome.reason)
-                step /= 2
-        options = solver.options
-    reached = angle >= span - 1e-12
-    return FailureEdge(
-        mesh=str(mesh), C1=c1, start=list(start), target=list(target), via=list(via),
-        start_load_path=result.reason, span_deg=span, edge_deg=angle,
-        first_failure_deg=None if reached else min(
-            f.angle_deg for f in failures if f.angle_deg > angle),
-        reached_target=reached, all_stable=all(s.stable for s in states), states=states,
-        failures=failures, resolution_deg=resolution_deg,
-        seconds=time.perf_counter() - clock, settings=settings.describe(options),
-        machine=machine_state().to_json())
+        for side in sides:
+            edge = turn_runner(runner, c1, side, at, via, step_deg, resolution_deg)
+            turns.append(edge)
+            if edge.reached_target:
+                key = f"from {side[0]:g}/{side[1]:g}"
+                fields[key] = runner.problem.displacement().x.array.reshape(-1, 3).copy()
+                stable[key] = edge.states[-1].stable
+        try:
+            reach(runner, c1, at, via)
+        except InvalidParameterError as err:
+            log.info("%s", err)
+            chain = False
+        else:
+            chain = True
+            fields["chain"] = runner.problem.displacement().x.array.reshape(-1, 3).copy()
+            stable["chain"] = tangent_inertia(runner.problem).stable
+    keys = list(fields)
+    largest, mean = {}, {}
+    for i, a in enumerate(keys):
+        for b in keys[i + 1:]:
+            d = 1e3 * np.linalg.norm(fields[a] - fields[b], axis=1)
+            largest[f"{a}|{b}"], mean[f"{a}|{b}"] = float(d.max()), float(d.mean())
+    return Meeting(C1=c1, at=list(at), turns=turns, chain_converged=chain,
+                   max_difference_mm=largest, mean_difference_mm=mean, stable=stable)
 
 
 @dataclass(frozen=True, slots=True)
@@ -381,20 +497,41 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--step", type=float, default=1.0, help="the longest step (degrees)")
     parser.add_argument("--resolution", type=float, default=0.05,
                         help="the shortest step tried before stopping (degrees)")
+    parser.add_argument("--meet", type=float, nargs=2, metavar=("PHI", "THETA"),
+                        help="instead: turn from --from and from --to to this direction, solve "
+                             "it as the sweep does too, and compare the states")
     parser.add_argument("--json", type=Path, help="write the record here")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     try:
         settings = SolverSettings.from_config(yaml.safe_load(args.config.read_text()))
-        edge = turn(args.mesh, settings, args.c1, tuple(args.start), tuple(args.target),
-                    tuple(args.via), args.step, args.resolution)
+        if args.meet:
+            meeting = meet(args.mesh, settings, args.c1, (tuple(args.start), tuple(args.target)),
+                           tuple(args.meet), tuple(args.via), args.step, args.resolution)
+        else:
+            edge = turn(args.mesh, settings, args.c1, tuple(args.start), tuple(args.target),
+                        tuple(args.via), args.step, args.resolution)
     except (InvalidParameterError, OSError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
+    if args.meet:
+        for t in meeting.turns:
+            last = t.states[-1]
+            print(f"from {t.start}: {'reached' if t.reached_target else 'stopped at'} "
+                  f"({last.phi:.3f}, {last.theta:.3f}), max |u| {last.max_displacement_mm:.3f} "
+                  f"mm, {'stable' if last.stable else 'UNSTABLE'}")
+        print(f"as the sweep solves it: {'converged' if meeting.chain_converged else 'failed'}")
+        for pair, largest in meeting.max_difference_mm.items():
+            print(f"{pair}: largest point difference {largest:.3f} mm, mean "
+                  f"{meeting.mean_difference_mm[pair]:.4f} mm")
+        if args.json:
+            meeting.write(args.json)
+        return 0
     for s in edge.states:
         print(f"{s.angle_deg:8.3f}°  ({s.phi:8.3f}, {s.theta:8.3f})  "
               f"Newton {s.newton_iterations:3d}  max |u| {s.max_displacement_mm:8.3f} mm  "
-              f"min det F {s.min_detF:.4f}  negative {s.negative} (pressure "
+              f"min det F {s.min_detF:.4f}  in contact {s.contact_vertices}  "
+              f"negative {s.negative} (pressure "
               f"{s.pressure_dofs}), null {s.zero}: {'stable' if s.stable else 'UNSTABLE'}")
     where = ("reached the target" if edge.reached_target else
              f"the edge at {edge.edge_deg:.3f}° of {edge.span_deg:.3f}° (a step to "
@@ -410,5 +547,6 @@ if __name__ == "__main__":
     raise SystemExit(main())
 
 
-__all__ = ["EdgeFailure", "EdgeState", "FailureEdge", "SweepEdges", "Trace", "TracedFailure",
-           "choose_traces", "direction_angles", "great_circle", "sweep_edges", "turn"]
+__all__ = ["EdgeFailure", "EdgeState", "FailureEdge", "Meeting", "SweepEdges", "Trace",
+           "TracedFailure", "choose_traces", "direction_angles", "great_circle", "meet", "reach",
+           "sweep_edges", "turn", "turn_runner"]

@@ -89,7 +89,7 @@ def test_turning_gravity_reaches_the_case_solved_alone(tiny_mesh: Path) -> None:
     edge = turn(tiny_mesh, SolverSettings(), 1.0, (180.0, 0.0), (150.0, 20.0), via=(2.0,),
                 step_deg=10.0, resolution_deg=1.0)
     assert edge.reached_target and edge.first_failure_deg is None and edge.all_stable
-    assert all(0 < s.min_detF < 1.5 for s in edge.states)
+    assert all(0 < s.min_detF < 1.5 and s.contact_vertices is None for s in edge.states)
     assert edge.edge_deg == pytest.approx(edge.span_deg) and len(edge.states) >= 3
     assert [s.angle_deg for s in edge.states] == sorted(s.angle_deg for s in edge.states)
     last = edge.states[-1]
@@ -173,3 +173,21 @@ def test_a_traced_sweep_is_written_read_and_shown(tiny_mesh: Path, tmp_path: Pat
     assert "1 of the sweep&#x27;s 1 failed cases" in page
     assert "none failed" in failure_edges_section(SweepEdges(failed=0, traced=[], seconds=0.0))
     assert "was not found" in failure_edges_section(None)
+
+
+@pytest.mark.solve
+def test_turns_from_both_sides_meet_the_sweeps_solution_where_it_is_unique(
+    tiny_mesh: Path, tmp_path: Path
+) -> None:
+    """Away from any fold the three ways to one direction find one equilibrium."""
+    from studies.failure_edge import Meeting, meet
+
+    meeting = meet(tiny_mesh, SolverSettings(), 1.0, ((180.0, 0.0), (140.0, 0.0)), (160.0, 0.0),
+                   via=(2.0,), step_deg=10.0, resolution_deg=1.0)
+    assert all(t.reached_target for t in meeting.turns) and meeting.chain_converged
+    assert set(meeting.max_difference_mm) == {"from 180/0|from 140/0", "from 180/0|chain",
+                                              "from 140/0|chain"}
+    assert max(meeting.max_difference_mm.values()) < 1e-3  # mm, against |u| of tens of mm
+    assert all(meeting.stable.values())
+    meeting.write(tmp_path / "meet.json")
+    assert Meeting.read(tmp_path / "meet.json") == meeting
