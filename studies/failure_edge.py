@@ -18,6 +18,11 @@ the edge is where that history has no nearby equilibrium; whether a state exists
 ``python -m studies.failure_edge MESH --c1 0.8 --from -75 0 --to -90 0 [--via 1.2 1.0]
 [--config config.yaml] [--step 1.0] [--resolution 0.05] [--json OUT]``
 
+With ``--meet PHI THETA`` (:func:`meet`) gravity is turned from both ``--from`` and ``--to`` to
+that direction, which is also solved as the sweep solves it, and the states are compared: two
+stable states at one direction are two equilibria of one load (a fold's hysteresis), and the
+answer there depends on the patient's history.
+
 In the workflow (``fe_study.failure_edges``, ``results/fe_study/failure_edges.json``, the
 report's stability section), :func:`sweep_edges` traces the sweep's own failed cases: each from
 the nearest direction of the dataset that converged at the same C1, reached through the two

@@ -189,7 +189,10 @@ def failure_edges_section(edges: Any) -> str:
         "the start where the solution was last found; stable means that every state up to it "
         "is a strict minimum of the potential (the tangent has one negative eigenvalue per "
         "pressure unknown and no null pivot, fem.stability). A turn of gravity is the history "
-        "of a patient rolling over: past the edge that history has no nearby equilibrium. "
+        "of a patient rolling over: past the edge, Newton from the last state finds no "
+        "equilibrium however short the step (down to the resolution). Near an edge two "
+        "histories can end in different stable states at one direction (python -m "
+        "studies.failure_edge --meet compares them). "
         f"{edges.seconds:.0f} s in all.", "caption")]
     rows = []
     for t in edges.traced:
