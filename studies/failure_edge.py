@@ -389,13 +389,15 @@ class TracedFailure(Record):
         case: the failed case's id.
         load_fraction: the load it reached in the sweep.
         start_case: the converged case the turn starts from (same C1).
-        edge: the turn (:class:`FailureEdge`).
+        edge: the turn (:class:`FailureEdge`); None where its start did not converge again.
+        error: why there is no turn.
     """
 
     case: str
     load_fraction: float
     start_case: str
-    edge: FailureEdge
+    edge: FailureEdge | None
+    error: str | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -460,6 +462,10 @@ def choose_traces(columns: dict[str, np.ndarray], n: int) -> list[Trace]:
     return traces
 
 
+#: The dataset's per-case columns :func:`sweep_edges` reads.
+SWEEP_COLUMNS = ("id", "C1", "phi", "theta", "converged", "load_fraction")
+
+
 def sweep_edges(
     mesh: str | Path,
     settings: SolverSettings,
@@ -468,19 +474,35 @@ def sweep_edges(
     step_deg: float = 1.0,
     resolution_deg: float = 0.05,
 ) -> SweepEdges:
-    """Trace the first ``n`` failed cases of a sweep (:func:`choose_traces`) with :func:`turn`."""
+    """Trace the first ``n`` failed cases of a sweep (:func:`choose_traces`) with :func:`turn`.
+
+    A trace whose start case does not converge again is recorded with its error, not turned.
+
+    Raises:
+        InvalidParameterError: if ``columns`` lacks one of :data:`SWEEP_COLUMNS`.
+    """
+    missing = [key for key in SWEEP_COLUMNS if key not in columns]
+    if missing:
+        raise InvalidParameterError(
+            f"the dataset has no column {', '.join(missing)}: rebuild it (snakemake --forcerun "
+            "aggregate)")
     clock = time.perf_counter()
     traced = []
     ids = np.asarray(columns["id"]).astype(str)
     for trace in choose_traces(columns, n):
         i, k = trace.failed, trace.start
         log.info("%s: from %s through %s", ids[i], ids[k], trace.via or "nothing stiffer")
-        edge = turn(mesh, settings, float(columns["C1"][i]),
-                    (float(columns["phi"][k]), float(columns["theta"][k])),
-                    (float(columns["phi"][i]), float(columns["theta"][i])),
-                    trace.via, step_deg, resolution_deg)
+        edge, error = None, None
+        try:
+            edge = turn(mesh, settings, float(columns["C1"][i]),
+                        (float(columns["phi"][k]), float(columns["theta"][k])),
+                        (float(columns["phi"][i]), float(columns["theta"][i])),
+                        trace.via, step_deg, resolution_deg)
+        except InvalidParameterError as err:  # its start did not converge again: say so
+            log.warning("%s: %s", ids[i], err)
+            error = str(err)
         traced.append(TracedFailure(str(ids[i]), float(columns["load_fraction"][i]),
-                                    str(ids[k]), edge))
+                                    str(ids[k]), edge, error))
     return SweepEdges(failed=int((~np.asarray(columns["converged"], dtype=bool)).sum()),
                       traced=traced, seconds=time.perf_counter() - clock)
 
@@ -552,6 +574,6 @@ if __name__ == "__main__":
     raise SystemExit(main())
 
 
-__all__ = ["EdgeFailure", "EdgeState", "FailureEdge", "Meeting", "SweepEdges", "Trace",
-           "TracedFailure", "choose_traces", "direction_angles", "great_circle", "meet", "reach",
-           "sweep_edges", "turn", "turn_runner"]
+__all__ = ["SWEEP_COLUMNS", "EdgeFailure", "EdgeState", "FailureEdge", "Meeting", "SweepEdges",
+           "Trace", "TracedFailure", "choose_traces", "direction_angles", "great_circle", "meet",
+           "reach", "sweep_edges", "turn", "turn_runner"]

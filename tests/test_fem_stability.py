@@ -173,6 +173,15 @@ def test_a_traced_sweep_is_written_read_and_shown(tiny_mesh: Path, tmp_path: Pat
     assert "1 of the sweep&#x27;s 1 failed cases" in page
     assert "none failed" in failure_edges_section(SweepEdges(failed=0, traced=[], seconds=0.0))
     assert "was not found" in failure_edges_section(None)
+    # a start that does not converge again is recorded with its reason, not turned
+    crippled = SolverSettings(loading=Loading(rescue=False, max_steps=4),
+                              petsc_options={"snes_max_it": 1})
+    stuck = sweep_edges(tiny_mesh, crippled, columns, 2, step_deg=10.0, resolution_deg=1.0)
+    assert stuck.traced[0].edge is None and "did not converge" in stuck.traced[0].error
+    assert "did not converge" in failure_edges_section(stuck)
+    with pytest.raises(InvalidParameterError, match="no column load_fraction"):
+        sweep_edges(tiny_mesh, SolverSettings(),
+                    {k: v for k, v in columns.items() if k != "load_fraction"}, 2)
 
 
 @pytest.mark.solve

@@ -197,6 +197,10 @@ def failure_edges_section(edges: Any) -> str:
     rows = []
     for t in edges.traced:
         e = t.edge
+        if e is None:
+            rows.append([t.case, pct(t.load_fraction), t.start_case, "n/a", t.error or "n/a",
+                         "", "", "", "", ""])
+            continue
         last = e.states[-1]
         rows.append([
             t.case, pct(t.load_fraction), t.start_case, fmt(e.span_deg, ".1f"),
