@@ -389,6 +389,9 @@ class TracedFailure(Record):
         case: the failed case's id.
         load_fraction: the load it reached in the sweep.
         start_case: the converged case the turn starts from (same C1).
+        start_sweep_max_mm: that case's largest displacement in the sweep: the turn's first
+            state is the sweep's own where its ``max_displacement_mm`` agrees (a near fold, the
+            start could land on another equilibrium).
         edge: the turn (:class:`FailureEdge`); None where its start did not converge again.
         error: why there is no turn.
     """
@@ -398,6 +401,7 @@ class TracedFailure(Record):
     start_case: str
     edge: FailureEdge | None
     error: str | None = None
+    start_sweep_max_mm: float = math.nan  # absent from records written before it was kept
 
 
 @dataclass(frozen=True, slots=True)
@@ -463,7 +467,7 @@ def choose_traces(columns: dict[str, np.ndarray], n: int) -> list[Trace]:
 
 
 #: The dataset's per-case columns :func:`sweep_edges` reads.
-SWEEP_COLUMNS = ("id", "C1", "phi", "theta", "converged", "load_fraction")
+SWEEP_COLUMNS = ("id", "C1", "phi", "theta", "converged", "load_fraction", "max_disp_mm")
 
 
 def sweep_edges(
@@ -501,8 +505,10 @@ def sweep_edges(
         except InvalidParameterError as err:  # its start did not converge again: say so
             log.warning("%s: %s", ids[i], err)
             error = str(err)
-        traced.append(TracedFailure(str(ids[i]), float(columns["load_fraction"][i]),
-                                    str(ids[k]), edge, error))
+        traced.append(TracedFailure(
+            case=str(ids[i]), load_fraction=float(columns["load_fraction"][i]),
+            start_case=str(ids[k]), edge=edge, error=error,
+            start_sweep_max_mm=float(columns["max_disp_mm"][k])))
     return SweepEdges(failed=int((~np.asarray(columns["converged"], dtype=bool)).sum()),
                       traced=traced, seconds=time.perf_counter() - clock)
 

@@ -123,7 +123,7 @@ def _columns(rows: list[tuple[float, float, float, bool]]) -> dict[str, np.ndarr
     c1, phi, theta, converged = (np.array(col) for col in zip(*rows, strict=True))
     ids = np.array([f"c1={a:.2f}_phi={b:.1f}_theta={c:.1f}" for a, b, c, _ in rows])
     return {"C1": c1, "phi": phi, "theta": theta, "converged": converged, "id": ids,
-            "load_fraction": np.where(converged, 1.0, 0.5)}
+            "load_fraction": np.where(converged, 1.0, 0.5), "max_disp_mm": np.full(len(ids), 9.0)}
 
 
 @pytest.mark.unit
@@ -164,6 +164,7 @@ def test_a_traced_sweep_is_written_read_and_shown(tiny_mesh: Path, tmp_path: Pat
     assert edges.failed == 1 and len(edges.traced) == 1
     traced = edges.traced[0]
     assert traced.start_case == "c1=1.00_phi=180.0_theta=0.0" and traced.load_fraction == 0.5
+    assert traced.start_sweep_max_mm == 9.0 and traced.edge.states[0].max_displacement_mm > 0
     assert traced.edge.reached_target and traced.edge.span_deg == pytest.approx(20.0)
     edges.write(tmp_path / "failure_edges.json")
     back = SweepEdges.read(tmp_path / "failure_edges.json")

@@ -199,11 +199,13 @@ def failure_edges_section(edges: Any) -> str:
         e = t.edge
         if e is None:
             rows.append([t.case, pct(t.load_fraction), t.start_case, "n/a", t.error or "n/a",
-                         "", "", "", "", ""])
+                         "", "", "", "", "", ""])
             continue
         last = e.states[-1]
         rows.append([
-            t.case, pct(t.load_fraction), t.start_case, fmt(e.span_deg, ".1f"),
+            t.case, pct(t.load_fraction), t.start_case,
+            f"{fmt(t.start_sweep_max_mm, '.2f')} / {fmt(e.states[0].max_displacement_mm, '.2f')}",
+            fmt(e.span_deg, ".1f"),
             "reached" if e.reached_target else fmt(e.edge_deg, ".2f"),
             "—" if e.first_failure_deg is None else fmt(e.first_failure_deg, ".2f"),
             f"{last.phi:.2f} / {last.theta:.2f}", fmt(last.max_displacement_mm, ".1f"),
@@ -211,7 +213,8 @@ def failure_edges_section(edges: Any) -> str:
             "yes" if e.all_stable else "no",
         ])
     out.append(table(
-        ["failed case", "its load reached in the sweep (%)", "turned from", "angle to it (deg)",
+        ["failed case", "its load reached in the sweep (%)", "turned from",
+         "its max |u| in the sweep / at the turn's start (mm)", "angle to it (deg)",
          "edge (deg from the start)", "first step that failed (deg)",
          "last solution Φ / θ (deg)", "its max |u| (mm)", "smallest det F on the way",
          "every state stable"], rows, table_id="failure-edges"))
