@@ -198,8 +198,9 @@ def failure_edges_section(edges: Any) -> str:
     for t in edges.traced:
         e = t.edge
         if e is None:
-            rows.append([t.case, pct(t.load_fraction), t.start_case, "n/a", t.error or "n/a",
-                         "", "", "", "", "", ""])
+            rows.append([t.case, pct(t.load_fraction), t.start_case,
+                         f"{fmt(t.start_sweep_max_mm, '.2f')} / n/a", "n/a",
+                         f"not traced: {t.error or 'n/a'}", "", "", "", "", ""])
             continue
         last = e.states[-1]
         rows.append([
