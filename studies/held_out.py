@@ -23,13 +23,13 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from fem.dataset import Dataset, direction_keys
+from fem.dataset import Dataset, direction_keys, gravity_direction
 from studies.results import Record, Result
 from surrogate.exceptions import ExtrapolationWarning
 
@@ -205,6 +205,9 @@ class HeldOutBlock(Record):
         held_out_between: the held-out model's errors at the cell centroids (:class:`Centroids`)
             over the same cases; absent where the dataset has no quadratic mesh's nodes.
         inside_between: the by-sample model's there.
+        failure_distance_deg: for each of ``rows``, the angle (degrees) from its gravity to the
+            nearest direction where the sweep failed at the same C1 (:func:`failure_distances`;
+            NaN where nothing failed at that C1); empty in records written before it was kept.
     """
 
     split: str
@@ -216,6 +219,7 @@ class HeldOutBlock(Record):
     inside_rows: list[CaseErrors]
     held_out_between: ErrorSpread | None = None
     inside_between: ErrorSpread | None = None
+    failure_distance_deg: list[float] = field(default_factory=list)
 
 
 @dataclass(frozen=True, slots=True)
@@ -242,6 +246,58 @@ def held_out_groups(ds: Dataset, split: str, cases: np.ndarray) -> list[str]:
     if split == "by_c1":
         return [f"{c:g}" for c in sorted({round(float(ds.C1[i]), 9) for i in cases})]
     return [str(ds.ids[i]) for i in cases]
+
+
+def failure_distances(ds: Dataset, cases: Sequence[int]) -> list[float]:
+    """Each case's angle (degrees) to the nearest direction where ``ds`` failed at its C1.
+
+    NaN where no case of that C1 failed. Beside a failure the sweep has no data beyond, and the
+    FE answer there can depend on the history (:mod:`studies.failure_edge`).
+    """
+    g = gravity_direction(np.asarray(ds.phi, dtype=float), np.asarray(ds.theta, dtype=float))
+    c1 = np.asarray(ds.C1, dtype=float)
+    failed = ~np.asarray(ds.converged, dtype=bool)
+    out = []
+    for i in cases:
+        same = np.flatnonzero(failed & np.isclose(c1, c1[i], rtol=0, atol=1e-9))
+        if same.size == 0:
+            out.append(float("nan"))
+            continue
+        nearest = float(np.clip(g[same] @ g[i], -1.0, 1.0).max())
+        out.append(float(np.degrees(np.arccos(nearest))))
+    return out
+
+
+#: The bands of :func:`by_failure_distance`, in degrees.
+FAILURE_DISTANCE_BANDS = (10.0, 25.0)
+
+
+def by_failure_distance(
+    rows: Sequence[CaseErrors], distances: Sequence[float],
+    edges: Sequence[float] = FAILURE_DISTANCE_BANDS,
+) -> list[tuple[str, ErrorSpread]]:
+    """The spread of ``rows`` by their angle to the nearest failed direction of their C1.
+
+    Bands without cases are left out; cases whose C1 has no failure form the last band.
+
+    Raises:
+        ValueError: if ``distances`` does not pair with ``rows``.
+    """
+    if len(distances) != len(rows):
+        raise ValueError(f"{len(distances)} distances for {len(rows)} cases")
+    d = np.asarray(distances, dtype=float)
+    bounds = [0.0, *sorted(edges), float("inf")]
+    bands = []
+    for lo, hi in zip(bounds[:-1], bounds[1:], strict=False):
+        inside = [r for r, x in zip(rows, d, strict=True) if lo <= x < hi]
+        label = (f"within {hi:g}° of a failure at its C1" if lo == 0 else
+                 f"{lo:g}° or more from one" if hi == float("inf") else f"{lo:g}–{hi:g}°")
+        if inside:
+            bands.append((label, ErrorSpread.over(inside)))
+    none = [r for r, x in zip(rows, d, strict=True) if np.isnan(x)]
+    if none:
+        bands.append(("no failure at its C1", ErrorSpread.over(none)))
+    return bands
 
 
 def trained_cases(model: Surrogate, ds: Dataset) -> np.ndarray:
@@ -318,6 +374,7 @@ def evaluate_held_out(
             inside_rows=inside_rows,
             held_out_between=held_out_between,
             inside_between=inside_between,
+            failure_distance_deg=failure_distances(ds, [int(i) for i in test]),
         ))
     return HeldOutEvaluation(
         blocks=blocks, inside_all=ErrorSpread.over(list(inside_of.values())),
@@ -407,5 +464,6 @@ if __name__ == "__main__":
     raise SystemExit(main())
 
 
-__all__ = ["HELD_OUT", "CaseErrors", "Centroids", "ErrorSpread", "HeldOutBlock",
-           "HeldOutEvaluation", "by_stiffness", "evaluate_held_out", "held_out_groups"]
+__all__ = ["FAILURE_DISTANCE_BANDS", "HELD_OUT", "CaseErrors", "Centroids", "ErrorSpread",
+           "HeldOutBlock", "HeldOutEvaluation", "by_failure_distance", "by_stiffness",
+           "evaluate_held_out", "failure_distances", "held_out_groups"]

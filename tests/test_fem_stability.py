@@ -201,3 +201,50 @@ def test_turns_from_both_sides_meet_the_sweeps_solution_where_it_is_unique(
     assert all(meeting.stable.values())
     meeting.write(tmp_path / "meet.json")
     assert Meeting.read(tmp_path / "meet.json") == meeting
+
+
+@pytest.mark.unit
+def test_held_out_cases_are_banded_by_their_angle_to_the_nearest_failure() -> None:
+    """The angle to the nearest failed direction of the same C1, and the report's bands."""
+    from types import SimpleNamespace
+
+    from report.context import Context
+    from report.sections.generalisation import held_out_part
+    from studies.held_out import (
+        CaseErrors,
+        ErrorSpread,
+        HeldOutBlock,
+        HeldOutEvaluation,
+        by_failure_distance,
+        failure_distances,
+    )
+
+    ds = SimpleNamespace(C1=np.array([0.8, 0.8, 0.8, 1.0, 0.8]),
+                         phi=np.array([-75.0, -90.0, -60.0, -75.0, 100.0]),
+                         theta=np.array([0.0, 0.0, 0.0, 0.0, -120.0]),
+                         converged=np.array([True, False, True, True, False]))
+    near = failure_distances(ds, [0, 2, 3])
+    assert near[0] == pytest.approx(15.0) and near[1] == pytest.approx(30.0)
+    assert np.isnan(near[2])  # nothing failed at 1.0 kPa
+    fe = np.ones((4, 3))
+    rows = [CaseErrors.between(fe + e, fe, f"case{k}", 0.8, 0.0, 0.0)
+            for k, e in enumerate((3.0, 0.1, 0.2, 0.05))]
+    bands = by_failure_distance(rows, [1.4, 17.0, 30.0, float("nan")])
+    assert [(label, s.cases) for label, s in bands] == [
+        ("within 10° of a failure at its C1", 1), ("10–25°", 1), ("25° or more from one", 1),
+        ("no failure at its C1", 1)]
+    assert bands[0][1].max_mm == pytest.approx(3.0 * np.sqrt(3))
+    with pytest.raises(ValueError, match="3 distances for 4 cases"):
+        by_failure_distance(rows, [1.0, 2.0, 3.0])
+    block = HeldOutBlock(split="by_direction", held_out="whole directions", groups=["a"],
+                         held_out_model=ErrorSpread.over(rows), inside_model=None, rows=rows,
+                         inside_rows=[], failure_distance_deg=[1.4, 17.0, 30.0, float("nan")])
+    result = HeldOutEvaluation(blocks=[block], inside_all=ErrorSpread.over(rows))
+    page = held_out_part(Context(out_dir=Path("."), clinical=[], paths={}, clinical_fields=[],
+                                 results={"held_out": result}))
+    assert 'id="held-out-near-failures"' in page and "within 10° of a failure" in page
+    old = HeldOutBlock(**{**{f: getattr(block, f) for f in block.__dataclass_fields__},
+                          "failure_distance_deg": []})
+    assert "near-failures" not in held_out_part(Context(
+        out_dir=Path("."), clinical=[], paths={}, clinical_fields=[],
+        results={"held_out": HeldOutEvaluation(blocks=[old], inside_all=result.inside_all)}))

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
+
 from report.context import Context
 from report.html import fmt, h3, missing, para, pct, table
-from studies.held_out import CaseErrors, ErrorSpread
+from studies.held_out import CaseErrors, ErrorSpread, HeldOutBlock, by_failure_distance
 from studies.postures import PostureRow
 
 
@@ -55,7 +58,32 @@ def held_out_part(ctx: Context) -> str:
          "p95 (mm)", "max (mm)", "max / case max |u| (%)",
          "between the points: mean / p95 / max (mm)", "worst case"],
         rows, table_id="held-out"))
+    out.append(_near_failures(result.blocks))
     return "".join(out)
+
+
+def _near_failures(blocks: Sequence[HeldOutBlock]) -> str:
+    """The held-out errors by the cases' angle to the nearest failed direction of their C1."""
+    rows = []
+    for block in blocks:
+        distances = block.failure_distance_deg
+        if len(distances) != len(block.rows) or all(math.isnan(d) for d in distances):
+            continue
+        for band, spread in by_failure_distance(block.rows, distances):
+            rows.append([block.split.replace("_", "-"), band, spread.cases,
+                         fmt(spread.mean_mm, ".3g"), fmt(spread.p95_mm, ".3g"),
+                         fmt(spread.max_mm, ".3g"), spread.worst_case])
+    if not rows:
+        return ""
+    return "".join([
+        para("The held-out models' errors by how near each held-out case lies to a direction "
+             "where the sweep failed at the same C1 (the angle between the gravity "
+             "directions). Beside a failure the sweep has no data beyond it, and there the FE "
+             "answer can itself depend on the history: the stability section's 'Where the "
+             "sweep's failures begin'.", "caption"),
+        table(["split", "angle to the nearest failure at its C1", "cases", "mean (mm)",
+               "p95 (mm)", "max (mm)", "worst case"], rows, table_id="held-out-near-failures"),
+    ])
 
 
 BETWEEN = (
