@@ -732,6 +732,20 @@ def gravity_direction(phi_deg: np.ndarray, theta_deg: np.ndarray) -> np.ndarray:
     )
 
 
+def gravity_angles(g: np.ndarray) -> tuple[float, float]:
+    """(Φ, θ) in degrees of the unit gravity direction ``g``, :func:`gravity_direction` inverted.
+
+    A direction in the paper's plane (the poles included) is named as the plane names it,
+    (Φ, 0) with Φ in (-180, 180]: not (-Φ, ±180), which is the same direction under another
+    name (a sweep refuses a direction listed under two).
+    """
+    if abs(g[2]) < 1e-9:
+        phi = float(np.degrees(np.arctan2(g[1], g[0]))) + 0.0
+        return (180.0 if phi == -180.0 else phi), 0.0
+    return (float(np.degrees(np.arccos(np.clip(g[0], -1.0, 1.0)))),
+            float(np.degrees(np.arctan2(g[2], g[1]))))
+
+
 def read_dataset(path: str | Path, nodes: bool = False) -> Dataset:
     """Read and check the HDF5 dataset written by :func:`build_dataset`.
 

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fem.dataset import Dataset, DatasetError, direction_keys, read_dataset
+from fem.dataset import Dataset, DatasetError, direction_keys, gravity_angles, read_dataset
 from studies.results import Record, Result
 
 KERNEL = "cubic"
@@ -182,17 +182,9 @@ def propose(ds: Dataset, gaps: DirectionGaps, k: int) -> list[tuple[float, float
 
 
 def direction_angles(g: np.ndarray) -> tuple[float, float]:
-    """(Φ, θ) in degrees, to 0.1°, of the unit gravity direction ``g`` (fem.dataset's Eq. 1).
-
-    A direction in the paper's plane is named as the plane names it, (Φ, 0) with Φ in
-    (-180, 180]: not (-Φ, ±180), which is the same direction under another name (a sweep
-    refuses a direction listed under two).
-    """
-    if abs(g[2]) < 1e-9:
-        phi = round(float(np.degrees(np.arctan2(g[1], g[0]))), 1) + 0.0
-        return (180.0 if phi == -180.0 else phi), 0.0
-    return (round(float(np.degrees(np.arccos(np.clip(g[0], -1.0, 1.0)))), 1),
-            round(float(np.degrees(np.arctan2(g[2], g[1]))), 1))
+    """:func:`fem.dataset.gravity_angles` of ``g`` to 0.1° (a direction in the plane as (Φ, 0))."""
+    phi, theta = (round(a, 1) + 0.0 for a in gravity_angles(g))
+    return (180.0 if phi == -180.0 else phi), theta
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from fem.dataset import gravity_direction
+from fem.dataset import gravity_angles, gravity_direction
 from fem.exceptions import InvalidParameterError
 from fem.parameters import Gravity, SolverSettings
 from fem.sweep import Case
@@ -135,10 +135,6 @@ class FailureEdge(Result):
     machine: dict | None = None
 
 
-def _unit(phi: float, theta: float) -> np.ndarray:
-    return Gravity(phi, theta, magnitude=1.0).vector
-
-
 def great_circle(
     start: np.ndarray, target: np.ndarray
 ) -> tuple[float, Callable[[float], np.ndarray]]:
@@ -162,17 +158,6 @@ def great_circle(
         return math.cos(a) * start + math.sin(a) * ortho
 
     return span, at
-
-
-def direction_angles(g: np.ndarray) -> tuple[float, float]:
-    """(Φ, θ) in degrees of a unit gravity vector; a direction in the paper's plane as (Φ, 0)."""
-    phi = math.degrees(math.acos(float(np.clip(g[0], -1.0, 1.0))))
-    if math.hypot(g[1], g[2]) < 1e-12:
-        return phi, 0.0
-    theta = math.degrees(math.atan2(g[2], g[1]))
-    if abs(g[2]) < 1e-12 and g[1] < 0:  # in the plane, on the negative side: (−Φ, 0)
-        return -phi, 0.0
-    return phi, theta
 
 
 def _check_steps(c1: float, via: tuple[float, ...], step_deg: float, resolution_deg: float) -> None:
@@ -223,7 +208,7 @@ def turn_runner(
     from fem.stability import tangent_inertia
 
     _check_steps(c1, via, step_deg, resolution_deg)
-    g0, g1 = _unit(*start), _unit(*target)
+    g0, g1 = gravity_direction(np.array([start[0], target[0]]), np.array([start[1], target[1]]))
     span, at = great_circle(g0, g1)
     clock = time.perf_counter()
     problem, solver, settings = runner.problem, runner.solver, runner.settings
@@ -233,7 +218,7 @@ def turn_runner(
     def record(angle: float, g: np.ndarray, iterations: int) -> EdgeState:
         inertia = tangent_inertia(problem)
         u = problem.displacement().x.array.reshape(-1, 3)
-        phi, theta = direction_angles(g)
+        phi, theta = gravity_angles(g)
         contact = problem.contact_status()
         return EdgeState(angle, phi, theta, iterations,
                          1e3 * float(np.linalg.norm(u, axis=1).max(initial=0.0)),
@@ -247,7 +232,7 @@ def turn_runner(
     while angle < span - 1e-12 and step >= resolution_deg:
         goal = min(angle + step, span)
         g = at(goal)
-        problem.set_case(material, Gravity(*direction_angles(g), magnitude=settings.gravity))
+        problem.set_case(material, Gravity(*gravity_angles(g), magnitude=settings.gravity))
         problem.w.x.array[:] = state
         solver.scale_to_load()
         problem.set_load_fraction(1.0)
@@ -581,5 +566,5 @@ if __name__ == "__main__":
 
 
 __all__ = ["SWEEP_COLUMNS", "EdgeFailure", "EdgeState", "FailureEdge", "Meeting", "SweepEdges",
-           "Trace", "TracedFailure", "choose_traces", "direction_angles", "great_circle", "meet",
+           "Trace", "TracedFailure", "choose_traces", "great_circle", "meet",
            "reach", "sweep_edges", "turn", "turn_runner"]
