@@ -463,7 +463,7 @@ def sweep_edges(
     step_deg: float = 1.0,
     resolution_deg: float = 0.05,
 ) -> SweepEdges:
-    """Trace the first ``n`` failed cases of a sweep (:func:`choose_traces`) with :func:`turn`.
+    """Trace the first ``n`` failed cases of a sweep (:func:`choose_traces`), on one runner.
 
     A trace whose start case does not converge again is recorded with its error, not turned.
 
@@ -475,25 +475,31 @@ def sweep_edges(
         raise InvalidParameterError(
             f"the dataset has no column {', '.join(missing)}: rebuild it (snakemake --forcerun "
             "aggregate)")
+    from fem.case import CaseRunner
+
     clock = time.perf_counter()
     traced = []
     ids = np.asarray(columns["id"]).astype(str)
-    for trace in choose_traces(columns, n):
-        i, k = trace.failed, trace.start
-        log.info("%s: from %s through %s", ids[i], ids[k], trace.via or "nothing stiffer")
-        edge, error = None, None
-        try:
-            edge = turn(mesh, settings, float(columns["C1"][i]),
-                        (float(columns["phi"][k]), float(columns["theta"][k])),
-                        (float(columns["phi"][i]), float(columns["theta"][i])),
-                        trace.via, step_deg, resolution_deg)
-        except InvalidParameterError as err:  # its start did not converge again: say so
-            log.warning("%s: %s", ids[i], err)
-            error = str(err)
-        traced.append(TracedFailure(
-            case=str(ids[i]), load_fraction=float(columns["load_fraction"][i]),
-            start_case=str(ids[k]), edge=edge, error=error,
-            start_sweep_max_mm=float(columns["max_disp_mm"][k])))
+    traces = choose_traces(columns, n)
+    if traces:  # one mesh read and form compilation for every trace
+        with CaseRunner(mesh, settings) as runner:
+            for trace in traces:
+                i, k = trace.failed, trace.start
+                log.info("%s: from %s through %s", ids[i], ids[k],
+                         trace.via or "nothing stiffer")
+                edge, error = None, None
+                try:
+                    edge = turn_runner(runner, float(columns["C1"][i]),
+                                       (float(columns["phi"][k]), float(columns["theta"][k])),
+                                       (float(columns["phi"][i]), float(columns["theta"][i])),
+                                       trace.via, step_deg, resolution_deg)
+                except InvalidParameterError as err:  # its start did not converge again
+                    log.warning("%s: %s", ids[i], err)
+                    error = str(err)
+                traced.append(TracedFailure(
+                    case=str(ids[i]), load_fraction=float(columns["load_fraction"][i]),
+                    start_case=str(ids[k]), edge=edge, error=error,
+                    start_sweep_max_mm=float(columns["max_disp_mm"][k])))
     return SweepEdges(failed=int((~np.asarray(columns["converged"], dtype=bool)).sum()),
                       traced=traced, seconds=time.perf_counter() - clock)
 
