@@ -25,6 +25,7 @@ from studies.postures import PostureEvaluation
 from studies.reference_roundtrip import RoundTripTable
 from studies.reference_state import ReferenceRecord
 from studies.stability import StabilityMap
+from studies.stability_audit import StabilityAudit
 from studies.stiffness import StiffnessResult
 from studies.surrogate_benchmark import SurrogateBenchmark
 from studies.surrogate_evaluation import ClinicalEvaluation, Extrapolation
@@ -38,7 +39,7 @@ INPUT_NAMES = (
     "dataset", "quality", "mesh_png", "model", "history", "table2", "variants", "clinical",
     "extrapolation", "benchmark", "clinical_fields", "fe_clinical", "fe_speed_accuracy",
     "fe_stability", "corpus", "reference_roundtrip", "reference_record", "tracking", "stiffness",
-    "viewer", "held_out", "postures", "off_grid", "fe_failure_edges",
+    "viewer", "held_out", "postures", "off_grid", "fe_failure_edges", "fe_stability_audit",
 )
 
 
@@ -57,6 +58,7 @@ RESULT_TYPES: dict[str, Callable[[Path], Any]] = {
     "fe_speed_accuracy": SpeedAccuracy.read,
     "fe_stability": StabilityMap.read,
     "fe_failure_edges": SweepEdges.read,
+    "fe_stability_audit": StabilityAudit.read,
     "corpus": CorpusTable.read,
     "reference_roundtrip": RoundTripTable.read,
     "reference_record": ReferenceRecord.read,

@@ -228,6 +228,23 @@ class FailureEdgesConfig:
 
 
 @dataclass(frozen=True, slots=True)
+class StabilityAuditConfig:
+    """The sweep's converged cases judged (``fe_study.stability_audit``).
+
+    See :mod:`studies.stability_audit`.
+
+    Attributes:
+        softest: how many of the sweep's C1 values to audit, softest first (0: none).
+    """
+
+    softest: int
+
+    def __post_init__(self) -> None:
+        if self.softest < 0:
+            raise ValueError(f"softest must be 0 or more, got {self.softest}")
+
+
+@dataclass(frozen=True, slots=True)
 class FEStudyConfig:
     """The FE study (``fe_study``): what is compared with what.
 
@@ -238,6 +255,7 @@ class FEStudyConfig:
         max_dofs: variants with more unknowns are skipped, not solved.
         stability_mesh: the mesh sizes of the stability maps.
         failure_edges: how the sweep's failed cases are traced.
+        stability_audit: which of the sweep's converged cases are judged for stability.
         default_variant: the variant the workflow's own mesh and ``fe`` settings amount to.
         base_config: the ``fe``, ``material`` and ``mesh`` sections that the reference and the
             variants depend on, without the default's discretisation and solver preset, which
@@ -250,6 +268,7 @@ class FEStudyConfig:
     max_dofs: int
     stability_mesh: MeshSpec
     failure_edges: FailureEdgesConfig
+    stability_audit: StabilityAuditConfig
     default_variant: Variant
     base_config: dict[str, Any]
 
@@ -269,11 +288,13 @@ class FEStudyConfig:
             edges = study["failure_edges"]
             failure_edges = FailureEdgesConfig(edges["n"], edges["step_deg"],
                                                edges["resolution_deg"])
+        with _section("fe_study.stability_audit"):
+            audit = StabilityAuditConfig(study["stability_audit"]["softest"])
         with _section("mesh.size"):
             default = default_variant(sections["mesh"], sections["fe"])
         speed_accuracy = study["speed_accuracy"]
         return cls(reference, variants, speed_accuracy["target"], speed_accuracy["max_dofs"],
-                   stability_mesh, failure_edges, default, Variant.base_config(sections))
+                   stability_mesh, failure_edges, audit, default, Variant.base_config(sections))
 
 
 @dataclass(frozen=True, slots=True)

@@ -117,6 +117,16 @@ def test_the_failure_edges_are_typed_and_their_resolution_checked() -> None:
         WorkflowConfig.from_mapping(raw)
 
 
+def test_the_stability_audit_names_how_many_c1_values() -> None:
+    raw = read("config.yaml")
+    assert WorkflowConfig.from_mapping(raw).fe_study.stability_audit.softest == 2
+    del raw["fe_study"]["stability_audit"]
+    assert WorkflowConfig.from_mapping(raw).fe_study.stability_audit.softest == 2
+    raw["fe_study"]["stability_audit"] = {"softest": -1}
+    with pytest.raises(ConfigError, match="softest"):
+        WorkflowConfig.from_mapping(raw)
+
+
 def test_variants_override_the_surrogate_settings() -> None:
     raw = read("config.yaml")
     config = WorkflowConfig.from_mapping(raw)

@@ -249,3 +249,101 @@ def test_held_out_cases_are_banded_by_their_angle_to_the_nearest_failure() -> No
     assert "near-failures" not in held_out_part(Context(
         out_dir=Path("."), clinical=[], paths={}, clinical_fields=[],
         results={"held_out": HeldOutEvaluation(blocks=[old], inside_all=result.inside_all)}))
+    assert "unstable equilibrium" not in page  # no audit: nothing said
+    from studies.stability_audit import AuditedCase, StabilityAudit
+
+    audit = StabilityAudit(C1=[0.8], cases=[AuditedCase("case0", 0.8, 0.0, 0.0, False),
+                                             AuditedCase("case1", 0.8, 0.0, 0.0, True)])
+    page = held_out_part(Context(out_dir=Path("."), clinical=[], paths={}, clinical_fields=[],
+                                 results={"held_out": result, "fe_stability_audit": audit}))
+    assert "unstable equilibrium" in page
+    assert "case0 (by-direction): largest point error 5.2" in page
+    assert "case1 (" not in page
+
+
+def _vertex_field(runner) -> tuple[np.ndarray, np.ndarray]:
+    """A solved case's displacement at the mesh's vertices (mm), as a dataset holds it."""
+    from scipy.spatial import cKDTree
+
+    from studies.stability_audit import displacement_rows
+
+    V, rows = displacement_rows(runner.problem)
+    x = V.tabulate_dof_coordinates()[: len(rows)]
+    vertices = runner.mesh.geometry.x
+    distance, dof = cKDTree(x).query(vertices)
+    assert distance.max() < 1e-12
+    return vertices.copy(), 1e3 * runner.problem.w.x.array[rows[dof]]
+
+
+@pytest.mark.solve
+def test_a_sweeps_own_state_is_polished_and_judged(tiny_mesh: Path) -> None:
+    """The audit judges the dataset's state itself: Newton from it stays put.
+
+    A state Newton would leave, or points of another mesh, are not judged.
+    """
+    from fem.case import CaseRunner
+    from studies.stability_audit import audit_case, state_from_points
+
+    case = Case(1.0, 160.0, 0.0)
+    with CaseRunner(tiny_mesh) as runner:
+        assert runner.solve(case)[0].converged
+        points, u_mm = _vertex_field(runner)
+        order = np.random.default_rng(0).permutation(len(points))  # any order of the points
+        state, at, where = state_from_points(runner.problem, points[order], u_mm[order])
+        assert len(at) == len(points) and not np.any(state[runner.problem.pressure_dofs])
+        judged = audit_case(runner, case, points[order], u_mm[order])
+        assert judged.stable is True and judged.unstable_modes == 0 and judged.error == ""
+        assert judged.moved_mm < 1e-4 and judged.newton_iterations <= 4
+        assert judged.max_mm == pytest.approx(1e3 * np.linalg.norm(
+            runner.problem.displacement().x.array.reshape(-1, 3), axis=1).max())
+        other = audit_case(runner, case, points, 1.5 * u_mm)  # Newton returns to the answer
+        assert other.stable is None and "left the dataset's state" in other.error
+        assert other.moved_mm > 1.0
+        with pytest.raises(InvalidParameterError, match="not this mesh's"):
+            state_from_points(runner.problem, points + 0.01, u_mm)
+
+
+@pytest.mark.workflow
+def test_the_audit_of_a_sweep_reads_its_dataset(
+    small_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Every converged case of the asked C1 judged from the workflow's dataset; errors named."""
+    from studies.stability_audit import StabilityAudit, main
+
+    results = small_run / "results"
+    args = [str(results / "mesh/mesh.xdmf"), str(results / "dataset/dataset.h5"),
+            "--config", "tests/config.yaml"]
+    assert main([*args, "--c1", "1.0", "--json", str(tmp_path / "audit.json")]) == 0
+    audit = StabilityAudit.read(tmp_path / "audit.json")
+    assert [c.phi for c in audit.cases] == [0.0, 90.0, 180.0] and audit.C1 == [1.0]
+    assert all(c.stable and c.moved_mm < 1e-3 for c in audit.cases), audit.cases
+    assert "C1 = 1 kPa: 3 converged cases, 3 judged, 0 unstable" in capsys.readouterr().out
+    assert main([*args, "--c1", "2.0"]) == 2
+    assert "no case at C1 = 2 kPa (it has 1, 5)" in capsys.readouterr().err
+
+
+@pytest.mark.unit
+def test_the_audit_is_written_read_and_shown(tmp_path: Path) -> None:
+    """The record round-trips; the report counts each C1's verdicts and lists the flagged."""
+    from report.sections.stability import stability_audit_section
+    from studies.stability_audit import AuditedCase, StabilityAudit, softest_c1
+
+    assert softest_c1(np.array([1.2, 0.8, 1.0, 0.8]), 2) == [0.8, 1.0]
+    assert softest_c1(np.array([1.2]), 3) == [1.2] and softest_c1(np.array([1.2]), 0) == []
+    cases = [AuditedCase("c1=0.80_phi=-60.0_theta=0.0", 0.8, -60.0, 0.0, True, moved_mm=2e-6),
+             AuditedCase("c1=0.80_phi=67.7_theta=-49.8", 0.8, 67.7, -49.8, False,
+                         unstable_modes=1, moved_mm=3e-6, min_detF=0.05, max_mm=60.0),
+             AuditedCase("c1=1.00_phi=90.0_theta=0.0", 1.0, 90.0, 0.0, None,
+                         error="Newton from the dataset's state: diverged_max_it")]
+    audit = StabilityAudit(C1=[0.8, 1.0], cases=cases, seconds=12.0)
+    assert [c.case for c in audit.unstable] == [cases[1].case]
+    assert [c.case for c in audit.not_judged] == [cases[2].case]
+    audit.write(tmp_path / "audit.json")
+    assert repr(StabilityAudit.read(tmp_path / "audit.json")) == repr(audit)  # NaN ≠ NaN
+    page = stability_audit_section(audit)
+    assert 'id="stability-audit"' in page and 'id="unstable-cases"' in page
+    assert "<td>0.8</td><td>2</td><td>2</td><td>1</td>" in page
+    assert "<td>1</td><td>1</td><td>0</td><td>0</td>" in page
+    assert "not judged: Newton from the dataset&#x27;s state" in page
+    assert "softest is 0" in stability_audit_section(StabilityAudit(C1=[], cases=[]))
+    assert "was not found" in stability_audit_section(None)

@@ -430,6 +430,15 @@ def test_fe_study_rules_run_end_to_end(small_run: Path) -> None:
     edges = json.loads((study / "failure_edges.json").read_text())
     assert edges["failed"] == failed and len(edges["traced"]) <= min(failed, 2)
     assert "Where the sweep&#x27;s failures begin" in page
+    # the softest C1 values' converged cases judged for stability (both of the small sweep's)
+    from studies.stability_audit import StabilityAudit
+
+    audit = StabilityAudit.read(study / "stability_audit.json")
+    columns = read_case_columns(small_run / "results/dataset/dataset.h5")
+    assert audit.C1 == [1.0, 5.0] and len(audit.cases) == int(columns["converged"].sum())
+    assert all(c.stable is not None and c.moved_mm < 1e-3 for c in audit.cases), audit.cases
+    assert "Are the sweep&#x27;s converged states stable?" in page
+    assert 'id="stability-audit"' in page
 
 
 @pytest.mark.parametrize(

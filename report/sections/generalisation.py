@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Any
 
 from report.context import Context
 from report.html import fmt, h3, missing, para, pct, table
@@ -59,7 +60,24 @@ def held_out_part(ctx: Context) -> str:
          "between the points: mean / p95 / max (mm)", "worst case"],
         rows, table_id="held-out"))
     out.append(_near_failures(result.blocks))
+    out.append(_unstable_held_out(result.blocks, ctx.results.get("fe_stability_audit")))
     return "".join(out)
+
+
+def _unstable_held_out(blocks: Sequence[HeldOutBlock], audit: Any) -> str:
+    """The held-out cases whose FE state the stability audit found unstable, with their errors."""
+    if audit is None:
+        return ""
+    unstable = {c.case for c in audit.unstable}
+    hits = [(block.split.replace("_", "-"), row) for block in blocks for row in block.rows
+            if row.case in unstable]
+    if not hits:
+        return ""
+    return para(
+        "Held out at a case whose FE state is an unstable equilibrium (the stability section's "
+        "audit: no state a body rests in, so no answer to compare with): "
+        + "; ".join(f"{row.case} ({split}): largest point error {fmt(row.max_mm, '.3g')} mm"
+                    for split, row in hits) + ".", "caption")
 
 
 def _near_failures(blocks: Sequence[HeldOutBlock]) -> str:

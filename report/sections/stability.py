@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -73,6 +74,8 @@ def stability_section(ctx: Context) -> str:
     out.append(_sweep_stability(ctx))
     out.append(h3("Where the sweep's failures begin"))
     out.append(failure_edges_section(ctx.results.get("fe_failure_edges")))
+    out.append(h3("Are the sweep's converged states stable?"))
+    out.append(stability_audit_section(ctx.results.get("fe_stability_audit")))
     out.append(h3("Surrogate outside its training data"))
     out.append(extrapolation_section(ctx))
     return "".join(out)
@@ -219,4 +222,38 @@ def failure_edges_section(edges: Any) -> str:
          "edge (deg from the start)", "first step that failed (deg)",
          "last solution Φ / θ (deg)", "its max |u| (mm)", "smallest det F on the way",
          "every state stable"], rows, table_id="failure-edges"))
+    return "".join(out)
+
+
+def stability_audit_section(audit: Any) -> str:
+    """The sweep's converged cases at its softest C1 values judged for stability (tables)."""
+    if audit is None:
+        return missing("results/fe_study/stability_audit.json")
+    if not audit.C1:
+        return para("No case of the sweep was audited (fe_study.stability_audit.softest is 0).",
+                    "note")
+    out = [para(
+        "Every converged case of the sweep's softest C1 values: its state read from the dataset "
+        "and polished by Newton at the full load (moved: the largest change at a point), then "
+        "judged by its tangent's inertia (stable: one negative eigenvalue per pressure unknown "
+        "and no null pivot, fem.stability). An unstable equilibrium solves the equations but "
+        "is no state a body rests in: the slightest disturbance carries it elsewhere. "
+        f"{audit.seconds:.0f} s in all.", "caption")]
+    rows = []
+    for value in audit.C1:
+        cases = [c for c in audit.cases if abs(c.C1 - value) < 1e-9]
+        unstable = [c for c in cases if c.stable is False]
+        rows.append([f"{value:g}", str(len(cases)), str(sum(c.stable is not None for c in cases)),
+                     str(len(unstable)), fmt(max((c.moved_mm for c in cases), default=math.nan),
+                                             ".1e")])
+    out.append(table(["C1 (kPa)", "converged cases", "judged", "unstable",
+                      "largest move by the polish (mm)"], rows, table_id="stability-audit"))
+    flagged = [c for c in audit.cases if not c.stable]
+    if flagged:
+        out.append(table(
+            ["case", "verdict", "unstable modes", "null pivots", "max |u| (mm)",
+             "smallest det F"],
+            [[c.case, "unstable" if c.stable is False else f"not judged: {c.error}",
+              str(c.unstable_modes), str(c.zero), fmt(c.max_mm, ".1f"), fmt(c.min_detF, ".3f")]
+             for c in flagged], table_id="unstable-cases"))
     return "".join(out)

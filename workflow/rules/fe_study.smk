@@ -162,3 +162,23 @@ rule fe_failure_edges:
         ENV
     script:
         "../scripts/fe_failure_edges.py"
+
+
+rule fe_stability_audit:
+    input:
+        mesh=MESH,
+        dataset=DATASET,
+    output:
+        FE_STABILITY_AUDIT_JSON,
+    params:
+        config=CONFIG.sections_of("fe", "material", "mesh"),
+        softest=CONFIG.fe_study.stability_audit.softest,
+    log:
+        "results/logs/fe_study/stability_audit.log",
+    threads: 1
+    resources:
+        mem_mb=4000,
+    conda:
+        ENV
+    script:
+        "../scripts/fe_stability_audit.py"
