@@ -58,8 +58,8 @@ import logging
 import math
 import os
 import tempfile
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -715,6 +715,42 @@ class Dataset:
         if hit.size == 0:
             raise KeyError(f"no case with C1={C1} kPa, phi={phi} deg, theta={theta} deg")
         return int(hit[0])
+
+    def without(self, ids: Iterable[str]) -> Dataset:
+        """The dataset with the cases ``ids`` set aside as if their solve had failed.
+
+        Their displacement becomes NaN (at the points and the nodes), ``converged`` False, and
+        they leave every split; every other case keeps its place. A case whose FE state is no
+        answer (an unstable equilibrium, :mod:`studies.stability_audit`) is no sample.
+
+        Raises:
+            DatasetError: naming an id the dataset does not have.
+        """
+        ids = list(ids)
+        index = {str(name): i for i, name in enumerate(self.ids)}
+        unknown = [name for name in ids if name not in index]
+        if unknown:
+            raise DatasetError(f"the dataset has no case {', '.join(unknown)}")
+        if not ids:
+            return self
+        drop = np.array(sorted(index[name] for name in ids))
+        displacement = self.displacement.copy()
+        displacement[drop] = np.nan
+        converged = self.converged.copy()
+        converged[drop] = False
+        splits = {}
+        for kind, parts in self.splits.items():
+            splits[kind] = {}
+            for part, indices in parts.items():
+                cases = indices // self.n_points if kind == "by_sample" else indices
+                splits[kind][part] = indices[~np.isin(cases, drop)]
+        nodes = self.nodes
+        if nodes is not None and nodes.displacement is not None:
+            fields = nodes.displacement.copy()
+            fields[drop] = np.nan
+            nodes = replace(nodes, displacement=fields)
+        return replace(self, displacement=displacement, converged=converged, splits=splits,
+                       nodes=nodes)
 
     def sample_indices(self, split: str, part: str) -> np.ndarray:
         """Flat sample indices (case * N + point) of a split part."""

@@ -241,6 +241,18 @@ def audit_sweep(
                           seconds=time.perf_counter() - clock, settings=settings.describe())
 
 
+def without_unstable(dataset: Any, audit: str | Path) -> Any:
+    """``dataset`` with the cases the audit file ``audit`` found unstable set aside as failed.
+
+    See :meth:`fem.dataset.Dataset.without`: no model trains or is tested on them, and a model
+    saved with the dataset warns beside them as beside a failed case.
+    """
+    unstable = [c.case for c in StabilityAudit.read(audit).unstable]
+    if unstable:
+        log.info("set aside as failed (an unstable FE state): %s", ", ".join(unstable))
+    return dataset.without(unstable)
+
+
 def softest_c1(c1: np.ndarray, n: int) -> list[float]:
     """The ``n`` softest distinct C1 values of a sweep's cases (kPa), softest first."""
     return [float(v) for v in np.unique(np.round(np.asarray(c1, dtype=float), 9))[:n]]
@@ -285,4 +297,4 @@ if __name__ == "__main__":
 
 
 __all__ = ["AuditedCase", "SAME_STATE_MM", "StabilityAudit", "audit_case", "audit_sweep",
-           "displacement_rows", "softest_c1", "state_from_points"]
+           "displacement_rows", "softest_c1", "state_from_points", "without_unstable"]

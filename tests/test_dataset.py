@@ -353,3 +353,31 @@ def test_the_clock_is_the_processes_start_not_the_imports() -> None:
     # the kernel's start time has clock-tick resolution (10 ms); the import came a second later
     assert before - 0.05 <= record["process_start"] < before + 0.5
     assert record["process_start"] + 1.0 <= record["finished"] <= after
+
+
+def test_cases_set_aside_leave_every_split_and_keep_the_others(tmp_path: Path) -> None:
+    """A case whose FE state is no answer is set aside as a failed one; nothing else moves."""
+    from fem.dataset import read_dataset
+    from studies.stability_audit import AuditedCase, StabilityAudit, without_unstable
+
+    c1s, phis = (1.0, 1.5, 2.0, 2.5, 3.0), (0.0, 45.0, 90.0, 135.0, 180.0)
+    paths = [_write_case(tmp_path, c1, phi) for c1 in c1s for phi in phis]
+    build_dataset([p[0] for p in paths], [p[1] for p in paths], tmp_path / "ds.h5", seed=3)
+    ds = read_dataset(tmp_path / "ds.h5")
+    gone = ds.case_index(1.5, 45.0)
+    aside = ds.without([str(ds.ids[gone])])
+    assert not aside.converged[gone] and aside.converged.sum() == ds.converged.sum() - 1
+    assert np.isnan(aside.displacement[gone]).all() and not np.isnan(ds.displacement[gone]).any()
+    for kind, parts in ds.splits.items():
+        for part, indices in parts.items():
+            cases = indices // ds.n_points if kind == "by_sample" else indices
+            assert np.array_equal(aside.splits[kind][part], indices[cases != gone]), (kind, part)
+    assert ds.without([]) is ds
+    with pytest.raises(DatasetError, match="no case c1=9"):
+        ds.without(["c1=9.00_phi=0.0_theta=0.0"])
+    audit = StabilityAudit(C1=[1.5], cases=[
+        AuditedCase(str(ds.ids[gone]), 1.5, 45.0, 0.0, False),
+        AuditedCase(str(ds.ids[ds.case_index(1.5, 90.0)]), 1.5, 90.0, 0.0, True)])
+    audit.write(tmp_path / "audit.json")
+    kept = without_unstable(ds, tmp_path / "audit.json")
+    assert np.flatnonzero(~kept.converged).tolist() == [gone]

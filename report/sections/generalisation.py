@@ -60,24 +60,21 @@ def held_out_part(ctx: Context) -> str:
          "between the points: mean / p95 / max (mm)", "worst case"],
         rows, table_id="held-out"))
     out.append(_near_failures(result.blocks))
-    out.append(_unstable_held_out(result.blocks, ctx.results.get("fe_stability_audit")))
+    out.append(_unstable_set_aside(ctx.results.get("fe_stability_audit")))
     return "".join(out)
 
 
-def _unstable_held_out(blocks: Sequence[HeldOutBlock], audit: Any) -> str:
-    """The held-out cases whose FE state the stability audit found unstable, with their errors."""
-    if audit is None:
+def _unstable_set_aside(audit: Any) -> str:
+    """The cases whose FE state the stability audit found unstable: set aside as failed."""
+    if audit is None or not audit.unstable:
         return ""
-    unstable = {c.case for c in audit.unstable}
-    hits = [(block.split.replace("_", "-"), row) for block in blocks for row in block.rows
-            if row.case in unstable]
-    if not hits:
-        return ""
+    cases = [c.case for c in audit.unstable]
     return para(
-        "Held out at a case whose FE state is an unstable equilibrium (the stability section's "
-        "audit: no state a body rests in, so no answer to compare with): "
-        + "; ".join(f"{row.case} ({split}): largest point error {fmt(row.max_mm, '.3g')} mm"
-                    for split, row in hits) + ".", "caption")
+        f"{len(cases)} converged case{'s' if len(cases) > 1 else ''} of the sweep "
+        f"({', '.join(cases)}) end{'' if len(cases) > 1 else 's'} on an unstable equilibrium "
+        "(the stability section's audit): no state a body rests in, so no answer. They are "
+        "set aside as the failed cases are: no model trains or is tested on them, and the "
+        "models warn beside them.", "caption")
 
 
 def _near_failures(blocks: Sequence[HeldOutBlock]) -> str:

@@ -12,6 +12,7 @@ wildcard_constraints:
 rule train_study_run:
     input:
         dataset=DATASET,
+        audit=FE_STABILITY_AUDIT_JSON,
     output:
         model=f"{STUDY_DIR}/{{arch}}/r{{repeat}}/model.json",
         params=f"{STUDY_DIR}/{{arch}}/r{{repeat}}/params.npz",
@@ -60,6 +61,7 @@ rule select_model:
     input:
         table=STUDY_TABLE,
         dataset=DATASET,
+        audit=FE_STABILITY_AUDIT_JSON,
     output:
         model=MODEL,
         params=f"{SURROGATE_DIR}/model/params.npz",
@@ -79,6 +81,7 @@ rule select_model:
 rule train_variant_run:
     input:
         dataset=DATASET,
+        audit=FE_STABILITY_AUDIT_JSON,
         table=STUDY_TABLE,
     output:
         model=f"{VARIANT_DIR}/{{variant}}/r{{repeat}}/model.json",
@@ -125,6 +128,7 @@ rule variants:
 rule train_held_out:
     input:
         dataset=DATASET,
+        audit=FE_STABILITY_AUDIT_JSON,
         table=STUDY_TABLE,
     output:
         model=f"{SURROGATE_DIR}/model_{{held_out}}/model.json",
@@ -152,6 +156,7 @@ rule train_held_out:
 rule held_out:
     input:
         dataset=DATASET,
+        audit=FE_STABILITY_AUDIT_JSON,
         model=MODEL,
         held_out=held_out_models(),
     output:

@@ -9,6 +9,7 @@ configure_cpu(single_thread=snakemake.threads == 1)  # before JAX starts: one co
 
 from fem.dataset import read_dataset  # noqa: E402
 from studies.joblog import job_log  # noqa: E402
+from studies.stability_audit import without_unstable  # noqa: E402
 from surrogate.checkpoint import save_model  # noqa: E402
 from surrogate.config import SurrogateConfig  # noqa: E402
 from surrogate.train import train_and_evaluate  # noqa: E402
@@ -28,6 +29,7 @@ config = config.replace(seed=config.seed + int(getattr(wildcards, "repeat", 0)))
 
 # a pod model takes its modes at every node of a quadratic mesh, where the dataset has them
 dataset = read_dataset(snakemake.input.dataset, nodes=config.structure == "pod")
+dataset = without_unstable(dataset, snakemake.input.audit)  # no sample of an unstable state
 holdout = [
     dataset.case_index(c["C1"], c["phi"], c.get("theta", 0.0)) for c in snakemake.params.holdout
 ]
