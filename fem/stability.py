@@ -89,7 +89,9 @@ class InertiaCounter:
 
         if not problem.symmetric:
             raise InvalidParameterError("the inertia needs a symmetric tangent (LDLᵀ)")
-        self.problem = problem
+        # the form and the conditions, not the problem: the counters of tangent_inertia are
+        # dropped with their problems
+        self.tangent, self.bcs = problem.tangent, problem.bcs
         self.A = fem_petsc.create_matrix(problem.tangent)
         self.A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
         self.ksp = PETSc.KSP().create(problem.mesh.comm)
@@ -112,7 +114,7 @@ class InertiaCounter:
         import dolfinx.fem.petsc as fem_petsc
 
         self.A.zeroEntries()
-        fem_petsc.assemble_matrix(self.A, self.problem.tangent, bcs=self.problem.bcs)
+        fem_petsc.assemble_matrix(self.A, self.tangent, bcs=self.bcs)
         self.A.assemble()
         pc = self.ksp.getPC()
         pc.setUp()  # the matrix changed: a numeric factorisation (KSPSetUp runs it only once)

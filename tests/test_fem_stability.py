@@ -60,6 +60,14 @@ def test_the_inertia_counts_the_dense_tangents_eigenvalues(tiny_mesh: Path) -> N
         assert (loaded.negative, loaded.positive) == _dense_signs(problem)
         assert loaded.unstable_modes > 0 and not loaded.stable
         assert loaded.as_dict()["unstable_modes"] == loaded.unstable_modes
+    # the kept factorisation goes with its problem
+    import gc
+    import weakref
+
+    alive = weakref.ref(problem)
+    del runner, problem
+    gc.collect()
+    assert alive() is None
 
 
 @pytest.mark.unit
