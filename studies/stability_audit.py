@@ -110,6 +110,10 @@ class StabilityAudit(Result):
         """The cases whose state could not be polished."""
         return [c for c in self.cases if c.stable is None]
 
+    def at(self, c1: float) -> list[AuditedCase]:
+        """The cases audited at C1 = ``c1`` (kPa)."""
+        return [c for c in self.cases if abs(c.C1 - c1) < 1e-9]
+
 
 def state_from_points(
     problem: Any, points_x: np.ndarray, u_mm: np.ndarray
@@ -134,10 +138,16 @@ def state_from_points(
         InvalidParameterError: if the points are neither the displacement's nodes nor the
             mesh's vertices (a dataset of another mesh).
     """
+    return _state_at(problem, *displacement_rows(problem), points_x, u_mm)
+
+
+def _state_at(
+    problem: Any, V: Any, rows: np.ndarray, points_x: np.ndarray, u_mm: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`state_from_points` given the displacement's space and rows."""
     from dolfinx import fem
     from scipy.spatial import cKDTree
 
-    V, rows = displacement_rows(problem)
     tree = cKDTree(np.asarray(points_x, dtype=float))
     u = 1e-3 * np.asarray(u_mm, dtype=float)
     distance, point = tree.query(V.tabulate_dof_coordinates()[: len(rows)])
@@ -180,7 +190,8 @@ def audit_case(runner: Any, case: Case, points_x: np.ndarray, u_mm: np.ndarray) 
     problem, solver, settings = runner.problem, runner.solver, runner.settings
     problem.set_case(case.material(settings.density), case.gravity(settings.gravity))
     problem.set_load_fraction(1.0)
-    state, at, points = state_from_points(problem, points_x, u_mm)
+    V, rows = displacement_rows(problem)
+    state, at, points = _state_at(problem, V, rows, points_x, u_mm)
     problem.w.x.array[:] = state
     solver.scale_to_load()
     outcome = solver.solve()
@@ -189,7 +200,6 @@ def audit_case(runner: Any, case: Case, points_x: np.ndarray, u_mm: np.ndarray) 
     if not outcome.converged:
         return AuditedCase(**base, stable=None,
                            error=f"Newton from the dataset's state: {outcome.reason}")
-    _, rows = displacement_rows(problem)
     polished = problem.w.x.array[rows[at]]
     moved_mm = float(np.linalg.norm(1e3 * polished - np.asarray(u_mm)[points], axis=1).max())
     u = problem.w.x.array[rows]
@@ -279,7 +289,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     record = replace(audit, machine=machine)
     for value in record.C1:
-        rows = [c for c in record.cases if abs(c.C1 - value) < 1e-9]
+        rows = record.at(value)
         unstable = [c.case for c in rows if c.stable is False]
         judged = sum(c.stable is not None for c in rows)
         print(f"C1 = {value:g} kPa: {len(rows)} converged cases, {judged} judged, "

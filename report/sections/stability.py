@@ -241,7 +241,7 @@ def stability_audit_section(audit: Any) -> str:
         f"{audit.seconds:.0f} s in all.", "caption")]
     rows = []
     for value in audit.C1:
-        cases = [c for c in audit.cases if abs(c.C1 - value) < 1e-9]
+        cases = audit.at(value)
         unstable = [c for c in cases if c.stable is False]
         rows.append([f"{value:g}", str(len(cases)), str(sum(c.stable is not None for c in cases)),
                      str(len(unstable)), fmt(max((c.moved_mm for c in cases), default=math.nan),
