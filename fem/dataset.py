@@ -742,8 +742,7 @@ class Dataset:
         for kind, parts in self.splits.items():
             splits[kind] = {}
             for part, indices in parts.items():
-                cases = indices // self.n_points if kind == "by_sample" else indices
-                splits[kind][part] = indices[~np.isin(cases, drop)]
+                splits[kind][part] = indices[~np.isin(self.split_cases(kind, indices), drop)]
         nodes = self.nodes
         if nodes is not None and nodes.displacement is not None:
             fields = nodes.displacement.copy()
@@ -751,6 +750,10 @@ class Dataset:
             nodes = replace(nodes, displacement=fields)
         return replace(self, displacement=displacement, converged=converged, splits=splits,
                        nodes=nodes)
+
+    def split_cases(self, kind: str, indices: np.ndarray) -> np.ndarray:
+        """The case of each index of a split of ``kind`` (a sample's case in ``by_sample``)."""
+        return indices // self.n_points if kind == "by_sample" else indices
 
     def sample_indices(self, split: str, part: str) -> np.ndarray:
         """Flat sample indices (case * N + point) of a split part."""
@@ -857,8 +860,7 @@ def read_dataset(path: str | Path, nodes: bool = False) -> Dataset:
         for part, idx in parts.items():
             if idx.size and (idx.min() < 0 or idx.max() >= n_samples[kind]):
                 raise DatasetError(f"dataset {path}: split {kind}/{part} has out-of-range indices")
-            cases = idx // ds.X.shape[0] if kind == "by_sample" else idx
-            if idx.size and not ds.converged[cases].all():
+            if idx.size and not ds.converged[ds.split_cases(kind, idx)].all():
                 raise DatasetError(f"dataset {path}: split {kind}/{part} includes failed cases")
     return ds
 
