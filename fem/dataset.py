@@ -349,25 +349,47 @@ def group_partition(
     keep_in_training: Sequence[Any],
     split: SplitFractions,
     rng: np.random.Generator,
+    always_test: Sequence[Any] = (),
 ) -> dict[str, np.ndarray]:
     """Partition ``cases`` by whole groups (cases with equal ``key``) into sorted index arrays.
 
     Groups whose key is in ``keep_in_training`` always train (the ends of a range, so that
-    held-out groups are interpolated, not extrapolated); the others are partitioned by
-    ``split``'s fractions of the number of groups. With fewer than three free groups there is
-    nothing to hold out: every case trains and the other parts are empty.
+    held-out groups are interpolated, not extrapolated); those in ``always_test`` are always
+    tested; the others are partitioned by ``split``'s fractions of their number. With fewer
+    than three groups free of both there is nothing to hold out: every case trains and the
+    other parts are empty.
+
+    Raises:
+        ValueError: if a group of ``always_test`` is not among the keys, or must also train.
     """
     unique = np.unique(key)
     kept = np.isin(unique, np.asarray(keep_in_training, dtype=unique.dtype))
-    free = unique[~kept]
+    tested = np.isin(unique, np.asarray(always_test, dtype=unique.dtype))
+    wanted = np.asarray(always_test, dtype=unique.dtype)
+    if not np.all(np.isin(wanted, unique[~kept])):
+        raise ValueError(f"groups {wanted.tolist()} cannot all be tested: the free groups are "
+                         f"{unique[~kept].tolist()}")
+    free = unique[~kept & ~tested]
     if free.size < 3:
         parts = {"train": unique, "validation": unique[:0], "test": unique[:0]}
     else:
         drawn = split.partition(free.size, rng)
         parts = {name: free[idx] for name, idx in drawn.items()}
         parts["train"] = np.concatenate([parts["train"], unique[kept]])
+        parts["test"] = np.concatenate([parts["test"], unique[tested]])
     return {name: np.sort(cases[np.isin(key, groups)]).astype(np.int64)
             for name, groups in parts.items()}
+
+
+def softest_held_out_c1(c1_values: np.ndarray) -> tuple[float, ...]:
+    """The C1 value that the by-C1 split always tests: the softest one it may hold out.
+
+    The softest and the stiffest train (held-out values are interpolated), so it is the second
+    softest, where the field changes fastest with C1; none where the split holds nothing out
+    (fewer than three values between the ends, :func:`group_partition`).
+    """
+    values = np.unique(np.asarray(c1_values, dtype=float))
+    return (float(values[1]),) if values.size >= 6 else ()
 
 
 def build_dataset(
@@ -443,16 +465,18 @@ def build_dataset(
     c1_all = np.array([k[0] for k in keys])
     phi_all, theta_all = np.array([k[1] for k in keys]), np.array([k[2] for k in keys])
     c1_good = np.round(c1_all[good_cases], 9)
-    c1_ends = (c1_good.min(), c1_good.max()) if c1_good.size else ()
+    c1_values = np.unique(c1_good)
+    c1_ends = (c1_values[0], c1_values[-1]) if c1_values.size else ()
     groups = {
-        "by_direction": (direction_keys(phi_all, theta_all)[good_cases], ()),
-        "by_c1": (c1_good, c1_ends),
+        "by_direction": (direction_keys(phi_all, theta_all)[good_cases], (), ()),
+        "by_c1": (c1_good, c1_ends, softest_held_out_c1(c1_values)),
     }
     held_out = {
         name: group_partition(
-            good_cases, key, keep, split, np.random.default_rng([seed, GROUP_SPLITS[name]])
+            good_cases, key, keep, split, np.random.default_rng([seed, GROUP_SPLITS[name]]),
+            always_test=tested,
         )
-        for name, (key, keep) in groups.items()
+        for name, (key, keep, tested) in groups.items()
     }
 
     def column(key: str, default: Any = np.nan) -> np.ndarray:
@@ -621,7 +645,8 @@ def _write_atomically(
             sp["by_case"].attrs["description"] = "case indices (whole setups held out)"
             sp["by_direction"].attrs["description"] = "case indices (whole directions held out)"
             sp["by_c1"].attrs["description"] = (
-                "case indices (whole C1 values held out; the softest and stiffest train)"
+                "case indices (whole C1 values held out; the softest and stiffest train, the "
+                "second softest is always tested)"
             )
         os.replace(tmp, output)
     except BaseException:

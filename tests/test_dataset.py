@@ -310,12 +310,34 @@ def test_group_splits_hold_out_whole_directions_and_whole_c1_values(tmp_path: Pa
         held = np.concatenate([parts["validation"], parts["test"]])
         assert len(ds.sample_indices(split, "test")) == len(parts["test"]) * N
     assert {1.0, 3.5} <= set(ds.C1[ds.splits["by_c1"]["train"]])
+    # the softest value that may be held out is held out, whatever the draw
+    assert set(ds.C1[ds.splits["by_c1"]["test"]]) >= {1.5}
     # the older splits draw from the seed's first stream, as before the group splits existed
     rng = np.random.default_rng(3)
     samples = (converged[:, None] * N + np.arange(N)[None, :]).ravel()
     expected = SplitFractions().partition(len(samples), rng)
     assert np.array_equal(ds.splits["by_sample"]["train"], samples[expected["train"]])
     assert len(held) > 0
+
+
+def test_the_by_c1_split_always_tests_its_softest_free_value() -> None:
+    """Whatever the seed, the second softest C1 is tested, and the draw still holds out others."""
+    from fem.dataset import group_partition, softest_held_out_c1
+
+    c1 = np.repeat([0.8, 1.0, 1.2, 1.4, 1.6, 1.8, 2.0], 3)
+    cases = np.arange(c1.size)
+    assert softest_held_out_c1(c1) == (1.0,)
+    assert softest_held_out_c1(c1[c1 < 1.5]) == ()  # 0.8-1.4: only two between the ends
+    for seed in range(6):
+        parts = group_partition(cases, c1, (0.8, 2.0), SplitFractions(0.6, 0.2, 0.2),
+                                np.random.default_rng(seed), always_test=(1.0,))
+        tested = set(c1[parts["test"]])
+        assert 1.0 in tested and len(tested) >= 2
+        assert {0.8, 2.0} <= set(c1[parts["train"]]) and 1.0 not in set(c1[parts["train"]])
+        assert sorted(np.concatenate(list(parts.values()))) == list(cases)
+    with pytest.raises(ValueError, match="cannot all be tested"):
+        group_partition(cases, c1, (0.8, 2.0), SplitFractions(), np.random.default_rng(0),
+                        always_test=(0.8,))
 
 
 def test_a_sweep_with_too_few_groups_holds_none_out(tmp_path: Path) -> None:
