@@ -40,7 +40,8 @@ if TYPE_CHECKING:  # JAX is imported by whoever has a model, not by this module'
 HELD_OUT = {
     "by_case": "whole setups (C1, direction); the clinical cases among them",
     "by_direction": "whole gravity directions, every C1 at each",
-    "by_c1": "whole C1 values, every direction at each (the softest and stiffest train)",
+    "by_c1": "whole C1 values, every direction at each (the softest and stiffest train; the "
+             "second softest is always among those held out)",
 }
 
 
@@ -208,6 +209,9 @@ class HeldOutBlock(Record):
         failure_distance_deg: for each of ``rows``, the angle (degrees) from its gravity to the
             nearest direction where the sweep failed at the same C1 (:func:`failure_distances`;
             NaN where nothing failed at that C1); empty in records written before it was kept.
+        bracketed: for each of ``rows`` of a ``by_c1`` block, whether the model trained on a
+            softer and a stiffer C1 at the case's direction (:func:`c1_bracketed`): a held-out
+            C1 interpolated there, not extrapolated; empty for the other splits.
     """
 
     split: str
@@ -220,6 +224,7 @@ class HeldOutBlock(Record):
     held_out_between: ErrorSpread | None = None
     inside_between: ErrorSpread | None = None
     failure_distance_deg: list[float] = field(default_factory=list)
+    bracketed: list[bool] = field(default_factory=list)
 
 
 @dataclass(frozen=True, slots=True)
@@ -266,6 +271,38 @@ def failure_distances(ds: Dataset, cases: Sequence[int]) -> list[float]:
         nearest = float(np.clip(g[same] @ g[i], -1.0, 1.0).max())
         out.append(float(np.degrees(np.arccos(nearest))))
     return out
+
+
+def c1_bracketed(ds: Dataset, trained: Sequence[int], cases: Sequence[int]) -> list[bool]:
+    """For each of ``cases``, whether ``trained`` holds a softer and a stiffer C1 at its direction.
+
+    Where it does, a model that trained on ``trained`` interpolates the case's C1; where not (a
+    direction solved at a few C1 values only, or one where the softer cases failed), it
+    extrapolates, whatever the held-out value's place in the sweep's range.
+    """
+    keys = direction_keys(np.asarray(ds.phi, dtype=float), np.asarray(ds.theta, dtype=float))
+    c1 = np.asarray(ds.C1, dtype=float)
+    trained = np.asarray(trained, dtype=np.int64)
+    out = []
+    for i in cases:
+        there = c1[trained[keys[trained] == keys[i]]]
+        out.append(bool(np.any(there < c1[i] - 1e-9) and np.any(there > c1[i] + 1e-9)))
+    return out
+
+
+def by_bracket(rows: Sequence[CaseErrors], bracketed: Sequence[bool]) -> list[
+        tuple[str, ErrorSpread]]:
+    """The spread of a ``by_c1`` block's ``rows``: interpolated in C1 at their direction or not.
+
+    Raises:
+        ValueError: if ``bracketed`` does not pair with ``rows``.
+    """
+    if len(bracketed) != len(rows):
+        raise ValueError(f"{len(bracketed)} flags for {len(rows)} cases")
+    groups = (("between trained C1 values at its direction", True),
+              ("beyond them: softer (or stiffer) than any trained at its direction", False))
+    return [(label, ErrorSpread.over(inside)) for label, flag in groups
+            if (inside := [r for r, b in zip(rows, bracketed, strict=True) if b == flag])]
 
 
 #: The bands of :func:`by_failure_distance`, in degrees.
@@ -375,6 +412,8 @@ def evaluate_held_out(
             held_out_between=held_out_between,
             inside_between=inside_between,
             failure_distance_deg=failure_distances(ds, [int(i) for i in test]),
+            bracketed=(c1_bracketed(ds, trained_cases(model, ds), [int(i) for i in test])
+                       if split == "by_c1" else []),
         ))
     return HeldOutEvaluation(
         blocks=blocks, inside_all=ErrorSpread.over(list(inside_of.values())),
@@ -465,5 +504,6 @@ if __name__ == "__main__":
 
 
 __all__ = ["FAILURE_DISTANCE_BANDS", "HELD_OUT", "CaseErrors", "Centroids", "ErrorSpread",
-           "HeldOutBlock", "HeldOutEvaluation", "by_failure_distance", "by_stiffness",
-           "evaluate_held_out", "failure_distances", "held_out_groups"]
+           "HeldOutBlock", "HeldOutEvaluation", "by_bracket", "by_failure_distance",
+           "by_stiffness", "c1_bracketed", "evaluate_held_out", "failure_distances",
+           "held_out_groups"]

@@ -192,3 +192,54 @@ def test_the_solves_span_from_the_first_process_start_to_the_last_end() -> None:
     assert solve_span(start, end) == 60.0
     assert solve_span(np.array([100.0, np.nan, 130.0]), end) is None  # an older summary
     assert solve_span(None, end) is None and solve_span(start[:0], end[:0]) is None
+
+
+def test_the_by_c1_cases_are_told_apart_by_whether_their_c1_is_interpolated() -> None:
+    """A held-out C1 between trained ones at its direction, or beyond them; the report's table."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from report.context import Context
+    from report.sections.generalisation import held_out_part
+    from studies.held_out import (
+        CaseErrors,
+        ErrorSpread,
+        HeldOutBlock,
+        HeldOutEvaluation,
+        by_bracket,
+        c1_bracketed,
+    )
+
+    # two directions: the plane's -90 at 0.8, 1.0 and 1.2; a band's direction at 1.0 and 1.2
+    ds = SimpleNamespace(C1=np.array([0.8, 1.0, 1.2, 1.0, 1.2, 0.8]),
+                         phi=np.array([-90.0, -90.0, -90.0, 60.0, 60.0, 60.0]),
+                         theta=np.array([0.0, 0.0, 0.0, -120.0, -120.0, -120.0]))
+    assert c1_bracketed(ds, [0, 2, 4], [1, 3]) == [True, False]
+    # the same direction under another name (-90 at theta 0 is 90 at theta 180) counts
+    ds.phi[0], ds.theta[0] = 90.0, 180.0
+    assert c1_bracketed(ds, [0, 2, 4], [1]) == [True]
+    assert c1_bracketed(ds, [2, 4], [1]) == [False]  # the softer case failed: not trained
+    assert c1_bracketed(ds, [0, 2, 4, 5], [3]) == [True]
+    fe = np.ones((4, 3))
+    rows = [CaseErrors.between(fe + e, fe, f"case{k}", 1.0, 0.0, 0.0)
+            for k, e in enumerate((0.01, 2.0, 0.02))]
+    bands = by_bracket(rows, [True, False, True])
+    assert [(label.split(":")[0], s.cases) for label, s in bands] == [
+        ("between trained C1 values at its direction", 2), ("beyond them", 1)]
+    assert bands[1][1].max_mm == pytest.approx(2.0 * np.sqrt(3))
+    with pytest.raises(ValueError, match="2 flags for 3 cases"):
+        by_bracket(rows, [True, False])
+    block = HeldOutBlock(split="by_c1", held_out="whole C1 values", groups=["1"],
+                         held_out_model=ErrorSpread.over(rows), inside_model=None, rows=rows,
+                         inside_rows=[], bracketed=[True, False, True])
+    context = Context(out_dir=Path("."), clinical=[], paths={}, clinical_fields=[],
+                      results={"held_out": HeldOutEvaluation(
+                          blocks=[block], inside_all=ErrorSpread.over(rows))})
+    page = held_out_part(context)
+    assert 'id="held-out-c1-bracketed"' in page and "beyond them" in page
+    older = HeldOutBlock(**{**{f: getattr(block, f) for f in block.__dataclass_fields__},
+                            "bracketed": []})
+    context.results["held_out"] = HeldOutEvaluation(blocks=[older],
+                                                    inside_all=ErrorSpread.over(rows))
+    assert "c1-bracketed" not in held_out_part(context)

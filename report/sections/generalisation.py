@@ -8,7 +8,13 @@ from typing import Any
 
 from report.context import Context
 from report.html import fmt, h3, missing, para, pct, table
-from studies.held_out import CaseErrors, ErrorSpread, HeldOutBlock, by_failure_distance
+from studies.held_out import (
+    CaseErrors,
+    ErrorSpread,
+    HeldOutBlock,
+    by_bracket,
+    by_failure_distance,
+)
 from studies.postures import PostureRow
 
 
@@ -60,6 +66,7 @@ def held_out_part(ctx: Context) -> str:
          "between the points: mean / p95 / max (mm)", "worst case"],
         rows, table_id="held-out"))
     out.append(_near_failures(result.blocks))
+    out.append(_c1_bracketed(result.blocks))
     out.append(_unstable_set_aside(ctx.results.get("fe_stability_audit")))
     return "".join(out)
 
@@ -98,6 +105,29 @@ def _near_failures(blocks: Sequence[HeldOutBlock]) -> str:
              "sweep's failures begin'.", "caption"),
         table(["split", "angle to the nearest failure at its C1", "cases", "mean (mm)",
                "p95 (mm)", "max (mm)", "worst case"], rows, table_id="held-out-near-failures"),
+    ])
+
+
+def _c1_bracketed(blocks: Sequence[HeldOutBlock]) -> str:
+    """The by-C1 model's errors where a held-out C1 lies between trained ones at its direction."""
+    rows = []
+    for block in blocks:
+        if block.split != "by_c1" or len(block.bracketed) != len(block.rows):
+            continue
+        for label, spread in by_bracket(block.rows, block.bracketed):
+            rows.append([label, spread.cases, fmt(spread.mean_mm, ".3g"),
+                         fmt(spread.p95_mm, ".3g"), fmt(spread.max_mm, ".3g"),
+                         spread.worst_case])
+    if not rows:
+        return ""
+    return "".join([
+        para("The by-C1 model's held-out cases by whether the model trained on a softer and a "
+             "stiffer C1 at the same direction. The split always holds out the second softest "
+             "C1, where the field changes fastest with C1; at a direction solved at fewer C1 "
+             "values (a refined band) or where the softer cases failed, that value lies beyond "
+             "the trained ones there, and the model extrapolates.", "caption"),
+        table(["held-out C1", "cases", "mean (mm)", "p95 (mm)", "max (mm)", "worst case"],
+              rows, table_id="held-out-c1-bracketed"),
     ])
 
 
