@@ -364,8 +364,8 @@ def group_partition(
     """
     unique = np.unique(key)
     kept = np.isin(unique, np.asarray(keep_in_training, dtype=unique.dtype))
-    tested = np.isin(unique, np.asarray(always_test, dtype=unique.dtype))
     wanted = np.asarray(always_test, dtype=unique.dtype)
+    tested = np.isin(unique, wanted)
     if not np.all(np.isin(wanted, unique[~kept])):
         raise ValueError(f"groups {wanted.tolist()} cannot all be tested: the free groups are "
                          f"{unique[~kept].tolist()}")
@@ -385,8 +385,9 @@ def softest_held_out_c1(c1_values: np.ndarray) -> tuple[float, ...]:
     """The C1 value that the by-C1 split always tests: the softest one it may hold out.
 
     The softest and the stiffest train (held-out values are interpolated), so it is the second
-    softest, where the field changes fastest with C1; none where the split holds nothing out
-    (fewer than three values between the ends, :func:`group_partition`).
+    softest, where the field changes fastest with C1. None with fewer than six values: the
+    split draws from at least three others (:func:`group_partition`), so that it tests more
+    than the soft end.
     """
     values = np.unique(np.asarray(c1_values, dtype=float))
     return (float(values[1]),) if values.size >= 6 else ()
