@@ -114,6 +114,12 @@ class StabilityAudit(Result):
         """The cases audited at C1 = ``c1`` (kPa)."""
         return [c for c in self.cases if abs(c.C1 - c1) < 1e-9]
 
+    def tally(self, c1: float) -> tuple[list[AuditedCase], int, list[AuditedCase]]:
+        """C1 = ``c1``'s audited cases, how many of them were judged, and the unstable ones."""
+        cases = self.at(c1)
+        return (cases, sum(c.stable is not None for c in cases),
+                [c for c in cases if c.stable is False])
+
 
 def state_from_points(
     problem: Any, points_x: np.ndarray, u_mm: np.ndarray
@@ -289,11 +295,10 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     record = replace(audit, machine=machine)
     for value in record.C1:
-        rows = record.at(value)
-        unstable = [c.case for c in rows if c.stable is False]
-        judged = sum(c.stable is not None for c in rows)
+        rows, judged, unstable = record.tally(value)
+        names = ", ".join(c.case for c in unstable)
         print(f"C1 = {value:g} kPa: {len(rows)} converged cases, {judged} judged, "
-              f"{len(unstable)} unstable{': ' + ', '.join(unstable) if unstable else ''}")
+              f"{len(unstable)} unstable{': ' + names if unstable else ''}")
     for c in record.not_judged:
         print(f"  not judged: {c.case}: {c.error}")
     print(f"{record.seconds:.0f} s")

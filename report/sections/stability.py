@@ -241,11 +241,9 @@ def stability_audit_section(audit: Any) -> str:
         f"{audit.seconds:.0f} s in all.", "caption")]
     rows = []
     for value in audit.C1:
-        cases = audit.at(value)
-        unstable = [c for c in cases if c.stable is False]
-        rows.append([f"{value:g}", str(len(cases)), str(sum(c.stable is not None for c in cases)),
-                     str(len(unstable)), fmt(max((c.moved_mm for c in cases), default=math.nan),
-                                             ".1e")])
+        cases, judged, unstable = audit.tally(value)
+        rows.append([f"{value:g}", str(len(cases)), str(judged), str(len(unstable)),
+                     fmt(max((c.moved_mm for c in cases), default=math.nan), ".1e")])
     out.append(table(["C1 (kPa)", "converged cases", "judged", "unstable",
                       "largest move by the polish (mm)"], rows, table_id="stability-audit"))
     flagged = [c for c in audit.cases if not c.stable]
