@@ -121,13 +121,14 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     compared = [row for row in evaluation.rows if row.errors is not None]
     for row in evaluation.rows:
+        kind = "" if row.kind == "in range" else f" [{row.kind}]"
         if row.errors is None:
-            print(f"{row.case}: FE {row.fe_status} ({row.fe_reason}), not compared")
+            print(f"{row.case}: FE {row.fe_status} ({row.fe_reason}), not compared{kind}")
         else:
             e = row.errors
             between = f", between the points {row.between.max_mm:.3f}" if row.between else ""
             print(f"{row.case}: mean {e.mean_mm:.4f} / p95 {e.p95_mm:.3f} / max {e.max_mm:.3f} "
-                  f"mm of {e.fe_max_mm:.1f}{between}")
+                  f"mm of {e.fe_max_mm:.1f}{between}{kind}")
     def show(label: str, rows: Sequence[PostureRow]) -> None:
         spread = ErrorSpread.over([r.errors for r in rows])
         over = sum(max(r.errors.max_mm, r.between.max_mm if r.between else 0.0)
@@ -140,6 +141,10 @@ def main(argv: list[str] | None = None) -> int:
         show(f"C1 = {c1:g} kPa", [r for r in compared if round(r.C1, 6) == c1])
     if compared:
         show("all", compared)
+        inside = [r for r in compared if r.kind == "in range"]
+        if inside and len(inside) < len(compared):  # the model warns at the others
+            show("in range", inside)
+            show("extrapolated", [r for r in compared if r.kind != "in range"])
     print(f"goals (mean {evaluation.goals_mm['mean']:g} mm, max {evaluation.goals_mm['max']:g} "
           f"mm): {'met' if evaluation.goals_met else 'not met'}")
     if args.json:

@@ -229,8 +229,9 @@ def write_error_fields(
 def extrapolation_kind(model: Surrogate, C1: float, phi: float, theta: float) -> str:
     """Which way a case leaves the model's training set, in words (``in range`` if it does not).
 
-    C1 below or above its range; for a model of the plane, an unseen Φ or θ off the plane; for
-    one trained off it, gravity away from every training direction.
+    C1 below or above its range, or below the softest C1 trained beside its direction; for a
+    model of the plane, an unseen Φ or θ off the plane; for one trained off it, gravity away
+    from every training direction.
     """
     training_range = model.training_range
     lo, hi = training_range["C1_kPa"]
@@ -239,6 +240,8 @@ def extrapolation_kind(model: Surrogate, C1: float, phi: float, theta: float) ->
         kinds.append("C1 below range")
     elif C1 > hi + 1e-9:
         kinds.append("C1 above range")
+    elif model.softest_beside(C1, phi, theta) is not None:
+        kinds.append("C1 below its direction's range")
     if model.range_checks()["directions"] is not None:
         if model.direction_outside(phi, theta) is not None:
             kinds.append("unseen direction")

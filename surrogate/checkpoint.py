@@ -48,8 +48,15 @@ def training_range(ds: Dataset, cases: np.ndarray) -> dict[str, Any]:
     """The C1, Φ and θ values of the given (training) cases, and their (Φ, θ) directions.
 
     ``unconverged`` lists the (C1, Φ, θ) of the dataset's cases whose FE solve failed:
-    holes in the range, where no FE solution backs a prediction.
+    holes in the range, where no FE solution backs a prediction. ``c1_by_direction`` lists each
+    direction's [Φ, θ, softest C1, stiffest C1] among the converged training cases: a sweep
+    need not solve every direction at every C1 (``sweep.refine``'s bands).
     """
+    cases = np.asarray(cases, dtype=int)
+    converged = cases[ds.converged[cases]]
+    by_direction: dict[tuple[float, float], list[float]] = {}
+    for i in converged:
+        by_direction.setdefault((float(ds.phi[i]), float(ds.theta[i])), []).append(float(ds.C1[i]))
     return {
         "C1_kPa": [float(ds.C1[cases].min()), float(ds.C1[cases].max())],
         "phi_deg": sorted({float(v) for v in ds.phi[cases]}),
@@ -57,6 +64,8 @@ def training_range(ds: Dataset, cases: np.ndarray) -> dict[str, Any]:
         "directions": sorted({(float(p), float(t)) for p, t in zip(ds.phi[cases], ds.theta[cases],
                                                                     strict=True)}),
         "unconverged": unconverged_cases(ds),
+        "c1_by_direction": [[p, t, min(c1), max(c1)]
+                            for (p, t), c1 in sorted(by_direction.items())],
     }
 
 

@@ -207,6 +207,12 @@ class Surrogate:
         self._sweep_angles = sorted(set(phis) | {p % 360.0 for _, p, _ in self._unconverged})
         self._unconverged_directions = _unit_directions(
             [(p, t) for _, p, t in self._unconverged] or np.zeros((0, 2)))
+        # each training direction's softest FE solution, (C1, Φ, θ)
+        self._softest = [
+            (float(lo), float(p), float(t)) for p, t, lo, _ in rng.get("c1_by_direction", [])
+        ]
+        self._softest_directions = _unit_directions(
+            [(p, t) for _, p, t in self._softest] or np.zeros((0, 2)))
 
     def range_checks(self) -> dict[str, Any]:
         """What decides that a query is an extrapolation (for :mod:`surrogate.export`).
@@ -216,8 +222,9 @@ class Surrogate:
         trained unit gravity directions of a sweep off the plane (else None),
         ``direction_spacing_deg`` their typical spacing and ``direction_reach_deg`` the angle
         from the nearest beyond which a query is outside them; ``unconverged``: the
-        sweep's failed cases (C1, Φ, θ); ``sweep_phi_deg``: the angles (mod 360°) whose failures
-        judge a query between them.
+        sweep's failed cases (C1, Φ, θ); ``softest``: each training direction's softest
+        trained C1, as (C1, Φ, θ); ``sweep_phi_deg``: the angles (mod 360°) whose failures and
+        softest solutions judge a query between them.
         """
         return {
             "c1_kPa": [v if math.isfinite(v) else None for v in self._c1_range],
@@ -229,8 +236,35 @@ class Surrogate:
             "direction_reach_deg": (self._direction_reach
                                     if math.isfinite(self._direction_reach) else None),
             "unconverged": [list(case) for case in self._unconverged],
+            "softest": [list(case) for case in self._softest],
             "sweep_phi_deg": list(self._sweep_angles),
         }
+
+    def _beside(self, cases: list[tuple[float, float, float]], units: np.ndarray, phi: float,
+                theta: float) -> list[tuple[float, float, float]]:
+        """The (C1, Φ, θ) entries of ``cases`` whose direction lies beside the query's.
+
+        A model of the plane judges a query at a sweep angle by that angle's entries, one
+        between two angles by both neighbours' (same θ); a model off the plane by the entries
+        whose direction (``units``, one row per entry) lies within the training directions'
+        typical spacing of the query's.
+        """
+        if not cases:
+            return []
+        if self._directions is not None:
+            cos = np.clip(units @ _unit_directions([(phi, theta)])[0], -1.0, 1.0)
+            angles = np.degrees(np.arccos(cos))
+            return [case for case, angle in zip(cases, angles, strict=True)
+                    if angle <= self._direction_spacing + 1e-9]
+        q = phi % 360.0
+        below = min(self._sweep_angles, key=lambda p: (q - p) % 360.0)
+        above = min(self._sweep_angles, key=lambda p: (p - q) % 360.0)
+        return [
+            (c, p, t)
+            for c, p, t in cases
+            if abs(t - theta) < 1e-6
+            and any(abs((p - n + 180.0) % 360.0 - 180.0) < 1e-6 for n in (below, above))
+        ]
 
     def _unconverged_beside(
         self, C1: float, phi: float, theta: float
@@ -238,33 +272,30 @@ class Surrogate:
         """The stiffest failed sweep case beside the query's direction, if C1 is not stiffer.
 
         The sweep's FE solves fail below some C1 in some directions (the model has no
-        equilibrium there, or none on the load path; docs/solver.md). A model of the plane
-        judges a query at a sweep angle by that angle's failures, one between two angles by
-        both neighbours' (same θ); a model off the plane by the failures whose direction lies
-        within the training directions' typical spacing of the query's.
+        equilibrium there, or none on the load path; docs/solver.md). "Beside" as
+        :meth:`_beside`.
         """
-        if not self._unconverged:
-            return None
-        if self._directions is not None:
-            query = _unit_directions([(phi, theta)])[0]
-            cos = np.clip(self._unconverged_directions @ query, -1.0, 1.0)
-            angles = np.degrees(np.arccos(cos))
-            beside = [case for case, angle in zip(self._unconverged, angles, strict=True)
-                      if angle <= self._direction_spacing + 1e-9]
-        else:
-            q = phi % 360.0
-            below = min(self._sweep_angles, key=lambda p: (q - p) % 360.0)
-            above = min(self._sweep_angles, key=lambda p: (p - q) % 360.0)
-            beside = [
-                (c, p, t)
-                for c, p, t in self._unconverged
-                if abs(t - theta) < 1e-6
-                and any(abs((p - n + 180.0) % 360.0 - 180.0) < 1e-6 for n in (below, above))
-            ]
+        beside = self._beside(self._unconverged, self._unconverged_directions, phi, theta)
         if not beside:
             return None
         stiffest = max(beside)
         return stiffest if C1 <= stiffest[0] + 1e-9 else None
+
+    def softest_beside(
+        self, C1: float, phi: float, theta: float
+    ) -> tuple[float, float, float] | None:
+        """The trained direction beside the query's whose softest FE solution is stiffer than C1.
+
+        As (that softest C1, Φ, θ): the one with the stiffest such minimum, or None where every
+        direction beside the query (:meth:`_beside`) was trained at C1 or softer. A sweep need
+        not solve every direction at every C1 (``sweep.refine``'s bands start at their own
+        C1_min, and a direction's softest solves may fail): below a direction's softest
+        solution the model extrapolates in C1 there, though C1 lies inside its global range.
+        None for a model saved without the per-direction record.
+        """
+        beside = self._beside(self._softest, self._softest_directions, phi, theta)
+        stiffer = [entry for entry in beside if C1 < entry[0] - 1e-9]
+        return max(stiffer) if stiffer else None
 
     @classmethod
     def load(cls, folder: str | Path) -> Surrogate:
@@ -336,9 +367,9 @@ class Surrogate:
             ValueError: if an input is not a finite number or C1 is not positive.
 
         Warns:
-            ExtrapolationWarning: if (C1, Φ, θ) lies outside the training range, or at or
-                below a C1 at which the sweep's FE solve failed at the same or a
-                neighbouring angle Φ.
+            ExtrapolationWarning: if (C1, Φ, θ) lies outside the training range, at or
+                below a C1 at which the sweep's FE solve failed beside its direction, or below
+                the softest C1 trained beside it (:meth:`softest_beside`).
         """
         return np.asarray(self._run(self._parts, self.features(C1, phi, theta)))
 
@@ -412,6 +443,16 @@ class Surrogate:
             messages.append(
                 f"the sweep's FE solve did not converge at C1 = {c1:g} kPa, {at} (beside C1 = "
                 f"{C1} kPa, Φ = {phi}°, θ = {theta}°), so no FE solution backs C1 ≤ {c1:g} kPa "
+                f"there"
+            )
+        softest = None if failed is not None or C1 < lo - 1e-9 else self.softest_beside(
+            C1, phi, theta)
+        if softest is not None:
+            c1, p, t = softest
+            at = f"Φ = {p:g}°" if self._directions is None else f"Φ = {p:g}°, θ = {t:g}°"
+            messages.append(
+                f"the sweep's softest FE solution at {at} (beside C1 = {C1} kPa, Φ = {phi}°, "
+                f"θ = {theta}°) is at C1 = {c1:g} kPa, so no FE solution backs C1 < {c1:g} kPa "
                 f"there"
             )
         for message in messages:

@@ -276,11 +276,23 @@ def test_prediction_warns_where_the_sweep_did_not_converge(
     for C1, phi in ((2.0, -90.0), (1.5, 270.0), (1.2, -45.0), (2.0, -135.0)):
         with pytest.warns(ExtrapolationWarning, match="did not converge at C1 = 2 kPa, Φ = -90°"):
             model.predict(C1, phi)
-    # stiffer than every failure, or beside angles without failures: no warning
+    # the copy keeps the run's record of each angle's softest trained C1 (1 kPa at -90°, from
+    # the dataset it was saved with): stiffer than every failure, or beside angles without
+    # failures, it does not warn
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         for C1, phi in ((2.5, -90.0), (1.0, 90.0), (1.0, 45.0), (1.0, 0.0)):
             model.predict(C1, phi)
+    # saved with the failures, the model knows that -90° was solved from 3 kPa only
+    saved = Surrogate.load(tmp_path / "saved")
+    for C1, phi in ((2.5, -90.0), (2.5, -45.0)):
+        with pytest.warns(ExtrapolationWarning, match=r"softest FE solution at Φ = -90° \(beside "
+                          rf"C1 = {C1} kPa, Φ = {phi}°, θ = 0.0°\) is at C1 = 3 kPa"):
+            saved.predict(C1, phi)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for C1, phi in ((3.0, -90.0), (1.0, 90.0), (1.0, 45.0)):
+            saved.predict(C1, phi)
 
 
 def test_a_model_of_the_caudal_half_warns_by_direction(tmp_path: Path) -> None:
@@ -294,6 +306,7 @@ def test_a_model_of_the_caudal_half_warns_by_direction(tmp_path: Path) -> None:
 
     from fem.dataset import read_dataset
     from fem.sweep import sphere_directions
+    from studies.surrogate_evaluation import extrapolation_kind
     from surrogate.checkpoint import save_model
     from surrogate.exceptions import ExtrapolationWarning
     from surrogate.predict import Surrogate, _unit_directions
@@ -346,8 +359,32 @@ def test_a_model_of_the_caudal_half_warns_by_direction(tmp_path: Path) -> None:
         failed.predict(1.0, 90.0, -90.0)  # standing
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        failed.predict(1.5, 90.0, -90.0)  # stiffer than the failure
+        failed.predict(3.0, 90.0, -90.0)  # the softest solved C1 there
         failed.predict(1.0, 0.0, 0.0)  # supine: far from it
+    # stiffer than the failure but softer than the softest solution there: still unbacked
+    with pytest.warns(ExtrapolationWarning, match=rf"softest FE solution at Φ = {nearest[0]:g}°, "
+                      rf"θ = {nearest[1]:g}° \(beside C1 = 1.5 kPa, Φ = 90.0°, θ = -90.0°\) is at "
+                      r"C1 = 3 kPa, so no FE solution backs C1 < 3 kPa there"):
+        failed.predict(1.5, 90.0, -90.0)
+    # a direction the sweep never solved at 1 kPa (a refined band from a stiffer C1_min, or a
+    # by-C1 held-out model's training cases) warns below its softest trained C1 alone, though
+    # 1 kPa is inside the model's C1 range
+    band = dataclasses.replace(result, train_cases=np.setdiff1d(
+        result.train_cases, [ds.case_index(1.0, *nearest)]))
+    save_model(tmp_path / "band", band, ds)
+    banded = Surrogate.load(tmp_path / "band")
+    assert banded.range_checks()["c1_kPa"] == [1.0, 3.0]
+    assert banded.softest_beside(1.0, 90.0, -90.0) == (3.0, *nearest)
+    assert banded.softest_beside(3.0, 90.0, -90.0) is None
+    assert extrapolation_kind(banded, 1.0, *nearest) == "C1 below its direction's range"
+    assert extrapolation_kind(banded, 1.0, 0.0, 0.0) == "in range"
+    with pytest.warns(ExtrapolationWarning, match=r"is at C1 = 3 kPa") as caught:
+        banded.predict(1.0, *nearest)
+    assert len(caught) == 1
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        banded.predict(3.0, *nearest)
+        banded.predict(1.0, 0.0, 0.0)
 
 
 def test_selection_takes_the_most_accurate_architecture_within_the_prediction_budget() -> None:

@@ -147,6 +147,44 @@ def test_outside_the_training_range_the_page_says_what_predict_warns(
             assert page.locator("#warnings").is_visible() == bool(shown)
 
 
+def test_below_a_directions_softest_trained_c1_the_page_says_what_predict_warns(
+    small_run: Path, tmp_path: Path
+) -> None:
+    """A model trained without the softest case at Φ = 90° warns below 5 kPa beside 90°.
+
+    Its C1 range is still [1, 5] kPa (the other angles' soft cases train): only the record of
+    each direction's softest trained C1 tells the page and Python that 90° is unbacked there.
+    """
+    from fem.dataset import read_dataset
+    from report.viewer import build_viewer
+    from surrogate.checkpoint import save_model
+    from surrogate.config import SurrogateConfig
+    from surrogate.train import train_and_evaluate
+
+    results = small_run / "results"
+    ds = read_dataset(results / "dataset" / "dataset.h5")
+    config = SurrogateConfig(hidden_layers=1, width=4, max_epochs=1)
+    save_model(tmp_path / "model", train_and_evaluate(
+        ds, config, progress=False, holdout=np.array([ds.case_index(1.0, 90.0)])), ds)
+    page_path = tmp_path / "index.html"
+    build_viewer(tmp_path / "model", results / "mesh" / "mesh.xdmf",
+                 results / "dataset" / "dataset.h5", page_path)
+    model = Surrogate.load(tmp_path / "model")
+    assert model.range_checks()["c1_kPa"] == [1.0, 5.0]
+    with open_page(page_path, ready=READY) as (page, errors, _):
+        for C1, phi, theta, expected in ((1.0, 90.0, 0.0, 1), (3.0, 45.0, 0.0, 1),
+                                         (5.0, 90.0, 0.0, 0), (1.0, 0.0, 0.0, 0)):
+            page.evaluate(f"window.viewer.setQuery({C1}, {phi}, {theta})")
+            shown = page.evaluate("window.viewer.state()")["warnings"]
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always", ExtrapolationWarning)
+                model.predict(float(page.evaluate("window.viewer.state()")["C1"]), phi, theta)
+            assert shown == [str(w.message) for w in caught], (C1, phi, theta)
+            assert len(shown) == expected, shown
+            assert all("softest FE solution at Φ = 90°" in m for m in shown)
+        assert not errors
+
+
 def test_an_fe_case_can_be_shown_and_compared(viewer: Path) -> None:
     with open_page(viewer, ready=READY) as (page, errors, _):
         page.select_option("#fe-case", index=1)

@@ -333,41 +333,53 @@ class WebSurrogate {
       messages.push(`θ = ${py(theta)}° but the surrogate was trained at θ = ${py(r.theta_deg[0])}° `
         + 'only');
     }
-    if (r.unconverged.length) {
-      // as Surrogate._unconverged_beside: off the plane, the failures within one typical spacing
-      // of the query's direction; in the plane, those at the sweep angles on either side
-      let beside;
+    // as Surrogate._beside: off the plane, the entries within one typical spacing of the
+    // query's direction; in the plane, those at the sweep angles on either side
+    const beside = (cases) => {
+      if (!cases.length) return [];
       if (r.directions) {
         const unit = (a, b) => {
           const [p, t] = [(a * Math.PI) / 180, (b * Math.PI) / 180];
           return [Math.cos(p), Math.sin(p) * Math.cos(t), Math.sin(p) * Math.sin(t)];
         };
         const g = unit(phi, theta);
-        beside = r.unconverged.filter(([, p, t]) => {
+        return cases.filter(([, p, t]) => {
           const d = unit(p, t);
           const cos = Math.min(Math.max(d[0] * g[0] + d[1] * g[1] + d[2] * g[2], -1), 1);
           return (Math.acos(cos) * 180) / Math.PI <= r.direction_spacing_deg + 1e-9;
         });
-      } else {
-        const q = mod(phi);
-        const angles = r.sweep_phi_deg;
-        const below = angles.reduce((a, p) => (mod(q - p) < mod(q - a) ? p : a));
-        const above = angles.reduce((a, p) => (mod(p - q) < mod(a - q) ? p : a));
-        const near = (p, n) => Math.abs(mod(p - n + 180) - 180) < 1e-6;
-        beside = r.unconverged.filter(([, p, t]) => Math.abs(t - theta) < 1e-6
-          && (near(p, below) || near(p, above)));
       }
-      if (beside.length) {
-        const later = (a, b) => b[0] > a[0] || (b[0] === a[0] && (b[1] > a[1]
-          || (b[1] === a[1] && b[2] > a[2])));
-        const [c1, p, t] = beside.reduce((a, b) => (later(a, b) ? b : a));
-        if (C1 <= c1 + 1e-9) {
-          const at = r.directions ? `Φ = ${p}°, θ = ${t}°` : `Φ = ${p}°`;
-          messages.push(`the sweep's FE solve did not converge at C1 = ${c1} kPa, ${at} `
-            + `(beside C1 = ${py(C1)} kPa, Φ = ${py(phi)}°, θ = ${py(theta)}°), so no FE solution `
-            + `backs C1 ≤ ${c1} kPa there`);
-        }
+      const q = mod(phi);
+      const angles = r.sweep_phi_deg;
+      const below = angles.reduce((a, p) => (mod(q - p) < mod(q - a) ? p : a));
+      const above = angles.reduce((a, p) => (mod(p - q) < mod(a - q) ? p : a));
+      const near = (p, n) => Math.abs(mod(p - n + 180) - 180) < 1e-6;
+      return cases.filter(([, p, t]) => Math.abs(t - theta) < 1e-6
+        && (near(p, below) || near(p, above)));
+    };
+    // the greatest (C1, Φ, θ) as Python's max of tuples
+    const later = (a, b) => b[0] > a[0] || (b[0] === a[0] && (b[1] > a[1]
+      || (b[1] === a[1] && b[2] > a[2])));
+    const greatest = (cases) => cases.reduce((a, b) => (later(a, b) ? b : a));
+    const at = (p, t) => (r.directions ? `Φ = ${p}°, θ = ${t}°` : `Φ = ${p}°`);
+    let failed = false;
+    const unconverged = beside(r.unconverged);
+    if (unconverged.length) {
+      const [c1, p, t] = greatest(unconverged);
+      if (C1 <= c1 + 1e-9) {
+        failed = true;
+        messages.push(`the sweep's FE solve did not converge at C1 = ${c1} kPa, ${at(p, t)} `
+          + `(beside C1 = ${py(C1)} kPa, Φ = ${py(phi)}°, θ = ${py(theta)}°), so no FE solution `
+          + `backs C1 ≤ ${c1} kPa there`);
       }
+    }
+    // as Surrogate.softest_beside: a direction beside the query trained only at stiffer C1
+    const stiffer = beside(r.softest || []).filter(([c1]) => C1 < c1 - 1e-9);
+    if (!failed && !(lo !== null && C1 < lo - 1e-9) && stiffer.length) {
+      const [c1, p, t] = greatest(stiffer);
+      messages.push(`the sweep's softest FE solution at ${at(p, t)} (beside C1 = ${py(C1)} kPa, `
+        + `Φ = ${py(phi)}°, θ = ${py(theta)}°) is at C1 = ${c1} kPa, so no FE solution backs `
+        + `C1 < ${c1} kPa there`);
     }
     return messages.map((m) => `${m}; the prediction is an extrapolation`);
   }
