@@ -212,6 +212,9 @@ class HeldOutBlock(Record):
         bracketed: for each of ``rows`` of a ``by_c1`` block, whether the model trained on a
             softer and a stiffer C1 at the case's direction (:func:`c1_bracketed`): a held-out
             C1 interpolated there, not extrapolated; empty for the other splits.
+        warned: for each of ``rows``, whether the held-out model warns that its prediction
+            there is an extrapolation (:func:`warns`), as a user querying it would be told;
+            empty in records written before it was kept.
     """
 
     split: str
@@ -225,6 +228,7 @@ class HeldOutBlock(Record):
     inside_between: ErrorSpread | None = None
     failure_distance_deg: list[float] = field(default_factory=list)
     bracketed: list[bool] = field(default_factory=list)
+    warned: list[bool] = field(default_factory=list)
 
 
 @dataclass(frozen=True, slots=True)
@@ -299,10 +303,15 @@ def by_bracket(rows: Sequence[CaseErrors], bracketed: Sequence[bool]) -> list[
     """
     if len(bracketed) != len(rows):
         raise ValueError(f"{len(bracketed)} flags for {len(rows)} cases")
-    groups = (("between trained C1 values at its direction", True),
-              ("beyond them: softer (or stiffer) than any trained at its direction", False))
-    return [(label, ErrorSpread.over(inside)) for label, flag in groups
+    return [(label, ErrorSpread.over(inside)) for flag, label in BRACKET_LABELS.items()
             if (inside := [r for r, b in zip(rows, bracketed, strict=True) if b == flag])]
+
+
+#: The groups of :func:`by_bracket`, by whether a case's C1 is bracketed at its direction.
+BRACKET_LABELS = {
+    True: "between trained C1 values at its direction",
+    False: "beyond them: softer (or stiffer) than any trained at its direction",
+}
 
 
 #: The bands of :func:`by_failure_distance`, in degrees.
@@ -335,6 +344,19 @@ def by_failure_distance(
     if none:
         bands.append(("no failure at its C1", ErrorSpread.over(none)))
     return bands
+
+
+def warns(model: Surrogate, ds: Dataset, case: int) -> bool:
+    """Whether ``model`` warns that its prediction at case ``case`` of ``ds`` is an extrapolation.
+
+    Any :class:`~surrogate.exceptions.ExtrapolationWarning` of ``Surrogate.predict`` counts:
+    outside the trained C1 range or directions, beside a failed FE solve, or below the softest
+    C1 trained beside the case's direction.
+    """
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ExtrapolationWarning)
+        model.predict(float(ds.C1[case]), float(ds.phi[case]), float(ds.theta[case]))
+    return any(issubclass(w.category, ExtrapolationWarning) for w in caught)
 
 
 def trained_cases(model: Surrogate, ds: Dataset) -> np.ndarray:
@@ -414,6 +436,7 @@ def evaluate_held_out(
             failure_distance_deg=failure_distances(ds, [int(i) for i in test]),
             bracketed=(c1_bracketed(ds, trained_cases(model, ds), [int(i) for i in test])
                        if split == "by_c1" else []),
+            warned=[warns(model, ds, int(i)) for i in test],
         ))
     return HeldOutEvaluation(
         blocks=blocks, inside_all=ErrorSpread.over(list(inside_of.values())),
@@ -503,7 +526,7 @@ if __name__ == "__main__":
     raise SystemExit(main())
 
 
-__all__ = ["FAILURE_DISTANCE_BANDS", "HELD_OUT", "CaseErrors", "Centroids", "ErrorSpread",
-           "HeldOutBlock", "HeldOutEvaluation", "by_bracket", "by_failure_distance",
+__all__ = ["BRACKET_LABELS", "FAILURE_DISTANCE_BANDS", "HELD_OUT", "CaseErrors", "Centroids",
+           "ErrorSpread", "HeldOutBlock", "HeldOutEvaluation", "by_bracket", "by_failure_distance",
            "by_stiffness", "c1_bracketed", "evaluate_held_out", "failure_distances",
-           "held_out_groups"]
+           "held_out_groups", "warns"]

@@ -232,14 +232,24 @@ def test_the_by_c1_cases_are_told_apart_by_whether_their_c1_is_interpolated() ->
         by_bracket(rows, [True, False])
     block = HeldOutBlock(split="by_c1", held_out="whole C1 values", groups=["1"],
                          held_out_model=ErrorSpread.over(rows), inside_model=None, rows=rows,
-                         inside_rows=[], bracketed=[True, False, True])
+                         inside_rows=[], bracketed=[True, False, True],
+                         warned=[False, True, True])
     context = Context(out_dir=Path("."), clinical=[], paths={}, clinical_fields=[],
                       results={"held_out": HeldOutEvaluation(
                           blocks=[block], inside_all=ErrorSpread.over(rows))})
     page = held_out_part(context)
     assert 'id="held-out-c1-bracketed"' in page and "beyond them" in page
+    # warned, per group: one of the two bracketed cases, the one beyond them
+    assert re.search(r"<td>between trained C1 values at its direction</td><td>2</td><td>1</td>",
+                     page)
+    assert re.search(r"<td>beyond them[^<]*</td><td>1</td><td>1</td>", page)
+    # the one case over 0.5 mm (2 √3 mm), warned at: split, cases, warned, over, of which
+    # warned, not warned
+    assert re.search(r'id="held-out-warned".*<td>by-c1</td><td>3</td><td>2</td><td>1</td>'
+                     r"<td>1</td><td>0</td>", page, re.S)
     older = HeldOutBlock(**{**{f: getattr(block, f) for f in block.__dataclass_fields__},
-                            "bracketed": []})
+                            "bracketed": [], "warned": []})
     context.results["held_out"] = HeldOutEvaluation(blocks=[older],
                                                     inside_all=ErrorSpread.over(rows))
-    assert "c1-bracketed" not in held_out_part(context)
+    page = held_out_part(context)
+    assert "c1-bracketed" not in page and "held-out-warned" not in page

@@ -306,6 +306,7 @@ def test_a_model_of_the_caudal_half_warns_by_direction(tmp_path: Path) -> None:
 
     from fem.dataset import read_dataset
     from fem.sweep import sphere_directions
+    from studies.held_out import warns
     from studies.surrogate_evaluation import extrapolation_kind
     from surrogate.checkpoint import save_model
     from surrogate.exceptions import ExtrapolationWarning
@@ -378,6 +379,8 @@ def test_a_model_of_the_caudal_half_warns_by_direction(tmp_path: Path) -> None:
     assert banded.softest_beside(3.0, 90.0, -90.0) is None
     assert extrapolation_kind(banded, 1.0, *nearest) == "C1 below its direction's range"
     assert extrapolation_kind(banded, 1.0, 0.0, 0.0) == "in range"
+    assert warns(banded, ds, ds.case_index(1.0, *nearest))  # what the held-out study records
+    assert not warns(banded, ds, ds.case_index(3.0, *nearest))
     with pytest.warns(ExtrapolationWarning, match=r"is at C1 = 3 kPa") as caught:
         banded.predict(1.0, *nearest)
     assert len(caught) == 1

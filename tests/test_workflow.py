@@ -333,6 +333,7 @@ def test_held_out_models_and_postures_are_judged_against_fe(small_run: Path) -> 
         test = [str(ds.ids[i]) for i in ds.splits[block.split]["test"]]
         assert [r.case for r in block.rows] == [r.case for r in block.inside_rows] == test
         assert len(block.failure_distance_deg) == len(block.rows)  # NaN where none failed
+        assert len(block.warned) == len(block.rows)
         for row in block.rows:
             assert 0 <= row.mean_mm <= row.p95_mm <= row.max_mm
             assert row.relative_max == pytest.approx(row.max_mm / row.fe_max_mm)

@@ -9,12 +9,14 @@ from typing import Any
 from report.context import Context
 from report.html import fmt, h3, missing, para, pct, table
 from studies.held_out import (
+    BRACKET_LABELS,
     CaseErrors,
     ErrorSpread,
     HeldOutBlock,
     by_bracket,
     by_failure_distance,
 )
+from studies.off_grid import GOALS_MM
 from studies.postures import PostureRow
 
 
@@ -67,6 +69,7 @@ def held_out_part(ctx: Context) -> str:
         rows, table_id="held-out"))
     out.append(_near_failures(result.blocks))
     out.append(_c1_bracketed(result.blocks))
+    out.append(_misses_warned(result.blocks))
     out.append(_unstable_set_aside(ctx.results.get("fe_stability_audit")))
     return "".join(out)
 
@@ -114,8 +117,12 @@ def _c1_bracketed(blocks: Sequence[HeldOutBlock]) -> str:
     for block in blocks:
         if block.split != "by_c1" or len(block.bracketed) != len(block.rows):
             continue
+        warned = block.warned if len(block.warned) == len(block.rows) else None
         for label, spread in by_bracket(block.rows, block.bracketed):
-            rows.append([label, spread.cases, fmt(spread.mean_mm, ".3g"),
+            flag = label == BRACKET_LABELS[True]
+            told = ("" if warned is None else sum(
+                w for b, w in zip(block.bracketed, warned, strict=True) if b == flag))
+            rows.append([label, spread.cases, told, fmt(spread.mean_mm, ".3g"),
                          fmt(spread.p95_mm, ".3g"), fmt(spread.max_mm, ".3g"),
                          spread.worst_case])
     if not rows:
@@ -125,9 +132,33 @@ def _c1_bracketed(blocks: Sequence[HeldOutBlock]) -> str:
              "stiffer C1 at the same direction. The split always holds out the second softest "
              "C1, where the field changes fastest with C1; at a direction solved at fewer C1 "
              "values (a refined band) or where the softer cases failed, that value lies beyond "
-             "the trained ones there, and the model extrapolates.", "caption"),
-        table(["held-out C1", "cases", "mean (mm)", "p95 (mm)", "max (mm)", "worst case"],
-              rows, table_id="held-out-c1-bracketed"),
+             "the trained ones there, and the model extrapolates. 'Warned' counts the cases "
+             "where the model says so itself (an extrapolation warning: below the softest C1 "
+             "trained beside the direction, or beside a failed solve).", "caption"),
+        table(["held-out C1", "cases", "warned", "mean (mm)", "p95 (mm)", "max (mm)",
+               "worst case"], rows, table_id="held-out-c1-bracketed"),
+    ])
+
+
+def _misses_warned(blocks: Sequence[HeldOutBlock]) -> str:
+    """Per held-out model: its cases over the largest-error goal, and how many it warned at."""
+    rows = []
+    for block in blocks:
+        if len(block.warned) != len(block.rows):  # a record written before warnings were kept
+            continue
+        over = [w for r, w in zip(block.rows, block.warned, strict=True)
+                if r.max_mm > GOALS_MM["max"]]
+        rows.append([block.split.replace("_", "-"), len(block.rows), sum(block.warned),
+                     len(over), sum(over), len(over) - sum(over)])
+    if not rows:
+        return ""
+    return "".join([
+        para(f"Where a user meets a held-out model's largest errors: its held-out cases, those "
+             f"at which it warns that the prediction is an extrapolation, those whose largest "
+             f"point error exceeds the goal of {GOALS_MM['max']:g} mm, and how many of these it "
+             f"warned at. A miss without a warning is one a user is not told of.", "caption"),
+        table(["split", "cases", "warned", f"over {GOALS_MM['max']:g} mm", "of which warned",
+               "not warned"], rows, table_id="held-out-warned"),
     ])
 
 
