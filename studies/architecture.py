@@ -17,7 +17,7 @@ import shutil
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -27,6 +27,9 @@ from studies.results import Record, Result
 from surrogate.checkpoint import HISTORY_JSON, MODEL_JSON, PARAMS_NPZ, unconverged_cases, write_json
 from surrogate.config import SurrogateConfig, parse_architecture
 from surrogate.model import layer_sizes, network_names
+
+if TYPE_CHECKING:
+    from surrogate.train import TrainResult
 
 
 @dataclass(frozen=True, slots=True)
@@ -253,6 +256,44 @@ def compare_variants(
         }
         out["variants"][name] = s
     return out
+
+
+def refit_model(source: str | Path, dataset: Dataset, target: str | Path) -> TrainResult:
+    """The run at ``source`` trained again on its validation data too, saved to ``target``.
+
+    Its own config and held-out cases, on ``dataset`` (the one it was trained on), for the
+    epochs its validation chose (its ``best_epoch``), keeping the last weights
+    (:func:`surrogate.train.train_and_evaluate`'s ``refit_epochs``): the validation data has
+    chosen the architecture and the epochs, and the model used downstream then learns from it
+    too. For a pod model, whose validation data is whole cases, a case the run never trained on
+    is one where it extrapolates in C1 or direction.
+
+    Raises:
+        ModelFileError: if ``source`` holds no model.
+        ValueError: if the run was trained on another dataset (its points, or a held-out case
+            the dataset lacks) or never improved on its validation data (no best epoch).
+    """
+    from surrogate.checkpoint import read_model_card, save_model
+    from surrogate.train import train_and_evaluate
+
+    card = read_model_card(source)
+    if card.get("n_points") != dataset.n_points:
+        raise ValueError(f"{source} has {card.get('n_points')} material points, the dataset "
+                         f"{dataset.n_points}: it was not trained on this dataset")
+    ids = {str(case): i for i, case in enumerate(dataset.ids)}
+    held_out = [str(case) for case in card.get("held_out_cases") or []]
+    missing = [case for case in held_out if case not in ids]
+    if missing:
+        raise ValueError(f"{source} held out {', '.join(missing)}, which the dataset lacks")
+    held = [ids[case] for case in held_out]
+    epochs = int(card.get("metrics", {}).get("best_epoch") or 0)
+    if epochs < 1:
+        raise ValueError(f"{source} has no best epoch to train again for")
+    result = train_and_evaluate(dataset, SurrogateConfig.from_mapping(card["config"]),
+                                progress=False, holdout=np.asarray(held) if held else None,
+                                refit_epochs=epochs)
+    save_model(target, result, dataset)
+    return result
 
 
 def copy_model(source: str | Path, target: str | Path, dataset: Dataset | None = None) -> None:

@@ -390,6 +390,8 @@ class SurrogateStudyConfig:
         postures: the clinical postures at each of their C1 values.
         off_grid: the random test cases of ``off_grid`` that the sweep lacks, in drawn order
             (:func:`off_grid_cases`).
+        refit: whether the model used downstream is the selected run trained again on its
+            validation data too (``select_model``), or the selected run itself.
     """
 
     architectures: tuple[str, ...]
@@ -400,6 +402,7 @@ class SurrogateStudyConfig:
     prediction_budget_ms: float | None
     postures: tuple[Posture, ...] = ()
     off_grid: tuple[Case, ...] = ()
+    refit: bool = True
 
     @classmethod
     def from_sections(
@@ -432,6 +435,7 @@ class SurrogateStudyConfig:
             prediction_budget_ms=study["prediction_budget_ms"],
             postures=postures_of(study.get("postures") or {}, sweep),
             off_grid=off_grid_cases(study.get("off_grid") or {}, sweep),
+            refit=bool(study.get("refit", True)),
         )
 
     def variant(self, name: str) -> SurrogateVariant:

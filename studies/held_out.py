@@ -365,17 +365,23 @@ def trained_cases(model: Surrogate, ds: Dataset) -> np.ndarray:
     A ``pod`` model trains on whole cases and leaves its validation cases out (with ``split:
     by_sample``, the ``by_case`` split's validation cases: :func:`surrogate.pod.case_split`); a
     pointwise or separable model's by-sample split draws points, so that it trains on part of
-    every case. Cases the model held out (``Surrogate.held_out``) are not among them.
+    every case. A model refitted on its validation data too (``metrics.refit``,
+    :func:`surrogate.train.train_and_evaluate`'s ``refit_epochs``) trained on those as well.
+    Cases the model held out (``Surrogate.held_out``) are not among them.
     """
     held = np.flatnonzero(np.isin(ds.ids, list(model.held_out)))
+    refit = bool(model.metrics.get("refit"))
     if model.config.structure == "pod":
         from surrogate.pod import case_split
 
-        cases = case_split(ds, model.config, held)[0]
+        train, validation = case_split(ds, model.config, held)
+        cases = np.union1d(train, validation) if refit else train
     elif model.config.split == "by_sample":
         cases = np.setdiff1d(np.arange(len(ds.ids)), held)
     else:
-        cases = np.setdiff1d(ds.splits[model.config.split]["train"], held)
+        parts = ds.splits[model.config.split]
+        cases = np.setdiff1d(np.union1d(parts["train"], parts["validation"]) if refit
+                             else parts["train"], held)
     return np.intersect1d(cases, np.flatnonzero(ds.converged))
 
 

@@ -142,26 +142,33 @@ def _fit_step(config: SurrogateConfig, optimizer: optax.GradientTransformation):
 
 def train_pod(
     ds: Dataset, config: SurrogateConfig, progress: bool = True,
-    holdout: np.ndarray | None = None,
+    holdout: np.ndarray | None = None, refit_epochs: int | None = None,
 ) -> TrainResult:
     """Fit a ``pod`` model on its split's training cases (see the module docstring).
+
+    With ``refit_epochs`` (:func:`surrogate.train.train_and_evaluate`), on its validation
+    cases too.
 
     Raises:
         ValueError: if the split leaves no training or validation cases, or too few for the
             modes.
     """
     train_cases, val_cases = case_split(ds, config, holdout)
-    return fit(ds, config, train_cases, val_cases, progress, holdout)
+    if refit_epochs is not None:
+        train_cases = np.union1d(train_cases, val_cases)
+    return fit(ds, config, train_cases, val_cases, progress, holdout, refit_epochs)
 
 
 def fit(
     ds: Dataset, config: SurrogateConfig, train_cases: np.ndarray, val_cases: np.ndarray,
-    progress: bool = False, holdout: np.ndarray | None = None,
+    progress: bool = False, holdout: np.ndarray | None = None, refit_epochs: int | None = None,
 ) -> TrainResult:
     """Fit the basis on ``train_cases`` and train the branch, stopping early on ``val_cases``.
 
     ``holdout`` is recorded as the cases kept out. Where ``ds`` holds the fields at a quadratic
-    mesh's nodes, the basis is taken there (the module docstring).
+    mesh's nodes, the basis is taken there (the module docstring). With ``refit_epochs``, the
+    branch trains for that many epochs and keeps the last weights, without early stopping
+    (``val_cases`` then only report an error, on cases it may have trained on).
 
     Raises:
         ValueError: if a case did not converge, or there are fewer training cases than modes.
@@ -255,7 +262,11 @@ def fit(
         if not np.isfinite(train_loss):
             log.warning("training diverged at epoch %d (loss %s)", epoch, train_loss)
             break
-        if val_loss < best["loss"]:
+        if refit_epochs is not None:  # the epochs a validation chose before: the last weights
+            best = {"loss": val_loss, "layers": layers, "epoch": epoch}
+            if epoch >= refit_epochs:
+                break
+        elif val_loss < best["loss"]:
             best = {"loss": val_loss, "layers": layers, "epoch": epoch}
             since_best = 0
         else:
@@ -265,6 +276,7 @@ def fit(
                 break
     if bar is not None:
         bar.close()
+    result.refit = refit_epochs is not None
     result.params = {"branch": best["layers"]}
     result.best_validation_loss, result.best_epoch = best["loss"], best["epoch"]
     error, domain = field_errors(best["layers"])

@@ -66,6 +66,9 @@ class TrainResult:
             displacement scale per unit weight (:mod:`surrogate.pod`); None for the others.
         node_basis: a ``pod`` model's modes at every node of its dataset's quadratic mesh
             (K, 3, modes), where it was fitted there; else None.
+        refit: whether it trained on its validation data too, for a number of epochs chosen
+            before (:func:`train_and_evaluate`'s ``refit_epochs``): its validation error is
+            then measured on data it trained on.
     """
 
     params: Params
@@ -83,6 +86,7 @@ class TrainResult:
     held_out_cases: np.ndarray | None = None
     basis: np.ndarray | None = None
     node_basis: np.ndarray | None = None
+    refit: bool = False
 
     def summary(self) -> dict[str, Any]:
         """JSON-friendly metrics."""
@@ -100,6 +104,7 @@ class TrainResult:
             "compile_s": self.compile_s,
             "n_train_cases": 0 if self.train_cases is None else int(self.train_cases.size),
             "held_out_cases": [] if self.held_out_cases is None else self.held_out_cases.tolist(),
+            "refit": self.refit,
         }
 
 
@@ -318,7 +323,8 @@ def evaluate(
 
 
 def prepare(
-    ds: Dataset, config: SurrogateConfig, holdout: np.ndarray | None = None
+    ds: Dataset, config: SurrogateConfig, holdout: np.ndarray | None = None,
+    refit: bool = False,
 ) -> tuple[Normalisation, np.ndarray | None, Samples, Samples, np.ndarray]:
     """Normalisation, point factor φ, training and validation samples, training cases.
 
@@ -327,6 +333,7 @@ def prepare(
         config: hyperparameters (split, boundary mode, encodings).
         holdout: case indices to keep out of training and validation (e.g. the
             clinical cases of a by-case evaluation).
+        refit: the validation samples train too (they are still returned, to report on).
 
     Raises:
         ValueError: if the chosen split has no training or validation samples left.
@@ -338,6 +345,8 @@ def prepare(
         train_idx, val_idx = keep(train_idx), keep(val_idx)
     if train_idx.size == 0 or val_idx.size == 0:
         raise ValueError(f"split {config.split!r} has no training or validation samples")
+    if refit:
+        train_idx = np.union1d(train_idx, val_idx)
     train_cases = np.unique(train_idx // ds.n_points)
     norm = Normalisation.fit(ds, train_cases, config.c1_encoding, config.output_scaling)
     phi = (
@@ -355,7 +364,8 @@ def prepare(
 
 
 def train_and_evaluate(
-    ds: Dataset, config: SurrogateConfig, progress: bool = True, holdout: np.ndarray | None = None
+    ds: Dataset, config: SurrogateConfig, progress: bool = True, holdout: np.ndarray | None = None,
+    refit_epochs: int | None = None,
 ) -> TrainResult:
     """Train the surrogate on ``ds`` following ``config``; returns the best weights.
 
@@ -364,18 +374,27 @@ def train_and_evaluate(
         config: hyperparameters and protocol.
         progress: show a progress bar with the epoch losses.
         holdout: case indices kept out of training and validation.
+        refit_epochs: train on the split's validation data too, for this many epochs (the best
+            epoch a run of the same config chose on that validation data), and keep the last
+            weights: the model used downstream, once the validation has done its work of
+            choosing the architecture and the epochs. None: train on the training part and
+            keep the weights of the lowest validation loss.
 
     A ``pod`` model is fitted by :func:`surrogate.pod.train_pod`.
 
     Raises:
-        ValueError: if the chosen split has no training or validation samples.
+        ValueError: if the chosen split has no training or validation samples, or
+            ``refit_epochs`` is not a positive integer.
     """
+    if refit_epochs is not None and (isinstance(refit_epochs, bool)
+                                     or not isinstance(refit_epochs, int) or refit_epochs < 1):
+        raise ValueError(f"refit_epochs must be a positive integer, got {refit_epochs!r}")
     if config.structure == "pod":
         from surrogate.pod import train_pod  # it builds on this module
 
-        return train_pod(ds, config, progress, holdout)
+        return train_pod(ds, config, progress, holdout, refit_epochs)
     start = time.perf_counter()
-    norm, phi, train, val, train_cases = prepare(ds, config, holdout)
+    norm, phi, train, val, train_cases = prepare(ds, config, holdout, refit_epochs is not None)
     inputs = Tables(*(jnp.asarray(a) for a in tables(ds, norm)))
     use_boundary = boundary_network(config) is not None and bool(np.any(train.boundary))
     if config.structure == "separable":
@@ -455,7 +474,11 @@ def train_and_evaluate(
         if not np.isfinite(train_loss):
             log.warning("training diverged at epoch %d (loss %s)", epoch, train_loss)
             break
-        if metrics["loss"] < best_loss:
+        if refit_epochs is not None:  # the epochs a validation chose before: the last weights
+            best_loss, best_params, best_epoch = metrics["loss"], params, epoch
+            if epoch >= refit_epochs:
+                break
+        elif metrics["loss"] < best_loss:
             best_loss, best_params, best_epoch, since_best = metrics["loss"], params, epoch, 0
         else:
             since_best += 1
@@ -465,6 +488,7 @@ def train_and_evaluate(
     if bar is not None:
         bar.close()
     result.train_s = time.perf_counter() - start
+    result.refit = refit_epochs is not None
     result.params, result.best_validation_loss, result.best_epoch = (
         best_params,
         best_loss,

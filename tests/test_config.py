@@ -569,3 +569,16 @@ def test_the_imaged_chain_parses_and_needs_its_imaged_posture() -> None:
     del raw["reference_state"]["imaged"]
     with pytest.raises(ConfigError, match=r"reference_state.points needs reference_state.imaged"):
         WorkflowConfig.from_mapping(raw)
+
+
+def test_the_model_used_downstream_is_refitted_unless_told_not_to() -> None:
+    raw = read("config.yaml")
+    assert raw["surrogate_study"]["refit"] is True
+    assert WorkflowConfig.from_mapping(raw).surrogate_study.refit
+    del raw["surrogate_study"]["refit"]  # the schema's default
+    assert WorkflowConfig.from_mapping(raw).surrogate_study.refit
+    raw["surrogate_study"]["refit"] = False
+    assert not WorkflowConfig.from_mapping(raw).surrogate_study.refit
+    raw["surrogate_study"]["refit"] = "yes"
+    with pytest.raises(ConfigError, match="refit"):
+        WorkflowConfig.from_mapping(raw)

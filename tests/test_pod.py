@@ -219,3 +219,46 @@ def test_a_pod_models_fast_prediction_is_its_plain_sum(trained) -> None:
             fast = model.predict(C1, phi, theta)
         assert np.abs(plain).max() > 0
         np.testing.assert_allclose(fast, plain, rtol=0, atol=1e-5 * np.abs(plain).max())
+
+
+def test_a_refit_trains_on_the_validation_cases_for_the_epochs_chosen(
+    trained, tmp_path: Path
+) -> None:
+    """The selected run trained again (surrogate_study.refit): its validation cases train too.
+
+    It runs the run's best epoch's worth of epochs and keeps the last weights; the model knows
+    every case it trained on (the per-direction C1 record, the held-out study's inside cases),
+    and a case it did not train on before now answers as the data says.
+    """
+    import dataclasses
+
+    from studies.architecture import refit_model
+    from studies.held_out import trained_cases
+    from surrogate.pod import case_split
+    from surrogate.predict import Surrogate
+
+    ds, result, folder = trained
+    train, validation = case_split(ds, CONFIG)
+    assert np.array_equal(result.train_cases, train) and not result.refit
+    again = refit_model(folder, ds, tmp_path / "refit")
+    assert again.refit and again.best_epoch == result.best_epoch == len(again.history)
+    assert np.array_equal(again.train_cases, np.union1d(train, validation))
+    model, before = Surrogate.load(tmp_path / "refit"), Surrogate.load(folder)
+    assert model.metrics["refit"] and not before.metrics["refit"]
+    assert np.array_equal(trained_cases(model, ds), np.union1d(train, validation))
+    assert np.array_equal(trained_cases(before, ds), train)
+    assert len(model.training_range["c1_by_direction"]) == 8  # every direction, 1 to 5 kPa
+    # a softest case at its direction that the run validated on: the run extrapolates there
+    # and says so, the refitted model has trained on it
+    case = next(int(c) for c in validation if ds.C1[c] == 1.0)
+    query = (float(ds.C1[case]), float(ds.phi[case]), float(ds.theta[case]))
+    with pytest.warns(ExtrapolationWarning, match="softest FE solution .* is at C1 = 2 kPa"):
+        first = before.predict(*query)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        second = model.predict(*query)
+    truth = ds.displacement[case]
+    assert np.abs(second - truth).max() < np.abs(first - truth).max()
+    with pytest.raises(ValueError, match="material points, the dataset"):
+        refit_model(folder, dataclasses.replace(ds, X=ds.X[:10]), tmp_path / "other")
+    assert not (tmp_path / "other").exists()

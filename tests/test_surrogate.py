@@ -564,3 +564,25 @@ def test_fast_prediction_is_the_plain_network(
             at_points = model.at(model.X[inside]).predict(C1, phi, theta)
         np.testing.assert_allclose(at_points, fast[inside], rtol=0,
                                    atol=1e-5 * np.abs(plain).max())
+
+
+def test_a_refit_trains_on_the_validation_part_for_the_epochs_given(dataset_path: Path) -> None:
+    """``refit_epochs``: the split's validation part trains too, for that many epochs.
+
+    The last weights are kept: no early stopping on data it trains on.
+    """
+    from fem.dataset import read_dataset
+    from surrogate.train import train_and_evaluate
+
+    ds = read_dataset(dataset_path)
+    config = SurrogateConfig(hidden_layers=1, width=4, max_epochs=5, patience=1, split="by_case")
+    parts = ds.splits["by_case"]
+    plain = train_and_evaluate(ds, config, progress=False)
+    assert np.array_equal(plain.train_cases, parts["train"]) and not plain.refit
+    again = train_and_evaluate(ds, config, progress=False, refit_epochs=3)
+    assert np.array_equal(again.train_cases, np.union1d(parts["train"], parts["validation"]))
+    assert again.refit and again.summary()["refit"]
+    assert len(again.history) == again.best_epoch == 3
+    for bad in (0, 2.5, True):
+        with pytest.raises(ValueError, match="refit_epochs must be a positive integer"):
+            train_and_evaluate(ds, config, progress=False, refit_epochs=bad)

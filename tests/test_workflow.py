@@ -312,6 +312,27 @@ def test_small_sweep_report(small_run: Path) -> None:
             assert f"<td>{per_phi['all_phi']:g}</td>" in lowest
 
 
+def test_the_model_used_downstream_is_the_selected_run_trained_again(small_run: Path) -> None:
+    """surrogate_study.refit (default): the selected run's config trained on its validation too.
+
+    For its best epoch's worth of epochs; the report says that its validation error is then on
+    data it trained on.
+    """
+    results = small_run / "results"
+    table = json.loads((results / "surrogate/study/table2.json").read_text())
+    run = json.loads((small_run / table["selected_run"] / "model.json").read_text())
+    model = json.loads((results / "surrogate/model/model.json").read_text())
+    assert model["config"] == run["config"]
+    assert model["metrics"]["refit"] and not run["metrics"]["refit"]
+    assert model["metrics"]["epochs"] == model["metrics"]["best_epoch"] == run["metrics"][
+        "best_epoch"]
+    assert model["metrics"]["n_train_cases"] >= run["metrics"]["n_train_cases"]
+    assert "c1_by_direction" in model["training_range"]
+    page = (results / "report/index.html").read_text()
+    assert "validation error, on data it trained on (mm)" in html_table(page, "training")
+    assert (results / "benchmarks/surrogate/select_model.tsv").is_file()
+
+
 def test_held_out_models_and_postures_are_judged_against_fe(small_run: Path) -> None:
     """Held-out models are judged on exactly their held-out groups; postures against FE.
 

@@ -17,11 +17,17 @@ def training_section(ctx: Context) -> str:
         return missing("results/surrogate/model/history.json")
     summary = history.get("summary") or {}
     arch = summary.get("architecture", "n/a")
+    refit = bool(summary.get("refit"))
     out = [para(
         "The selected model's training: the loss (the paper's Eq. 2) on the training and "
-        "validation samples, and the validation error in mm, per epoch. Training stops at "
-        "max_epochs, or earlier when the validation loss has not improved for the configured "
-        "patience; the best epoch's weights are kept.", "caption")]
+        "validation samples, and the validation error in mm, per epoch. " + (
+            "It is the selected run trained again on its validation data too "
+            "(surrogate_study.refit), for the epochs that run's validation chose, keeping the "
+            "last weights: its 'validation' error is measured on data it trained on, and the "
+            "held-out section judges the selection instead." if refit else
+            "Training stops at max_epochs, or earlier when the validation loss has not "
+            "improved for the configured patience; the best epoch's weights are kept."),
+        "caption")]
     if history.get("history"):
         out.append(ctx.figure(
             "training_history.png",
@@ -34,7 +40,8 @@ def training_section(ctx: Context) -> str:
         ["split", summary.get("split", "n/a")], ["seed", summary.get("seed", "n/a")],
         ["epochs (best epoch)",
          f"{fmt(summary.get('epochs'), 'd')} ({fmt(summary.get('best_epoch'), 'd')})"],
-        ["validation error (mm)", fmt(summary.get("validation_error_mm"), ".4g")],
+        ["validation error, on data it trained on (mm)" if refit else "validation error (mm)",
+         fmt(summary.get("validation_error_mm"), ".4g")],
         ["training time", seconds(summary.get("train_s"))],
         ["training cases", fmt(summary.get("n_train_cases"), "d")],
         ["training range", _training_range((ctx.results.get("model") or {}).get("training_range"))],

@@ -56,7 +56,8 @@ rule architecture_study:
         "../scripts/study_table.py"
 
 
-# The model used downstream: the selected architecture's best run, copied (not retrained).
+# The model used downstream: the selected architecture's best run, trained again on its
+# validation data too for the epochs that run chose (surrogate_study.refit), or copied.
 rule select_model:
     input:
         table=STUDY_TABLE,
@@ -66,11 +67,15 @@ rule select_model:
         model=MODEL,
         params=f"{SURROGATE_DIR}/model/params.npz",
         history=f"{SURROGATE_DIR}/model/history.json",
+    params:
+        refit=CONFIG.surrogate_study.refit,
     log:
         "results/logs/surrogate/select_model.log",
+    benchmark:
+        "results/benchmarks/surrogate/select_model.tsv"
     threads: 1
     resources:
-        mem_mb=500,
+        mem_mb=lambda wildcards: 4000 if CONFIG.surrogate_study.refit else 500,
     conda:
         ENV
     script:

@@ -1,22 +1,39 @@
-"""Snakemake adapter: the model used downstream is the study's selected run, copied.
+"""Snakemake adapter: the model used downstream, from the study's selected run.
 
-It is not retrained; the dataset's failed cases, and those whose FE state is unstable, are
-recorded with it so that it warns where no FE solution backs it.
+With ``surrogate_study.refit`` the selected run's config is trained again on the same data and
+its validation data too, for the epochs the run's validation chose
+(:func:`surrogate.train.train_and_evaluate`'s ``refit_epochs``); otherwise the run is copied.
+Either way the dataset's failed cases, and those whose FE state is unstable, are recorded with
+it so that it warns where no FE solution backs it.
 """
 
 import json
 import logging
 from pathlib import Path
 
-from fem.dataset import read_dataset
-from studies.architecture import copy_model
-from studies.joblog import job_log
-from studies.stability_audit import without_unstable
+from surrogate.runtime import configure_cpu
+
+configure_cpu(single_thread=snakemake.threads == 1)  # before JAX starts: one core per job
+
+from fem.dataset import read_dataset  # noqa: E402
+from studies.architecture import copy_model, refit_model  # noqa: E402
+from studies.joblog import job_log  # noqa: E402
+from studies.stability_audit import without_unstable  # noqa: E402
 
 job_log(snakemake.log[0])
+log = logging.getLogger("select_model")
 
 table = json.loads(Path(snakemake.input.table).read_text())
-copy_model(table["selected_run"], Path(snakemake.output.model).parent,
-           dataset=without_unstable(read_dataset(snakemake.input.dataset), snakemake.input.audit))
-logging.getLogger("select_model").info(
-    "selected %s: %s", table["selected_architecture"], table["selected_run"])
+run, folder = table["selected_run"], Path(snakemake.output.model).parent
+if snakemake.params.refit:
+    card = json.loads((Path(run) / "model.json").read_text())
+    dataset = read_dataset(snakemake.input.dataset, nodes=card["config"]["structure"] == "pod")
+    result = refit_model(run, without_unstable(dataset, snakemake.input.audit), folder)
+    log.info("selected %s: %s, trained again on %d cases for %d epochs in %.0f s",
+             table["selected_architecture"], run, result.train_cases.size, result.best_epoch,
+             result.train_s)
+else:
+    copy_model(run, folder,
+               dataset=without_unstable(read_dataset(snakemake.input.dataset),
+                                        snakemake.input.audit))
+    log.info("selected %s: %s", table["selected_architecture"], run)
