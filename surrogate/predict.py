@@ -436,24 +436,24 @@ class Surrogate:
             messages.append(
                 f"θ = {theta}° but the surrogate was trained at θ = {self._thetas[0]}° only"
             )
+        def at(p: float, t: float) -> str:  # a sweep direction: Φ alone in the plane
+            return f"Φ = {p:g}°" if self._directions is None else f"Φ = {p:g}°, θ = {t:g}°"
+
+        query = f"C1 = {C1} kPa, Φ = {phi}°, θ = {theta}°"
         failed = self._unconverged_beside(C1, phi, theta)
         if failed is not None:
             c1, p, t = failed
-            at = f"Φ = {p:g}°" if self._directions is None else f"Φ = {p:g}°, θ = {t:g}°"
             messages.append(
-                f"the sweep's FE solve did not converge at C1 = {c1:g} kPa, {at} (beside C1 = "
-                f"{C1} kPa, Φ = {phi}°, θ = {theta}°), so no FE solution backs C1 ≤ {c1:g} kPa "
-                f"there"
+                f"the sweep's FE solve did not converge at C1 = {c1:g} kPa, {at(p, t)} (beside "
+                f"{query}), so no FE solution backs C1 ≤ {c1:g} kPa there"
             )
         softest = None if failed is not None or C1 < lo - 1e-9 else self.softest_beside(
             C1, phi, theta)
         if softest is not None:
             c1, p, t = softest
-            at = f"Φ = {p:g}°" if self._directions is None else f"Φ = {p:g}°, θ = {t:g}°"
             messages.append(
-                f"the sweep's softest FE solution at {at} (beside C1 = {C1} kPa, Φ = {phi}°, "
-                f"θ = {theta}°) is at C1 = {c1:g} kPa, so no FE solution backs C1 < {c1:g} kPa "
-                f"there"
+                f"the sweep's softest FE solution at {at(p, t)} (beside {query}) is at C1 = "
+                f"{c1:g} kPa, so no FE solution backs C1 < {c1:g} kPa there"
             )
         for message in messages:
             warnings.warn(

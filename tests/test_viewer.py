@@ -138,13 +138,22 @@ def test_outside_the_training_range_the_page_says_what_predict_warns(
     lo, hi = model.range_checks()["c1_kPa"]
     with open_page(viewer, ready=READY) as (page, _, _):
         for C1, phi, theta in ((hi * 1.4, 180.0, 0.0), (lo, 120.0, 30.0), (lo, 180.0, 0.0)):
-            page.evaluate(f"window.viewer.setQuery({C1}, {phi}, {theta})")
-            shown = page.evaluate("window.viewer.state()")["warnings"]
-            with warnings.catch_warnings(record=True) as caught:
-                warnings.simplefilter("always", ExtrapolationWarning)
-                model.predict(float(page.evaluate("window.viewer.state()")["C1"]), phi, theta)
-            assert shown == [str(w.message) for w in caught], (C1, phi, theta)
+            shown = _warnings_as_python(page, model, C1, phi, theta)
             assert page.locator("#warnings").is_visible() == bool(shown)
+
+
+def _warnings_as_python(page, model: Surrogate, C1: float, phi: float, theta: float) -> list[str]:
+    """The page's warnings at a query, checked to be ``model.predict``'s, word for word.
+
+    Python is asked at the C1 the page took (its slider may round the query's).
+    """
+    page.evaluate(f"window.viewer.setQuery({C1}, {phi}, {theta})")
+    shown = page.evaluate("window.viewer.state()")["warnings"]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ExtrapolationWarning)
+        model.predict(float(page.evaluate("window.viewer.state()")["C1"]), phi, theta)
+    assert shown == [str(w.message) for w in caught], (C1, phi, theta)
+    return shown
 
 
 def test_below_a_directions_softest_trained_c1_the_page_says_what_predict_warns(
@@ -174,12 +183,7 @@ def test_below_a_directions_softest_trained_c1_the_page_says_what_predict_warns(
     with open_page(page_path, ready=READY) as (page, errors, _):
         for C1, phi, theta, expected in ((1.0, 90.0, 0.0, 1), (3.0, 45.0, 0.0, 1),
                                          (5.0, 90.0, 0.0, 0), (1.0, 0.0, 0.0, 0)):
-            page.evaluate(f"window.viewer.setQuery({C1}, {phi}, {theta})")
-            shown = page.evaluate("window.viewer.state()")["warnings"]
-            with warnings.catch_warnings(record=True) as caught:
-                warnings.simplefilter("always", ExtrapolationWarning)
-                model.predict(float(page.evaluate("window.viewer.state()")["C1"]), phi, theta)
-            assert shown == [str(w.message) for w in caught], (C1, phi, theta)
+            shown = _warnings_as_python(page, model, C1, phi, theta)
             assert len(shown) == expected, shown
             assert all("softest FE solution at Φ = 90°" in m for m in shown)
         assert not errors
