@@ -145,15 +145,15 @@ def test_outside_the_training_range_the_page_says_what_predict_warns(
 def _warnings_as_python(page, model: Surrogate, C1: float, phi: float, theta: float) -> list[str]:
     """The page's warnings at a query, checked to be ``model.predict``'s, word for word.
 
-    Python is asked at the C1 the page took (its slider may round the query's).
+    Python is asked at the query the page took (its sliders round C1, Φ and θ to their steps).
     """
     page.evaluate(f"window.viewer.setQuery({C1}, {phi}, {theta})")
-    shown = page.evaluate("window.viewer.state()")["warnings"]
+    state = page.evaluate("window.viewer.state()")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ExtrapolationWarning)
-        model.predict(float(page.evaluate("window.viewer.state()")["C1"]), phi, theta)
-    assert shown == [str(w.message) for w in caught], (C1, phi, theta)
-    return shown
+        model.predict(float(state["C1"]), float(state["phi"]), float(state["theta"]))
+    assert state["warnings"] == [str(w.message) for w in caught], (C1, phi, theta)
+    return state["warnings"]
 
 
 def test_below_a_directions_softest_trained_c1_the_page_says_what_predict_warns(
