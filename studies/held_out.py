@@ -351,11 +351,13 @@ def warns(model: Surrogate, ds: Dataset, case: int) -> bool:
 
     Any :class:`~surrogate.exceptions.ExtrapolationWarning` of ``Surrogate.predict`` counts:
     outside the trained C1 range or directions, beside a failed FE solve, or below the softest
-    C1 trained beside the case's direction.
+    C1 trained beside the case's direction. The query's checks alone are run
+    (``Surrogate.features``, which ``predict`` calls), not the network: the case's errors have
+    predicted it already.
     """
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ExtrapolationWarning)
-        model.predict(float(ds.C1[case]), float(ds.phi[case]), float(ds.theta[case]))
+        model.features(float(ds.C1[case]), float(ds.phi[case]), float(ds.theta[case]))
     return any(issubclass(w.category, ExtrapolationWarning) for w in caught)
 
 

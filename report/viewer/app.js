@@ -374,7 +374,7 @@ class WebSurrogate {
       }
     }
     // as Surrogate.softest_beside: a direction beside the query trained only at stiffer C1
-    const stiffer = beside(r.softest || []).filter(([c1]) => C1 < c1 - 1e-9);
+    const stiffer = beside(r.softest).filter(([c1]) => C1 < c1 - 1e-9);
     if (!failed && !(lo !== null && C1 < lo - 1e-9) && stiffer.length) {
       const [c1, p, t] = greatest(stiffer);
       messages.push(`the sweep's softest FE solution at ${at(p, t)} (beside C1 = ${py(C1)} kPa, `
