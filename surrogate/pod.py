@@ -13,8 +13,11 @@ Training is on whole cases: the basis is orthonormal, so a field's squared error
 squared error plus what the basis cannot hold (a constant of the training). The branch is
 trained by Adam on the whole training set at once (the config's learning rate, moments and
 schedule), one epoch being :data:`STEPS_PER_EPOCH` steps, with early stopping on the validation
-cases' loss as for the other models. The validation error in mm is the full field's: weights
-and basis together.
+cases' error in mm, the full field's (weights and basis together), the error that the
+architecture study compares and the goals are stated in. Its loss, the weights' squared error
+in units of each case's compliance gain, weighs a soft case's error less than its millimetres
+do; chosen by it, an epoch can be kept whose error in mm is well above a later one's
+(docs/results-log.md, "fifteen hundred epochs").
 
 The modes are stored scaled by the weights' RMS over the training cases, so that the branch's
 outputs are of order one: the displacement of a case is ``gain(C1) · u_scale · (b(C1, ĝ) ·
@@ -240,7 +243,8 @@ def fit(
              n if nodes is None else len(nodes.X), "points" if nodes is None else "nodes",
              config.modes, left, result.compile_s)
 
-    best: dict[str, Any] = {"loss": float("inf"), "layers": layers, "epoch": 0}
+    best: dict[str, Any] = {"loss": float("inf"), "error_mm": float("inf"), "layers": layers,
+                            "epoch": 0}
     since_best = 0
     bar = progress_bar(config.max_epochs, progress, config.architecture)
     for epoch in range(1, config.max_epochs + 1):
@@ -263,11 +267,11 @@ def fit(
             log.warning("training diverged at epoch %d (loss %s)", epoch, train_loss)
             break
         if refit_epochs is not None:  # the epochs a validation chose before: the last weights
-            best = {"loss": val_loss, "layers": layers, "epoch": epoch}
+            best = {"loss": val_loss, "error_mm": error_mm, "layers": layers, "epoch": epoch}
             if epoch >= refit_epochs:
                 break
-        elif val_loss < best["loss"]:
-            best = {"loss": val_loss, "layers": layers, "epoch": epoch}
+        elif error_mm < best["error_mm"]:
+            best = {"loss": val_loss, "error_mm": error_mm, "layers": layers, "epoch": epoch}
             since_best = 0
         else:
             since_best += 1
