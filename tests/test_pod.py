@@ -221,6 +221,27 @@ def test_a_pod_models_fast_prediction_is_its_plain_sum(trained) -> None:
         np.testing.assert_allclose(fast, plain, rtol=0, atol=1e-5 * np.abs(plain).max())
 
 
+def test_a_pod_model_keeps_the_epoch_of_its_lowest_validation_error_in_mm(
+    cube: tuple[Path, Path],
+) -> None:
+    """The best epoch is the one whose validation error in mm is lowest, not its loss's.
+
+    At a constant, high rate the validation loss and error wander apart: the loss weighs each
+    case's weights in units of its compliance gain, the error in mm weighs the soft cases more.
+    """
+    from surrogate.train import train_and_evaluate
+
+    noisy = CONFIG.replace(lr_schedule="constant", learning_rate=0.02, max_epochs=40,
+                           patience=40)
+    result = train_and_evaluate(read_dataset(cube[0]), noisy, progress=False)
+    errors = np.array([h["validation_error_mm"] for h in result.history])
+    losses = np.array([h["validation_loss"] for h in result.history])
+    assert np.argmin(losses) != np.argmin(errors)  # the two choices differ in this run
+    assert result.best_epoch == int(np.argmin(errors)) + 1
+    assert result.validation_error_mm == pytest.approx(errors.min(), rel=1e-5)
+    assert result.best_validation_loss == pytest.approx(losses[result.best_epoch - 1])
+
+
 def test_a_refit_trains_on_the_validation_cases_for_the_epochs_chosen(
     trained, tmp_path: Path
 ) -> None:
