@@ -16,7 +16,7 @@ schedule), one epoch being :data:`STEPS_PER_EPOCH` steps, with early stopping on
 cases' error in mm, the full field's (weights and basis together), the error that the
 architecture study compares and the goals are stated in. Its loss, the weights' squared error
 in units of each case's compliance gain, weighs a soft case's error less than its millimetres
-do; chosen by it, an epoch can be kept whose error in mm is well above a later one's
+do; chosen by it, an epoch can be kept whose error in mm is above a later one's
 (docs/results-log.md, "fifteen hundred epochs").
 
 The modes are stored scaled by the weights' RMS over the training cases, so that the branch's
