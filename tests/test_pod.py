@@ -231,12 +231,14 @@ def test_a_pod_model_keeps_the_epoch_of_its_lowest_validation_error_in_mm(
     """
     from surrogate.train import train_and_evaluate
 
-    noisy = CONFIG.replace(lr_schedule="constant", learning_rate=0.02, max_epochs=40,
+    # a run whose two choices lie far apart: the epoch of the lowest error in mm (early) has
+    # about three times the lowest loss (late)
+    noisy = CONFIG.replace(lr_schedule="constant", learning_rate=0.05, seed=1, max_epochs=40,
                            patience=40)
     result = train_and_evaluate(read_dataset(cube[0]), noisy, progress=False)
     errors = np.array([h["validation_error_mm"] for h in result.history])
     losses = np.array([h["validation_loss"] for h in result.history])
-    assert np.argmin(losses) != np.argmin(errors)  # the two choices differ in this run
+    assert losses[np.argmin(errors)] > 2.0 * losses.min()  # the two choices differ widely
     assert result.best_epoch == int(np.argmin(errors)) + 1
     assert result.validation_error_mm == pytest.approx(errors.min(), rel=1e-5)
     assert result.best_validation_loss == pytest.approx(losses[result.best_epoch - 1])
