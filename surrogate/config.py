@@ -69,7 +69,8 @@ class SurrogateConfig:
         beta2: Adam β2 (paper 0.9).
         batch_size: samples per step (paper 8000).
         max_epochs: epoch cap (paper 200).
-        patience: early-stopping patience on the validation loss (paper 20).
+        patience: early-stopping patience on the validation loss (a ``pod`` model's on its
+            validation error in mm; paper 20).
         lr_schedule: ``constant`` (the paper), ``cosine`` (decay to
             ``lr_final · learning_rate`` at ``max_epochs``) or ``exponential`` (the same
             end point, geometric per epoch, as the authors' public code).

@@ -49,7 +49,8 @@ class TrainResult:
     """A trained surrogate and how it got there.
 
     Attributes:
-        params: the best weights (lowest validation loss).
+        params: the best weights (lowest validation loss; a ``pod`` model's lowest validation
+            error in mm, :mod:`surrogate.pod`).
         config: hyperparameters.
         normalisation: input/output maps fitted on the training cases.
         point_factor: per-point output factor φ of the exact Dirichlet mode (None otherwise).
@@ -378,7 +379,8 @@ def train_and_evaluate(
             epoch a run of the same config chose on that validation data), and keep the last
             weights: the model used downstream, once the validation has done its work of
             choosing the architecture and the epochs. None: train on the training part and
-            keep the weights of the lowest validation loss.
+            keep the weights of the lowest validation loss (a ``pod`` model: of the lowest
+            validation error in mm).
 
     A ``pod`` model is fitted by :func:`surrogate.pod.train_pod`.
 

@@ -25,8 +25,9 @@ def training_section(ctx: Context) -> str:
             "(surrogate_study.refit), for the epochs that run's validation chose, keeping the "
             "last weights: its 'validation' error is measured on data it trained on, and the "
             "held-out section judges the selection instead." if refit else
-            "Training stops at max_epochs, or earlier when the validation loss has not "
-            "improved for the configured patience; the best epoch's weights are kept."),
+            "Training stops at max_epochs, or earlier when the validation loss (a pod "
+            "model's: its validation error in mm) has not improved for the configured "
+            "patience; the best epoch's weights are kept."),
         "caption")]
     if history.get("history"):
         out.append(ctx.figure(
