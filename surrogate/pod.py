@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import logging
 import time
-from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -45,8 +44,14 @@ import optax
 from fem.dataset import Dataset
 from surrogate.config import SurrogateConfig
 from surrogate.data import Normalisation
-from surrogate.model import Layers, branch_weights, init_params
-from surrogate.train import TrainResult, learning_rate_schedule, make_optimizer, progress_bar
+from surrogate.model import Layers, Params, branch_weights, init_params
+from surrogate.train import (
+    EpochFigures,
+    TrainResult,
+    learning_rate_schedule,
+    make_optimizer,
+    run_epochs,
+)
 
 log = logging.getLogger(__name__)
 
@@ -243,47 +248,17 @@ def fit(
              n if nodes is None else len(nodes.X), "points" if nodes is None else "nodes",
              config.modes, left, result.compile_s)
 
-    best: dict[str, Any] = {"loss": float("inf"), "error_mm": float("inf"), "layers": layers,
-                            "epoch": 0}
-    since_best = 0
-    bar = progress_bar(config.max_epochs, progress, config.architecture)
-    for epoch in range(1, config.max_epochs + 1):
-        t0 = time.perf_counter()
+    def one_epoch() -> tuple[Params, EpochFigures]:
+        nonlocal layers, state
         layers, state, train_loss = epoch_fn(layers, state, train_x, train_w)
-        train_loss = float(train_loss)
-        val_loss = float(loss_fn(layers, val_x, val_w))
-        error_mm = float(field_errors(layers)[0])
-        result.history.append({
-            "epoch": epoch, "train_loss": train_loss, "validation_loss": val_loss,
-            "validation_error_mm": error_mm,
-            "learning_rate": float(schedule((epoch - 1) * STEPS_PER_EPOCH)),
-            "epoch_s": time.perf_counter() - t0,
-        })
-        if bar is not None:
-            bar.set_postfix(train=f"{train_loss:.4g}", val=f"{val_loss:.4g}",
-                            err_mm=f"{error_mm:.4f}")
-            bar.update(1)
-        if not np.isfinite(train_loss):
-            log.warning("training diverged at epoch %d (loss %s)", epoch, train_loss)
-            break
-        if refit_epochs is not None:  # the epochs a validation chose before: the last weights
-            best = {"loss": val_loss, "error_mm": error_mm, "layers": layers, "epoch": epoch}
-            if epoch >= refit_epochs:
-                break
-        elif error_mm < best["error_mm"]:
-            best = {"loss": val_loss, "error_mm": error_mm, "layers": layers, "epoch": epoch}
-            since_best = 0
-        else:
-            since_best += 1
-            if since_best >= config.patience:
-                log.info("early stop at epoch %d (best %d)", epoch, best["epoch"])
-                break
-    if bar is not None:
-        bar.close()
-    result.refit = refit_epochs is not None
-    result.params = {"branch": best["layers"]}
-    result.best_validation_loss, result.best_epoch = best["loss"], best["epoch"]
-    error, domain = field_errors(best["layers"])
+        figures = EpochFigures(float(train_loss), float(loss_fn(layers, val_x, val_w)),
+                               float(field_errors(layers)[0]))
+        return {"branch": layers}, figures
+
+    run_epochs(one_epoch, {"branch": layers}, config, result, schedule=schedule,
+               steps=STEPS_PER_EPOCH, refit_epochs=refit_epochs, progress=progress,
+               select="validation_error_mm")
+    error, domain = field_errors(result.params["branch"])
     result.validation_error_mm, result.validation_error_domain_mm = float(error), float(domain)
     result.train_s = time.perf_counter() - start
     log.info("%s pod: best epoch %d of %d, validation error %.4f mm (%.4f mm off the rib), "

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import partial
 from typing import Any
@@ -448,40 +449,85 @@ def train_and_evaluate(
         result.compile_s,
     )
 
-    best_loss, best_params, best_epoch, since_best = float("inf"), params, 0, 0
+    def one_epoch() -> tuple[Params, EpochFigures]:
+        nonlocal params, opt_state, key
+        key, epoch_key = jax.random.split(key)
+        params, opt_state, train_loss = epoch_fn(params, opt_state, epoch_key, *data, inputs)
+        metrics = evaluate(params, val, config, norm.u_scale, inputs)
+        return params, EpochFigures(float(train_loss), metrics["loss"], metrics["error_mm"])
+
+    run_epochs(one_epoch, params, config, result, schedule=schedule, steps=steps,
+               refit_epochs=refit_epochs, progress=progress, select="validation_loss")
+    result.train_s = time.perf_counter() - start
+    final = evaluate(result.params, val, config, norm.u_scale, inputs)
+    result.validation_error_mm = final["error_mm"]
+    result.validation_error_domain_mm = final["domain_error_mm"]
+    log.info(
+        "%s: best epoch %d of %d, validation error %.4f mm (%.4f mm off the rib), %.1f s",
+        config.architecture,
+        result.best_epoch,
+        len(result.history),
+        result.validation_error_mm,
+        result.validation_error_domain_mm,
+        result.train_s,
+    )
+    return result
+
+
+@dataclass(frozen=True)
+class EpochFigures:
+    """What one epoch of training reports: its training loss and its validation figures."""
+
+    train_loss: float
+    validation_loss: float
+    validation_error_mm: float
+
+
+def run_epochs(
+    one_epoch: Callable[[], tuple[Any, EpochFigures]], params: Any, config: SurrogateConfig,
+    result: TrainResult, *, schedule: optax.Schedule, steps: int, refit_epochs: int | None,
+    progress: bool, select: str,
+) -> None:
+    """The epoch loop every structure trains in: early stopping, or a refit's fixed epochs.
+
+    Each call of ``one_epoch`` trains one epoch and returns the weights and their figures; the
+    loop appends them to ``result.history`` (with the learning rate at the epoch's first of
+    ``steps`` steps and the epoch's time) and stops when training diverges, after
+    ``config.max_epochs``, or ``config.patience`` epochs after the best. The best epoch is the
+    one of the lowest ``select`` figure (``"validation_loss"`` or ``"validation_error_mm"``);
+    with ``refit_epochs``, the last of that many epochs. Its weights, validation loss and
+    epoch go into ``result`` (``params``, ``best_validation_loss``, ``best_epoch``), with
+    ``result.refit``. ``params`` are the weights before the first epoch.
+    """
+    if select not in ("validation_loss", "validation_error_mm"):
+        raise ValueError(f"select must be validation_loss or validation_error_mm, got {select!r}")
+    best, best_params, best_epoch, since_best = float("inf"), params, 0, 0
+    best_loss = float("inf")
     bar = progress_bar(config.max_epochs, progress, config.architecture)
     for epoch in range(1, config.max_epochs + 1):
         t0 = time.perf_counter()
-        key, epoch_key = jax.random.split(key)
-        params, opt_state, train_loss = epoch_fn(params, opt_state, epoch_key, *data, inputs)
-        train_loss = float(train_loss)
-        metrics = evaluate(params, val, config, norm.u_scale, inputs)
-        result.history.append(
-            {
-                "epoch": epoch,
-                "train_loss": train_loss,
-                "validation_loss": metrics["loss"],
-                "validation_error_mm": metrics["error_mm"],
-                "learning_rate": float(schedule((epoch - 1) * steps)),
-                "epoch_s": time.perf_counter() - t0,
-            }
-        )
+        params, figures = one_epoch()
+        result.history.append({
+            "epoch": epoch, "train_loss": figures.train_loss,
+            "validation_loss": figures.validation_loss,
+            "validation_error_mm": figures.validation_error_mm,
+            "learning_rate": float(schedule((epoch - 1) * steps)),
+            "epoch_s": time.perf_counter() - t0,
+        })
         if bar is not None:
-            bar.set_postfix(
-                train=f"{train_loss:.4g}",
-                val=f"{metrics['loss']:.4g}",
-                err_mm=f"{metrics['error_mm']:.4f}",
-            )
+            bar.set_postfix(train=f"{figures.train_loss:.4g}", val=f"{figures.validation_loss:.4g}",
+                            err_mm=f"{figures.validation_error_mm:.4f}")
             bar.update(1)
-        if not np.isfinite(train_loss):
-            log.warning("training diverged at epoch %d (loss %s)", epoch, train_loss)
+        if not np.isfinite(figures.train_loss):
+            log.warning("training diverged at epoch %d (loss %s)", epoch, figures.train_loss)
             break
         if refit_epochs is not None:  # the epochs a validation chose before: the last weights
-            best_loss, best_params, best_epoch = metrics["loss"], params, epoch
+            best_loss, best_params, best_epoch = figures.validation_loss, params, epoch
             if epoch >= refit_epochs:
                 break
-        elif metrics["loss"] < best_loss:
-            best_loss, best_params, best_epoch, since_best = metrics["loss"], params, epoch, 0
+        elif getattr(figures, select) < best:
+            best, best_params, best_epoch, since_best = getattr(figures, select), params, epoch, 0
+            best_loss = figures.validation_loss
         else:
             since_best += 1
             if since_best >= config.patience:
@@ -489,26 +535,9 @@ def train_and_evaluate(
                 break
     if bar is not None:
         bar.close()
-    result.train_s = time.perf_counter() - start
     result.refit = refit_epochs is not None
     result.params, result.best_validation_loss, result.best_epoch = (
-        best_params,
-        best_loss,
-        best_epoch,
-    )
-    final = evaluate(best_params, val, config, norm.u_scale, inputs)
-    result.validation_error_mm = final["error_mm"]
-    result.validation_error_domain_mm = final["domain_error_mm"]
-    log.info(
-        "%s: best epoch %d of %d, validation error %.4f mm (%.4f mm off the rib), %.1f s",
-        config.architecture,
-        best_epoch,
-        len(result.history),
-        result.validation_error_mm,
-        result.validation_error_domain_mm,
-        result.train_s,
-    )
-    return result
+        best_params, best_loss, best_epoch)
 
 
 def progress_bar(total: int, enabled: bool, label: str) -> Any:

@@ -586,3 +586,51 @@ def test_a_refit_trains_on_the_validation_part_for_the_epochs_given(dataset_path
     for bad in (0, 2.5, True):
         with pytest.raises(ValueError, match="refit_epochs must be a positive integer"):
             train_and_evaluate(ds, config, progress=False, refit_epochs=bad)
+
+
+def _scripted_run(figures: list[tuple[float, float, float]], select: str,
+                  refit_epochs: int | None = None, max_epochs: int = 20, patience: int = 3):
+    """:func:`surrogate.train.run_epochs` over epochs whose figures are given; weights = epoch."""
+    from surrogate.train import EpochFigures, TrainResult, run_epochs
+
+    config = SurrogateConfig(max_epochs=max_epochs, patience=patience)
+    result = TrainResult(params=0, config=config, normalisation=None)  # the loop never reads it
+    epochs = iter(range(1, len(figures) + 1))
+
+    def one_epoch():
+        epoch = next(epochs)
+        return epoch, EpochFigures(*figures[epoch - 1])
+
+    run_epochs(one_epoch, 0, config, result, schedule=lambda step: 0.01, steps=10,
+               refit_epochs=refit_epochs, progress=False, select=select)
+    return result
+
+
+def test_the_epoch_loop_keeps_the_best_epoch_by_its_figure_and_stops_on_patience() -> None:
+    """One loop trains every structure (:func:`surrogate.train.run_epochs`).
+
+    The best epoch is the one of the figure named, patience counts from it, the history holds
+    every epoch run, a refit keeps its last epoch and a diverged loss ends the run.
+    """
+    # (train loss, validation loss, validation error mm): the loss is lowest at epoch 4, the
+    # error at epoch 2; both rise after epoch 4
+    figures = [(1.0, 0.9, 0.50), (0.8, 0.7, 0.20), (0.6, 0.5, 0.30), (0.5, 0.4, 0.25),
+               (0.4, 0.6, 0.40), (0.3, 0.8, 0.60), (0.2, 0.9, 0.70), (0.1, 1.0, 0.80)]
+    by_loss = _scripted_run(figures, "validation_loss")
+    assert (by_loss.best_epoch, by_loss.params, by_loss.best_validation_loss) == (4, 4, 0.4)
+    assert len(by_loss.history) == 7  # three epochs past the best
+    assert [h["validation_error_mm"] for h in by_loss.history] == [f[2] for f in figures[:7]]
+    assert not by_loss.refit
+
+    by_error = _scripted_run(figures, "validation_error_mm")
+    assert (by_error.best_epoch, by_error.params, by_error.best_validation_loss) == (2, 2, 0.7)
+    assert len(by_error.history) == 5
+
+    refit = _scripted_run(figures, "validation_error_mm", refit_epochs=6)
+    assert (refit.best_epoch, refit.params, len(refit.history), refit.refit) == (6, 6, 6, True)
+
+    diverged = _scripted_run([(1.0, 0.9, 0.5), (float("nan"), 0.8, 0.4)], "validation_loss")
+    assert (diverged.best_epoch, len(diverged.history)) == (1, 2)
+
+    with pytest.raises(ValueError, match="select"):
+        _scripted_run(figures, "train_loss")
