@@ -501,8 +501,8 @@ def run_epochs(
     """
     if select not in ("validation_loss", "validation_error_mm"):
         raise ValueError(f"select must be validation_loss or validation_error_mm, got {select!r}")
-    best, best_params, best_epoch, since_best = float("inf"), params, 0, 0
-    best_loss = float("inf")
+    best_figure, best_loss, best_params, best_epoch = float("inf"), float("inf"), params, 0
+    since_best = 0
     bar = progress_bar(config.max_epochs, progress, config.architecture)
     for epoch in range(1, config.max_epochs + 1):
         t0 = time.perf_counter()
@@ -525,9 +525,9 @@ def run_epochs(
             best_loss, best_params, best_epoch = figures.validation_loss, params, epoch
             if epoch >= refit_epochs:
                 break
-        elif getattr(figures, select) < best:
-            best, best_params, best_epoch, since_best = getattr(figures, select), params, epoch, 0
-            best_loss = figures.validation_loss
+        elif getattr(figures, select) < best_figure:
+            best_figure, best_loss = getattr(figures, select), figures.validation_loss
+            best_params, best_epoch, since_best = params, epoch, 0
         else:
             since_best += 1
             if since_best >= config.patience:
