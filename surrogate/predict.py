@@ -266,7 +266,7 @@ class Surrogate:
             and any(abs((p - n + 180.0) % 360.0 - 180.0) < 1e-6 for n in (below, above))
         ]
 
-    def _unconverged_beside(
+    def unconverged_beside(
         self, C1: float, phi: float, theta: float
     ) -> tuple[float, float, float] | None:
         """The stiffest failed sweep case beside the query's direction, if C1 is not stiffer.
@@ -440,7 +440,7 @@ class Surrogate:
             return f"Φ = {p:g}°" if self._directions is None else f"Φ = {p:g}°, θ = {t:g}°"
 
         query = f"C1 = {C1} kPa, Φ = {phi}°, θ = {theta}°"
-        failed = self._unconverged_beside(C1, phi, theta)
+        failed = self.unconverged_beside(C1, phi, theta)
         if failed is not None:
             c1, p, t = failed
             messages.append(

@@ -237,7 +237,7 @@ def test_bad_inputs_are_named(dataset_path: Path, tmp_path: Path) -> None:
 
 
 def test_prediction_warns_where_the_sweep_did_not_converge(
-    dataset_path: Path, tmp_path: Path
+    dataset_path: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """A model knows the sweep's failed cases and warns at or below their C1 beside their Φ.
 
@@ -293,6 +293,27 @@ def test_prediction_warns_where_the_sweep_did_not_converge(
         warnings.simplefilter("error")
         for C1, phi in ((3.0, -90.0), (1.0, 90.0), (1.0, 45.0)):
             saved.predict(C1, phi)
+    # studies.warning_coverage on the plane: Φ drawn evenly, half of it beside -90°; there
+    # the failures warn up to 2 kPa and the softest solution (3 kPa) above it
+    from studies.warning_coverage import KINDS, warning_coverage
+
+    coverage = warning_coverage(saved, queries=4000, seed=2, edges=(2.0, 3.0))
+    assert coverage.queries == coverage.drawn == 4000 and coverage.kinds[KINDS[2]] == 0
+    below_failure, below_softest, stiffer = coverage.bands
+    assert (below_failure.c1_low, below_softest.c1_low, stiffer.c1_high) == (1.0, 2.0, 5.0)
+    assert below_failure.warned == coverage.kinds[KINDS[0]]
+    assert below_softest.warned == coverage.kinds[KINDS[1]]
+    assert stiffer.warned == 0
+    assert 0.4 < below_failure.share < 0.6 and 0.4 < below_softest.share < 0.6
+    from studies.warning_coverage import main
+
+    assert main([str(tmp_path / "saved"), "--queries", "4000", "--seed", "2", "--bands", "2",
+                 "3"]) == 0
+    out = capsys.readouterr().out
+    assert f"warned: {coverage.warned} ({100 * coverage.share:.2f} %)" in out
+    assert f"beside a failed FE solve: {coverage.kinds[KINDS[0]]}" in out
+    assert main([str(tmp_path / "missing")]) == 2
+    assert "error:" in capsys.readouterr().err
 
 
 def test_a_model_of_the_caudal_half_warns_by_direction(tmp_path: Path) -> None:
@@ -388,6 +409,25 @@ def test_a_model_of_the_caudal_half_warns_by_direction(tmp_path: Path) -> None:
         warnings.simplefilter("error")
         banded.predict(3.0, *nearest)
         banded.predict(1.0, 0.0, 0.0)
+
+    # studies.warning_coverage: the share of the trained range each model warns at, by drawing
+    # queries over it. The model without a failure warns nowhere inside its directions; both
+    # others warn below 3 kPa beside the one direction whose softest solution is 3 kPa (the
+    # failed model's 1 kPa failure itself backs no query: C1 = 1 kPa exactly has no measure)
+    from studies.warning_coverage import KINDS, warning_coverage
+
+    clear = warning_coverage(model, queries=3000, seed=1)
+    assert clear.warned == 0 and 0.3 < clear.queries / clear.drawn < 0.8  # the caudal half
+    with_failure = warning_coverage(failed, queries=3000, seed=1)
+    without_solve = warning_coverage(banded, queries=3000, seed=1)
+    assert with_failure.queries == without_solve.queries == clear.queries
+    assert with_failure.warned == without_solve.warned == with_failure.kinds[KINDS[1]]
+    # beside: within one spacing (about 25°) of one of 32 directions over the caudal half
+    assert 0.01 < with_failure.share < 0.2
+    assert sum(b.queries for b in with_failure.bands) == with_failure.queries
+    assert sum(b.warned for b in with_failure.bands) == with_failure.warned
+    assert [(b.c1_low, b.c1_high) for b in with_failure.bands] == [(1.0, 1.2), (1.2, 2.0),
+                                                                    (2.0, 3.0)]
 
 
 def test_selection_takes_the_most_accurate_architecture_within_the_prediction_budget() -> None:
