@@ -31,13 +31,17 @@ from fem.dataset import gravity_angles
 from surrogate.exceptions import ExtrapolationWarning
 from surrogate.predict import Surrogate
 
-#: The kinds of warning counted inside the trained range (a query may have both).
+#: The kinds of warning counted inside the trained range. A warned query counts once, under the
+#: first that applies, as the model itself checks a failed solve beside it first.
 KINDS = ("beside a failed FE solve", "below the softest C1 solved beside", "other")
 
 
 @dataclass(frozen=True)
 class CoverageBand:
-    """The queries with C1 in ``[c1_low, c1_high)`` kPa, and how many of them warned."""
+    """How many queries had C1 in ``[c1_low, c1_high)`` kPa, and how many of them warned.
+
+    The last band includes its upper end, the trained range's.
+    """
 
     c1_low: float
     c1_high: float
