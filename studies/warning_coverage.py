@@ -11,7 +11,7 @@ where a user gets an answer without a warning, and where she does not.
 The queries: C1 uniform in the model's trained range; gravity directions uniform on the sphere
 and kept where they lie among the training directions (``Surrogate.direction_outside`` None),
 or, for a model of the plane, Φ uniform outside its arc without training angles, at its trained
-θ. ``python -m studies.warning_coverage MODEL [--queries N] [--seed S] [--bands C1 ...]`` prints
+θ. ``python -m studies.warning_coverage MODEL [--draws N] [--seed S] [--bands C1 ...]`` prints
 the table.
 """
 
@@ -105,26 +105,26 @@ def _directions(
 
 
 def warning_coverage(
-    model: Surrogate, queries: int = 40_000, seed: int = 0, edges: Sequence[float] = (1.0, 1.2, 2.0)
+    model: Surrogate, draws: int = 40_000, seed: int = 0, edges: Sequence[float] = (1.0, 1.2, 2.0)
 ) -> WarningCoverage:
-    """Draw ``queries`` queries over ``model``'s trained range and count where it warns.
+    """Draw ``draws`` queries over ``model``'s trained range and count where it warns.
 
     Args:
         model: a trained surrogate.
-        queries: directions drawn (those outside the training directions are dropped).
+        draws: directions drawn (those outside the training directions are dropped).
         seed: the random stream's seed.
         edges: C1 values (kPa) between the bands of the table.
 
     Raises:
-        ValueError: if ``queries`` is not positive, or the model records no finite C1 range.
+        ValueError: if ``draws`` is not positive, or the model records no finite C1 range.
     """
-    if queries < 1:
-        raise ValueError(f"queries must be positive, got {queries}")
+    if draws < 1:
+        raise ValueError(f"draws must be positive, got {draws}")
     low, high = model.range_checks()["c1_kPa"]
     if low is None or high is None:
         raise ValueError("the model records no finite trained C1 range")
     rng = np.random.default_rng(seed)
-    phi, theta = _directions(model, rng, queries)
+    phi, theta = _directions(model, rng, draws)
     c1 = rng.uniform(low, high, len(phi))
     warned = np.zeros(len(phi), dtype=bool)
     kinds = dict.fromkeys(KINDS, 0)
@@ -145,7 +145,7 @@ def warning_coverage(
     for lo, hi in zip(cuts[:-1], cuts[1:], strict=True):
         inside = (c1 >= lo) & ((c1 < hi) if hi < high else (c1 <= hi))
         bands.append(CoverageBand(lo, hi, int(inside.sum()), int(warned[inside].sum())))
-    return WarningCoverage((low, high), queries, len(phi), int(warned.sum()), kinds, tuple(bands),
+    return WarningCoverage((low, high), draws, len(phi), int(warned.sum()), kinds, tuple(bands),
                            seed)
 
 
@@ -156,7 +156,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m studies.warning_coverage",
                                      description=__doc__.splitlines()[0])
     parser.add_argument("model", type=Path, help="a model folder")
-    parser.add_argument("--queries", type=int, default=40_000,
+    parser.add_argument("--draws", type=int, default=40_000,
                         help="directions drawn (default 40000)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--bands", type=float, nargs="*", default=[1.0, 1.2, 2.0],
@@ -164,7 +164,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         model = Surrogate.load(args.model)
-        coverage = warning_coverage(model, args.queries, args.seed, args.bands)
+        coverage = warning_coverage(model, args.draws, args.seed, args.bands)
     except (SurrogateError, OSError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2

@@ -297,7 +297,7 @@ def test_prediction_warns_where_the_sweep_did_not_converge(
     # the failures warn up to 2 kPa and the softest solution (3 kPa) above it
     from studies.warning_coverage import KINDS, warning_coverage
 
-    coverage = warning_coverage(saved, queries=4000, seed=2, edges=(2.0, 3.0))
+    coverage = warning_coverage(saved, draws=4000, seed=2, edges=(2.0, 3.0))
     assert coverage.queries == coverage.drawn == 4000 and coverage.kinds[KINDS[2]] == 0
     below_failure, below_softest, stiffer = coverage.bands
     assert (below_failure.c1_low, below_softest.c1_low, stiffer.c1_high) == (1.0, 2.0, 5.0)
@@ -307,7 +307,7 @@ def test_prediction_warns_where_the_sweep_did_not_converge(
     assert 0.4 < below_failure.share < 0.6 and 0.4 < below_softest.share < 0.6
     from studies.warning_coverage import main
 
-    assert main([str(tmp_path / "saved"), "--queries", "4000", "--seed", "2", "--bands", "2",
+    assert main([str(tmp_path / "saved"), "--draws", "4000", "--seed", "2", "--bands", "2",
                  "3"]) == 0
     out = capsys.readouterr().out
     assert f"warned: {coverage.warned} ({100 * coverage.share:.2f} %)" in out
@@ -416,10 +416,10 @@ def test_a_model_of_the_caudal_half_warns_by_direction(tmp_path: Path) -> None:
     # failed model's 1 kPa failure itself backs no query: C1 = 1 kPa exactly has no measure)
     from studies.warning_coverage import KINDS, warning_coverage
 
-    clear = warning_coverage(model, queries=3000, seed=1)
+    clear = warning_coverage(model, draws=3000, seed=1)
     assert clear.warned == 0 and 0.3 < clear.queries / clear.drawn < 0.8  # the caudal half
-    with_failure = warning_coverage(failed, queries=3000, seed=1)
-    without_solve = warning_coverage(banded, queries=3000, seed=1)
+    with_failure = warning_coverage(failed, draws=3000, seed=1)
+    without_solve = warning_coverage(banded, draws=3000, seed=1)
     assert with_failure.queries == without_solve.queries == clear.queries
     assert with_failure.warned == without_solve.warned == with_failure.kinds[KINDS[1]]
     # beside: within one spacing (about 25°) of one of 32 directions over the caudal half
