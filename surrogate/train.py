@@ -501,8 +501,8 @@ def run_epochs(
     """
     if select not in ("validation_loss", "validation_error_mm"):
         raise ValueError(f"select must be validation_loss or validation_error_mm, got {select!r}")
-    best_figure, best_loss, best_params, best_epoch = float("inf"), float("inf"), params, 0
-    since_best = 0
+    best: EpochFigures | None = None  # the best epoch's figures; None before there is one
+    best_params, best_epoch, since_best = params, 0, 0
     bar = progress_bar(config.max_epochs, progress, config.architecture)
     for epoch in range(1, config.max_epochs + 1):
         t0 = time.perf_counter()
@@ -522,12 +522,11 @@ def run_epochs(
             log.warning("training diverged at epoch %d (loss %s)", epoch, figures.train_loss)
             break
         if refit_epochs is not None:  # the epochs a validation chose before: the last weights
-            best_loss, best_params, best_epoch = figures.validation_loss, params, epoch
+            best, best_params, best_epoch = figures, params, epoch
             if epoch >= refit_epochs:
                 break
-        elif getattr(figures, select) < best_figure:
-            best_figure, best_loss = getattr(figures, select), figures.validation_loss
-            best_params, best_epoch, since_best = params, epoch, 0
+        elif getattr(figures, select) < (float("inf") if best is None else getattr(best, select)):
+            best, best_params, best_epoch, since_best = figures, params, epoch, 0
         else:
             since_best += 1
             if since_best >= config.patience:
@@ -536,8 +535,8 @@ def run_epochs(
     if bar is not None:
         bar.close()
     result.refit = refit_epochs is not None
-    result.params, result.best_validation_loss, result.best_epoch = (
-        best_params, best_loss, best_epoch)
+    result.params, result.best_epoch = best_params, best_epoch
+    result.best_validation_loss = float("inf") if best is None else best.validation_loss
 
 
 def progress_bar(total: int, enabled: bool, label: str) -> Any:
