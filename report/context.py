@@ -30,6 +30,7 @@ from studies.stiffness import StiffnessResult
 from studies.surrogate_benchmark import SurrogateBenchmark
 from studies.surrogate_evaluation import ClinicalEvaluation, Extrapolation
 from studies.tracking import TrackingResult
+from studies.warning_coverage import WarningCoverage
 from surrogate.checkpoint import read_history, read_model_card
 
 log = logging.getLogger(__name__)
@@ -40,6 +41,7 @@ INPUT_NAMES = (
     "extrapolation", "benchmark", "clinical_fields", "fe_clinical", "fe_speed_accuracy",
     "fe_stability", "corpus", "reference_roundtrip", "reference_record", "tracking", "stiffness",
     "viewer", "held_out", "postures", "off_grid", "fe_failure_edges", "fe_stability_audit",
+    "warning_coverage",
 )
 
 
@@ -66,6 +68,7 @@ RESULT_TYPES: dict[str, Callable[[Path], Any]] = {
     "held_out": HeldOutEvaluation.read,
     "postures": PostureEvaluation.read,
     "off_grid": OffGridEvaluation.read,
+    "warning_coverage": WarningCoverage.read,
 }
 
 

@@ -11,8 +11,9 @@ where a user gets an answer without a warning, and where she does not.
 The queries: C1 uniform in the model's trained range; gravity directions uniform on the sphere
 and kept where they lie among the training directions (``Surrogate.direction_outside`` None),
 or, for a model of the plane, Φ uniform outside its arc without training angles, at its trained
-θ. ``python -m studies.warning_coverage MODEL [--draws N] [--seed S] [--bands C1 ...]`` prints
-the table.
+θ. ``python -m studies.warning_coverage MODEL [--draws N] [--seed S] [--bands C1 ...] [--json
+OUT]`` prints the table; the workflow's rule ``warning_coverage`` writes it for the selected model
+(``results/surrogate/warning_coverage.json``, :class:`WarningCoverage`) and the report shows it.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from fem.dataset import gravity_angles
+from studies.results import Record, Result
 from surrogate.exceptions import ExtrapolationWarning
 from surrogate.predict import Surrogate
 
@@ -36,8 +38,14 @@ from surrogate.predict import Surrogate
 KINDS = ("beside a failed FE solve", "below the softest C1 solved beside", "other")
 
 
-@dataclass(frozen=True)
-class CoverageBand:
+#: The queries drawn, their seed and the C1 values (kPa) between the table's bands, by default.
+DRAWS = 40_000
+SEED = 0
+BAND_EDGES = (1.0, 1.2, 2.0)
+
+
+@dataclass(frozen=True, slots=True)
+class CoverageBand(Record):
     """How many queries had C1 in ``[c1_low, c1_high)`` kPa, and how many of them warned.
 
     The last band includes its upper end, the trained range's.
@@ -54,9 +62,11 @@ class CoverageBand:
         return self.warned / self.queries if self.queries else math.nan
 
 
-@dataclass(frozen=True)
-class WarningCoverage:
+@dataclass(frozen=True, slots=True)
+class WarningCoverage(Result):
     """How much of a model's trained range it answers without a warning.
+
+    ``results/surrogate/warning_coverage.json`` for the selected model.
 
     Attributes:
         c1_kpa: the trained C1 range the queries were drawn from.
@@ -105,7 +115,7 @@ def _directions(
 
 
 def warning_coverage(
-    model: Surrogate, draws: int = 40_000, seed: int = 0, edges: Sequence[float] = (1.0, 1.2, 2.0)
+    model: Surrogate, draws: int = DRAWS, seed: int = SEED, edges: Sequence[float] = BAND_EDGES
 ) -> WarningCoverage:
     """Draw ``draws`` queries over ``model``'s trained range and count where it warns.
 
@@ -156,11 +166,13 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m studies.warning_coverage",
                                      description=__doc__.splitlines()[0])
     parser.add_argument("model", type=Path, help="a model folder")
-    parser.add_argument("--draws", type=int, default=40_000,
-                        help="directions drawn (default 40000)")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--bands", type=float, nargs="*", default=[1.0, 1.2, 2.0],
-                        help="C1 values (kPa) between the bands (default 1.0 1.2 2.0)")
+    parser.add_argument("--draws", type=int, default=DRAWS,
+                        help=f"directions drawn (default {DRAWS})")
+    parser.add_argument("--seed", type=int, default=SEED)
+    parser.add_argument("--bands", type=float, nargs="*", default=list(BAND_EDGES),
+                        help="C1 values (kPa) between the bands (default "
+                             f"{' '.join(f'{e:g}' for e in BAND_EDGES)})")
+    parser.add_argument("--json", type=Path, help="also write the result here")
     args = parser.parse_args(argv)
     try:
         model = Surrogate.load(args.model)
@@ -168,6 +180,8 @@ def main(argv: list[str] | None = None) -> int:
     except (SurrogateError, OSError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
+    if args.json is not None:
+        coverage.write(args.json)
     low, high = coverage.c1_kpa
     print(f"{args.model}: {coverage.queries} queries inside the training directions (of "
           f"{coverage.drawn} drawn, seed {coverage.seed}), C1 uniform in [{low:g}, {high:g}] kPa")

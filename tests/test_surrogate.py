@@ -305,13 +305,26 @@ def test_prediction_warns_where_the_sweep_did_not_converge(
     assert below_softest.warned == coverage.kinds[KINDS[1]]
     assert stiffer.warned == 0
     assert 0.4 < below_failure.share < 0.6 and 0.4 < below_softest.share < 0.6
-    from studies.warning_coverage import main
+    from studies.warning_coverage import WarningCoverage, main
 
     assert main([str(tmp_path / "saved"), "--draws", "4000", "--seed", "2", "--bands", "2",
-                 "3"]) == 0
+                 "3", "--json", str(tmp_path / "coverage.json")]) == 0
     out = capsys.readouterr().out
     assert f"warned: {coverage.warned} ({100 * coverage.share:.2f} %)" in out
     assert f"beside a failed FE solve: {coverage.kinds[KINDS[0]]}" in out
+    # the workflow's file (rule warning_coverage) reads back as the same result, and the
+    # report's table gives each band's count and share, the last band closed at 5 kPa
+    assert WarningCoverage.read(tmp_path / "coverage.json") == coverage
+    from report.context import Context
+    from report.sections.generalisation import warning_coverage_part
+
+    page = warning_coverage_part(Context(out_dir=tmp_path, clinical=[], paths={},
+                                         clinical_fields=[],
+                                         results={"warning_coverage": coverage}))
+    assert (f"<td>[1, 2)</td><td>{below_failure.queries}</td><td>{below_failure.warned}</td>"
+            f"<td>{100 * below_failure.share:.2f}</td>") in page
+    assert f"<td>[3, 5]</td><td>{stiffer.queries}</td><td>0</td><td>0.00</td>" in page
+    assert f"<td>all</td><td>4000</td><td>{coverage.warned}</td>" in page
     assert main([str(tmp_path / "missing")]) == 2
     assert "error:" in capsys.readouterr().err
 

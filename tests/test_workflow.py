@@ -387,6 +387,14 @@ def test_held_out_models_and_postures_are_judged_against_fe(small_run: Path) -> 
     assert row.errors is not None and off_grid.spread.max_mm == row.errors.max_mm > 0
     assert f"{row.errors.max_mm:.3g}" in html_table(page, "off-grid")
 
+    # where the selected model warns over its trained range (rule warning_coverage)
+    from studies.warning_coverage import WarningCoverage
+
+    coverage = WarningCoverage.read(results / "surrogate/warning_coverage.json")
+    assert coverage.queries > 0 and sum(b.queries for b in coverage.bands) == coverage.queries
+    assert f"<td>all</td><td>{coverage.queries}</td><td>{coverage.warned}</td>" in html_table(
+        page, "warning-coverage")
+
 
 def test_held_out_command_prints_the_workflows_figures(small_run: Path, capsys) -> None:
     """``python -m studies.held_out`` gives a model's held-out errors as the workflow's JSON."""

@@ -163,6 +163,32 @@ def _misses_warned(blocks: Sequence[HeldOutBlock]) -> str:
     ])
 
 
+def warning_coverage_part(ctx: Context) -> str:
+    """How much of the selected model's trained range it answers without a warning."""
+    result = ctx.results.get("warning_coverage")
+    if result is None:
+        return missing("results/surrogate/warning_coverage.json")
+    low, high = result.c1_kpa
+    rows = [[f"[{band.c1_low:g}, {band.c1_high:g}{']' if band.c1_high == high else ')'}",
+             band.queries, band.warned, pct(band.share, ".2f")] for band in result.bands]
+    rows.append(["all", result.queries, result.warned, pct(result.share, ".2f")])
+    kinds = "; ".join(f"{kind}: {count}" for kind, count in result.kinds.items())
+    return "".join([
+        para(f"The tables above give how large the misses are where the model warns; this gives "
+             f"how much of its range a user meets a warning in. {result.drawn} gravity "
+             f"directions were drawn evenly and kept where they lie among the training "
+             f"directions ({result.queries} queries), each with C1 drawn evenly in the trained "
+             f"range {low:g}–{high:g} kPa (seed {result.seed}); each query's checks were run as "
+             f"a prediction runs them. A warned query is one where no FE solution of the sweep "
+             f"backs an answer: beside a case whose FE solve failed at that C1 or a stiffer one, "
+             f"or below the softest C1 solved beside its direction. The share warned is that "
+             f"of the range, not of the queries users make.", "caption"),
+        table(["C1 (kPa)", "queries", "warned", "warned (%)"], rows, table_id="warning-coverage"),
+        para(f"Warned queries by kind (each counted once, under the first that applies): "
+             f"{kinds}.", "note"),
+    ])
+
+
 BETWEEN = (
     " A tumour lies between the material points the model trained on: the column 'between "
     "the points' gives the same errors at the FE mesh's cell centroids, where the FE field is "
@@ -255,8 +281,11 @@ def off_grid_part(ctx: Context) -> str:
 def generalisation_section(ctx: Context) -> str:
     """Held-out groups, random cases off the grid, then the clinical postures."""
     return "".join([h3("Between the sweep's cases: whole groups held out"), held_out_part(ctx),
+                    h3("Where the model warns over its trained range"),
+                    warning_coverage_part(ctx),
                     h3("At random cases off the grid"), off_grid_part(ctx),
                     h3("In every posture"), postures_part(ctx)])
 
 
-__all__ = ["generalisation_section", "held_out_part", "off_grid_part", "postures_part"]
+__all__ = ["generalisation_section", "held_out_part", "off_grid_part", "postures_part",
+           "warning_coverage_part"]

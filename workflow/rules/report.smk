@@ -17,6 +17,7 @@ rule report:
         held_out=HELD_OUT_JSON,
         postures=POSTURES_JSON,
         off_grid=OFF_GRID_JSON,
+        warning_coverage=WARNING_COVERAGE_JSON,
         benchmark=BENCHMARK_JSON,
         clinical_fields=clinical_fields(),
         fe_clinical=FE_CLINICAL_JSON,

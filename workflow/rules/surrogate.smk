@@ -269,6 +269,25 @@ rule off_grid:
         "../scripts/off_grid.py"
 
 
+# Where the selected model warns that no FE solution backs a query, over the range it was
+# trained on (studies.warning_coverage): queries drawn evenly, their checks run without the
+# network, the share warned by C1 band and by kind.
+rule warning_coverage:
+    input:
+        model=MODEL,
+    output:
+        WARNING_COVERAGE_JSON,
+    log:
+        "results/logs/surrogate/warning_coverage.log",
+    threads: 1
+    resources:
+        mem_mb=1000,
+    conda:
+        ENV
+    script:
+        "../scripts/warning_coverage.py"
+
+
 # Both threads reserved: the job pins itself to one core and times the FE solver and the
 # surrogate there, with no other job of the workflow beside it.
 rule surrogate_benchmark:

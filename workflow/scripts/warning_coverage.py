@@ -1,0 +1,13 @@
+"""Snakemake adapter: where the selected model warns over the range it was trained on."""
+
+from surrogate.runtime import configure_cpu
+
+configure_cpu()
+
+from studies.joblog import job_log  # noqa: E402
+from studies.warning_coverage import warning_coverage  # noqa: E402
+from surrogate.predict import Surrogate  # noqa: E402
+
+job_log(snakemake.log[0])
+
+warning_coverage(Surrogate.load(snakemake.input.model)).write(snakemake.output[0])
