@@ -175,14 +175,15 @@ def warning_coverage_part(ctx: Context) -> str:
     kinds = "; ".join(f"{kind}: {count}" for kind, count in result.kinds.items())
     return "".join([
         para(f"The tables above give how large the misses are where the model warns; this gives "
-             f"how much of its range a user meets a warning in. {result.drawn} gravity "
-             f"directions were drawn evenly and kept where they lie among the training "
-             f"directions ({result.queries} queries), each with C1 drawn evenly in the trained "
-             f"range {low:g}–{high:g} kPa (seed {result.seed}); each query's checks were run as "
-             f"a prediction runs them. A warned query is one where no FE solution of the sweep "
-             f"backs an answer: beside a case whose FE solve failed at that C1 or a stiffer one, "
-             f"or below the softest C1 solved beside its direction. The share warned is that "
-             f"of the range, not of the queries users make.", "caption"),
+             f"how much of its range a user meets a warning in. {result.drawn:,} gravity "
+             f"directions (for a model of the paper's plane, Φ alone) were drawn evenly and "
+             f"kept where they lie among the training directions ({result.queries:,} queries), "
+             f"each with C1 drawn evenly in the trained range {low:g}–{high:g} kPa (seed "
+             f"{result.seed}); each query's checks were run as a prediction runs them. A "
+             f"warned query is one where no FE solution of the sweep backs an answer: beside a "
+             f"case whose FE solve failed at that C1 or a stiffer one, or below the softest C1 "
+             f"solved beside its direction. The share warned is that of the range, not of the "
+             f"queries users make.", "caption"),
         table(["C1 (kPa)", "queries", "warned", "warned (%)"], rows, table_id="warning-coverage"),
         para(f"Warned queries by kind (each counted once, under the first that applies): "
              f"{kinds}.", "note"),
