@@ -9,7 +9,10 @@ Examples::
 ``.npy`` (the (N, 3) array in mm) or ``.xdmf`` (on the mesh of ``--mesh``, for ParaView).
 ``train`` trains the ``surrogate`` settings of ``--config`` with the ``--set`` overrides on
 one core, saves the model with ``--out`` and prints one JSON line (validation error, best
-epoch, training time). Bad input exits with status 2 and a message naming it.
+epoch, training time). Bad input exits with status 2 and a message naming it. A setup the
+model warns at (an extrapolation: no FE solution of its sweep backs it) prints ``warning: ...``
+on stderr and is still answered; with ``--strict`` it is refused instead (status 3, nothing
+written), for scripts that must not use such an answer.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ import argparse
 import json
 import logging
 import sys
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -25,7 +29,7 @@ import numpy as np
 
 from fem.dataset import DatasetError
 from surrogate.config import SurrogateConfig
-from surrogate.exceptions import SurrogateError
+from surrogate.exceptions import ExtrapolationWarning, SurrogateError
 
 
 def predict(args: argparse.Namespace) -> int:
@@ -33,7 +37,6 @@ def predict(args: argparse.Namespace) -> int:
     from surrogate.fields import write_prediction_xdmf
     from surrogate.predict import Surrogate
 
-    logging.captureWarnings(True)
     output = Path(args.output) if args.output else None
     if output is not None and output.suffix not in (".npy", ".xdmf"):
         print(f"error: --output {output} must end in .npy or .xdmf", file=sys.stderr)
@@ -44,7 +47,20 @@ def predict(args: argparse.Namespace) -> int:
         return 2
     try:
         model = Surrogate.load(args.model)
-        u = model.predict(args.c1, args.phi, args.theta)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", ExtrapolationWarning)
+            u = model.predict(args.c1, args.phi, args.theta)
+        extrapolated = False
+        for warning in caught:  # one line each, as a user reads it (not Python's source line)
+            if issubclass(warning.category, ExtrapolationWarning):
+                extrapolated = True
+                print(f"{'error' if args.strict else 'warning'}: {warning.message}",
+                      file=sys.stderr)
+            else:
+                warnings.showwarning(warning.message, warning.category, warning.filename,
+                                     warning.lineno)
+        if extrapolated and args.strict:
+            return 3
         if output is not None and output.suffix == ".xdmf":
             write_prediction_xdmf(output, args.mesh, model, u)
     except (SurrogateError, ValueError) as err:
@@ -118,6 +134,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output",
                    help="write the displacement: .npy (array, mm) or .xdmf (on the mesh)")
     p.add_argument("--mesh", default="results/mesh/mesh.xdmf", help="mesh for an .xdmf output")
+    p.add_argument("--strict", action="store_true",
+                   help="refuse a setup the model warns at (no FE solution backs it): exit "
+                        "status 3, nothing written")
     p.set_defaults(run=predict)
     t = sub.add_parser("train", help="train one model outside the workflow")
     t.add_argument("dataset", help="the sweep's HDF5 dataset")

@@ -536,6 +536,17 @@ def test_train_command_line_trains_saves_and_names_bad_settings(
     assert main(["predict", str(tmp_path / "m"), "--c1", "2", "--phi", "90",
                  "-o", str(tmp_path / "no" / "such" / "u.npy")]) == 2
     assert "does not exist" in capsys.readouterr().err
+    # an extrapolation is answered with one line saying so; --strict refuses it, writing nothing
+    outside = ["predict", str(tmp_path / "m"), "--c1", "50", "--phi", "90", "-o",
+               str(tmp_path / "far.npy")]
+    assert main(outside) == 0 and (tmp_path / "far.npy").is_file()
+    err = capsys.readouterr().err
+    assert err.startswith("warning: C1 = 50.0 kPa is outside the training range")
+    assert len(err.strip().splitlines()) == 1  # not Python's file, line and source line
+    (tmp_path / "far.npy").unlink()
+    assert main([*outside, "--strict"]) == 3 and not (tmp_path / "far.npy").exists()
+    assert capsys.readouterr().err.startswith("error: C1 = 50.0 kPa is outside")
+    assert main(["predict", str(tmp_path / "m"), "--c1", "2", "--phi", "90", "--strict"]) == 0
     assert main([*args, "--set", "activation=sigmoid"]) == 2
     assert "surrogate.activation must be one of" in capsys.readouterr().err
     assert main([*args, "--set", "widthx"]) == 2
