@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -59,7 +60,7 @@ class MeshConfig:
         config = cls(
             source=source,
             geometry=BreastGeometry.from_mapping(values.get("geometry") or {}),
-            size=MeshSize.from_mapping(values.get("size") or {}),
+            size=MeshSize.from_mapping(size_for_source(source, values.get("size") or {})),
             # the file section may stay in the config while the parametric source is used
             file=ImportSpec.from_mapping(file_values) if file_values and source == "file" else None,
         )
@@ -83,6 +84,23 @@ class MeshConfig:
     def input_files(self) -> list[str]:
         """Files the mesh is built from (none for the parametric source)."""
         return self.file.input_files() if self.source == "file" and self.file else []
+
+
+def size_for_source(source: str, values: Mapping[str, Any]) -> dict[str, Any]:
+    """``mesh.size`` as :class:`MeshSize` takes it for ``source``.
+
+    The mound's size is the parametric breast's (an import meshes at ``global_size``): for an
+    import it is capped at ``global_size``, so that a finer ``global_size`` alone, as a user
+    writes it for an image-resolution surface, is no error about a mound the file has not.
+    """
+    values = dict(values)
+    if source != "file":
+        return values
+    default = MeshSize()
+    mound = values.get("mound_size", default.mound_size)
+    finest = values.get("global_size", default.global_size)
+    numbers = all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in (mound, finest))
+    return {**values, "mound_size": min(mound, finest)} if numbers else values
 
 
 def make_mesh(

@@ -34,7 +34,7 @@ from fem.dataset import SplitFractions, direction_keys
 from fem.exceptions import FEError
 from fem.parameters import SolverSettings
 from fem.sweep import Case, clinical_cases, random_cases, sweep_cases
-from meshes.config import MeshConfig
+from meshes.config import MeshConfig, size_for_source
 from meshes.parametric import BreastGeometry
 from studies.fe_variants import MeshSpec, Variant, expand_variants
 from surrogate.config import SurrogateConfig, SurrogateConfigError, parse_architecture
@@ -201,8 +201,8 @@ def default_variant(mesh: Mapping[str, Any], fe: Mapping[str, Any]) -> Variant:
     disc = fe["discretisation"]
     degree = disc["degree"]
     element = "p1-penalty" if disc["element"] == "p1-penalty" else f"p{degree}p{degree - 1}"
-    return Variant(MeshSpec.from_mapping(mesh["size"]), element, fe["solver"],
-                   disc["quadrature_degree"])
+    size = size_for_source(mesh.get("source", "parametric"), mesh["size"])
+    return Variant(MeshSpec.from_mapping(size), element, fe["solver"], disc["quadrature_degree"])
 
 
 @dataclass(frozen=True, slots=True)

@@ -311,6 +311,34 @@ def test_the_parametric_sizes_are_left_aside_on_import(caplog) -> None:
     assert "order: 2, fold_size: 0.004: parametric only" in caplog.text
 
 
+def test_an_import_finer_than_the_default_mound_size_needs_only_its_global_size() -> None:
+    """`size: {global_size: 0.008}` (the README's import) is no error about the mound's size.
+
+    The mound is the parametric breast's: for an import its size is capped at global_size,
+    whether the schema filled in its default (0.010) or the key is absent; the parametric
+    breast still refuses a mound coarser than the rest.
+    """
+    from meshes.config import MeshConfig
+
+    config = file_config()["mesh"]
+    for size in ({"global_size": 0.008}, {"global_size": 0.008, "mound_size": 0.010}):
+        parsed = MeshConfig.from_mapping({**config, "size": size}).size
+        assert (parsed.global_size, parsed.mound_size) == (0.008, 0.008)
+    kept = MeshConfig.from_mapping({**config, "size": {"global_size": 0.02, "mound_size": 0.01}})
+    assert kept.size.mound_size == 0.01
+    with pytest.raises(GeometryError, match="mound_size"):
+        MeshConfig.from_mapping({"source": "parametric", "size": {"global_size": 0.008}})
+    with pytest.raises(GeometryError, match="global_size must be positive"):
+        MeshConfig.from_mapping({**config, "size": {"global_size": "fine"}})
+    # the whole config, its defaults filled by the schema (the FE study's default variant
+    # reads mesh.size too)
+    from studies.config import WorkflowConfig, validated
+
+    whole = file_config()
+    whole["mesh"]["size"] = {"global_size": 0.008}
+    assert WorkflowConfig.from_mapping(validated(whole)).mesh.size.mound_size == 0.008
+
+
 # -- the checks as functions -----------------------------------------------------------------
 
 
