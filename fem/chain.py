@@ -175,15 +175,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--from-rest", action="store_true", help="no guesses: every case cold")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
-    config: dict[str, Any] = {}
-    if args.config:
-        import yaml
-
-        config = yaml.safe_load(args.config.read_text()) or {}
+    from fem.configfile import read_config_file
     from fem.exceptions import FEError
 
     try:
-        settings = SolverSettings.from_config(config)
+        settings = SolverSettings.from_config(read_config_file(args.config) if args.config
+                                              else {})
         cases = [Case(c1, phi, args.theta) for phi in args.phi for c1 in args.c1]
         solved = solve_chain(args.mesh, cases, lambda case: args.cases / case.id, settings,
                              warm_start=not args.from_rest)

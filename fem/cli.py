@@ -20,6 +20,7 @@ from pathlib import Path
 from mpi4py import MPI
 
 from fem.case import run_case
+from fem.configfile import read_config_file
 from fem.exceptions import FEError
 from fem.parameters import SolverSettings
 from fem.sweep import Case
@@ -46,14 +47,10 @@ def main(argv: list[str] | None = None) -> int:
         logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO)
     else:
         logging.basicConfig(level=logging.CRITICAL)
-    config: dict = {}
-    if args.config:
-        import yaml
-
-        config = yaml.safe_load(args.config.read_text()) or {}
-    if args.solver:
-        config = {**config, "fe": {**config.get("fe", {}), "solver": args.solver}}
     try:
+        config = read_config_file(args.config) if args.config else {}
+        if args.solver:
+            config = {**config, "fe": {**config.get("fe", {}), "solver": args.solver}}
         settings = SolverSettings.from_config(config)
         summary = run_case(args.mesh, Case(args.c1, args.phi, args.theta), args.out, settings)
     except (FEError, MeshInputError) as err:

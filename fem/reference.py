@@ -277,8 +277,7 @@ def main(argv: list[str] | None = None) -> int:
     import json
     import sys
 
-    import yaml
-
+    from fem.configfile import read_config_file
     from fem.exceptions import FEError
     from fem.parameters import SolverSettings
     from fem.sweep import Case
@@ -300,14 +299,14 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     try:
-        config = yaml.safe_load(args.config.read_text()) if args.config else {}
-        settings = SolverSettings.from_config(config or {})
+        settings = SolverSettings.from_config(read_config_file(args.config) if args.config
+                                              else {})
         case = Case(args.c1, args.phi, args.theta)
         runner = CaseRunner(args.observed, settings)
         estimate = estimate_reference(runner, case.material(settings.density),
                                       case.gravity(settings.gravity),
                                       tolerance=1e-3 * args.tolerance_mm, method=args.method)
-    except (FEError, MeshInputError, OSError, yaml.YAMLError) as err:
+    except (FEError, MeshInputError, OSError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     if not estimate.converged:

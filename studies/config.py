@@ -29,6 +29,8 @@ import numpy as np
 import yaml
 from jsonschema import validators
 
+from fem.configfile import ConfigFileError
+from fem.configfile import read_config_file as fem_read_config_file
 from fem.contact import resolve_obstacle
 from fem.dataset import SplitFractions, direction_keys
 from fem.exceptions import FEError
@@ -60,33 +62,16 @@ class ConfigError(ValueError):
 
 
 def read_config_file(path: str | Path) -> dict[str, Any]:
-    """A config file (YAML) as a mapping; a syntax error names its line and column.
+    """A config file (YAML) as a mapping (:func:`fem.configfile.read_config_file`).
 
     Raises:
         ConfigError: for a file that cannot be read, is not YAML (with the line and column
             where the parser stopped), or does not hold a mapping of sections.
     """
-    path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as err:
-        raise ConfigError(f"{path}: cannot read the config file ({err})") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        words = [getattr(err, "context", None), getattr(err, "problem", None)]
-        what = ", ".join(w for w in words if w) or str(err)
-        syntax = (yaml.scanner.ScannerError, yaml.parser.ParserError)
-        kind = "syntax error" if isinstance(err, syntax) else "error"
-        raise ConfigError(f"{path}: YAML {kind}{where}: {what}") from None
-    if not isinstance(data, dict):
-        raise ConfigError(
-            f"{path}: a config file is a mapping of sections (mesh:, fe:, sweep:, ...), this "
-            f"one holds {type(data).__name__}"
-        )
-    return data
+        return fem_read_config_file(path)
+    except ConfigFileError as err:
+        raise ConfigError(str(err)) from None
 
 
 def load_schema(path: str | Path = SCHEMA_PATH) -> dict[str, Any]:

@@ -7,8 +7,10 @@ from __future__ import annotations
 
 import copy
 import math
+import re
 import sys
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -29,6 +31,7 @@ from studies.config import (
     WorkflowConfig,
     canonical,
     load_schema,
+    read_config_file,
     validated,
 )
 from studies.fe_variants import ELEMENTS as STUDY_ELEMENTS
@@ -125,6 +128,38 @@ def test_the_stability_audit_names_how_many_c1_values() -> None:
     raw["fe_study"]["stability_audit"] = {"softest": -1}
     with pytest.raises(ConfigError, match="softest"):
         WorkflowConfig.from_mapping(raw)
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    (None, "cannot read the config file"),
+    ("fe: {solver: [direct\n", "YAML syntax error at line 2, column 1"),
+    ("", "the config file is empty"),
+    ("[1, 2]", "a config file is a mapping of sections .* holds list"),
+])
+def test_the_fe_commands_name_a_config_file_they_cannot_use(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], text: str | None, message: str
+) -> None:
+    """``fem.cli``, ``fem.chain`` and ``fem.reference`` stop on it by name, writing nothing.
+
+    The same reader as the workflow's (``studies.config.read_config_file`` wraps it).
+    """
+    from fem.chain import main as chain
+    from fem.cli import main as one_case
+    from fem.reference import main as reference
+
+    config = tmp_path / "my.yaml"
+    if text is not None:
+        config.write_text(text)
+    out = tmp_path / "out"
+    for main, args in ((one_case, ["--out", str(out)]), (chain, ["--cases", str(out)]),
+                       (reference, ["--out", str(out)])):
+        assert main(["no_mesh.xdmf", "--c1", "1", "--phi", "180", *args,
+                     "--config", str(config)]) == 2
+        err = capsys.readouterr().err
+        assert re.search(f"^error: {re.escape(str(config))}: {message}", err), err
+    assert not out.exists()
+    with pytest.raises(ConfigError, match=message):
+        read_config_file(config)
 
 
 def test_variants_override_the_surrogate_settings() -> None:
