@@ -42,8 +42,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
+from fem.configfile import read_config_file
 from fem.dataset import gravity_angles, gravity_direction
 from fem.exceptions import InvalidParameterError
 from fem.parameters import Gravity, SolverSettings
@@ -528,7 +528,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     try:
-        settings = SolverSettings.from_config(yaml.safe_load(args.config.read_text()))
+        settings = SolverSettings.from_config(read_config_file(args.config))
         if args.meet:
             meeting = meet(args.mesh, settings, args.c1, (tuple(args.start), tuple(args.target)),
                            tuple(args.meet), tuple(args.via), args.step, args.resolution)

@@ -35,8 +35,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
+from fem.configfile import read_config_file
 from fem.dataset import DatasetError
 from fem.exceptions import InvalidParameterError
 from fem.parameters import SolverSettings
@@ -288,7 +288,7 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     machine = machine_state().to_json()
     try:
-        settings = SolverSettings.from_config(yaml.safe_load(args.config.read_text()))
+        settings = SolverSettings.from_config(read_config_file(args.config))
         audit = audit_sweep(args.mesh, args.dataset, settings, args.c1)
     except (InvalidParameterError, DatasetError, OSError) as err:
         print(f"error: {err}", file=sys.stderr)
