@@ -24,8 +24,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
+from fem.configfile import read_config_file
+from fem.exceptions import FEError
 from fem.parameters import SolverSettings
 from fem.sweep import Case
 from studies.machine import machine_state
@@ -178,9 +179,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--tolerance-mm", type=float, default=0.01)
     parser.add_argument("--out", type=Path, help="roundtrip.json to write")
     args = parser.parse_args(argv)
-    config = yaml.safe_load(args.config.read_text()) if args.config else {}
-    table = round_trips(args.mesh, SolverSettings.from_config(config or {}), args.c1,
-                        args.observed, 1e-3 * args.tolerance_mm)
+    try:
+        config = read_config_file(args.config) if args.config else {}
+        table = round_trips(args.mesh, SolverSettings.from_config(config), args.c1,
+                            args.observed, 1e-3 * args.tolerance_mm)
+    except (FEError, OSError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
     print(f"machine: {table.machine}")
     print(" | ".join(HEADER))
     for row in table_rows(table):

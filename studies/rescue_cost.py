@@ -186,7 +186,7 @@ def _compare(case: Case, out: Path) -> CaseCost:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point (see the module docstring)."""
-    from studies.config import read_config_file
+    from studies.config import ConfigError, read_config_file
 
     parser = argparse.ArgumentParser(prog="python -m studies.rescue_cost",
                                      description=__doc__.splitlines()[0])
@@ -201,12 +201,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--config", type=Path, default=Path("config.yaml"))
     parser.add_argument("--out", type=Path, default=Path("results/benchmarks/rescue_cost"))
     args = parser.parse_args(argv)
-    config = read_config_file(args.config)
     try:
+        config = read_config_file(args.config)
         against = None if args.against is None else parse_against(args.against)
         result = run(args.mesh.resolve(), config, args.direction, args.c1, args.out.resolve(),
                      against)
-    except (InvalidParameterError, RuntimeError) as err:
+    except (InvalidParameterError, ConfigError, RuntimeError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     result.write(args.out / "rescue_cost.json")

@@ -19,8 +19,9 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-import yaml
 
+from fem.configfile import read_config_file
+from fem.exceptions import InvalidParameterError
 from fem.parameters import SolverSettings
 from fem.sweep import clinical_cases
 from studies.machine import machine_state, one_core
@@ -39,8 +40,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--config", type=Path, default=Path("config.yaml"))
     parser.add_argument("--repeats", type=int, default=2)
     args = parser.parse_args(argv)
-    config = yaml.safe_load(args.config.read_text())
-    settings = SolverSettings.from_config(config)
+    try:
+        config = read_config_file(args.config)
+        settings = SolverSettings.from_config(config)
+    except InvalidParameterError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
     cases = clinical_cases(config.get("clinical", []))
     print(f"machine before: {machine_state().to_json()}")
     with one_core() as core:

@@ -209,8 +209,7 @@ def estimate_file(observation: Path, reference: Path, model_folder: Path, phi: f
 
 def main(argv: list[str] | None = None) -> int:
     """The estimate from a points file, or the benchmark."""
-    import yaml
-
+    from fem.configfile import read_config_file
     from fem.exceptions import FEError
     from fem.parameters import SolverSettings
     from meshes.exceptions import GeometryError, MeshInputError
@@ -243,7 +242,7 @@ def main(argv: list[str] | None = None) -> int:
                              (args.observation is None or args.out is None)):
         parser.error("give OBSERVATION --reference REF --out DIR, or --benchmark REF")
     try:
-        values = (yaml.safe_load(args.config.read_text()) or {}) if args.config else {}
+        values = read_config_file(args.config) if args.config else {}
         settings = SolverSettings.from_config(values)
         if args.benchmark is not None:
             with Estimator(reference, args.model, settings) as estimator:
@@ -253,7 +252,7 @@ def main(argv: list[str] | None = None) -> int:
         result = estimate_file(args.observation, reference, args.model, args.phi, args.theta,
                                settings, values.get("mesh"), args.out, fe=not args.no_fe)
     except (FEError, GeometryError, MeshInputError, SurrogateError, StiffnessError,
-            TrackingInputError, OSError, yaml.YAMLError, ValueError) as err:
+            TrackingInputError, OSError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     lo, hi = result.interval_kPa

@@ -170,7 +170,7 @@ def run(config: dict, c1_values: list[float], directions: list[float], out: Path
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point (see the module docstring)."""
-    from studies.config import WorkflowConfig, read_config_file
+    from studies.config import ConfigError, WorkflowConfig, read_config_file
 
     parser = argparse.ArgumentParser(prog="python -m studies.sweep_speed",
                                      description=__doc__.splitlines()[0])
@@ -179,8 +179,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=Path("results/benchmarks/sweep_speed"))
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
-    config = read_config_file(args.config)
-    cases = WorkflowConfig.from_mapping(config).cases
+    try:
+        config = read_config_file(args.config)
+        cases = WorkflowConfig.from_mapping(config).cases
+    except ConfigError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
     c1_values = sorted({case.C1 for case in cases})
     result = run(config, c1_values, args.phi, args.out.resolve())
     result.write(args.out / "sweep_speed.json")

@@ -259,8 +259,7 @@ def track_file(points_csv: Path, imaged: Path, reference: Path, model_folder: Pa
 
 def main(argv: list[str] | None = None) -> int:
     """Track the points by both paths, write the CSV (and a JSON beside it), print a summary."""
-    import yaml
-
+    from fem.configfile import read_config_file
     from fem.exceptions import FEError
     from fem.parameters import SolverSettings
     from meshes.exceptions import GeometryError, MeshInputError
@@ -282,12 +281,12 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="%(message)s")
     try:
-        values = (yaml.safe_load(args.config.read_text()) or {}) if args.config else {}
+        values = read_config_file(args.config) if args.config else {}
         result = track_file(args.points, args.imaged, args.reference, args.model, args.c1,
                             args.phi, args.theta, SolverSettings.from_config(values),
                             values.get("mesh"), args.out)
     except (FEError, GeometryError, MeshInputError, SurrogateError, TrackingInputError,
-            OSError, yaml.YAMLError, ValueError) as err:
+            OSError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     t = result.surrogate_ms

@@ -18,12 +18,13 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 
 def main(argv: list[str] | None = None) -> int:
     """Run the benchmark and print its figures."""
     from fem.case import CaseRunner
+    from fem.configfile import read_config_file
+    from fem.exceptions import InvalidParameterError
     from fem.io import node_displacement
     from fem.parameters import SolverSettings
     from fem.reference import write_reference_mesh
@@ -45,8 +46,12 @@ def main(argv: list[str] | None = None) -> int:
                         help="target posture θ (e.g. standing: --target 90 --target-theta -90)")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
-    values = (yaml.safe_load(args.config.read_text()) or {}) if args.config else {}
-    settings = SolverSettings.from_config(values)
+    try:
+        settings = SolverSettings.from_config(read_config_file(args.config) if args.config
+                                              else {})
+    except InvalidParameterError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
     model = Surrogate.load(args.model)
     truth = CaseRunner(args.mesh, settings)
     check_model_on(model, truth.mesh)
