@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from fem.configfile import read_config_file
 from fem.dataset import DatasetError
 from surrogate.config import SurrogateConfig
 from surrogate.exceptions import ExtrapolationWarning, SurrogateError
@@ -81,7 +82,7 @@ def settings(path: str | Path, items: list[str]) -> tuple[SurrogateConfig, dict[
 
     Raises:
         SurrogateError: if an override is not ``KEY=VALUE`` or a setting is invalid.
-        OSError: if the config cannot be read.
+        fem.configfile.ConfigFileError: if the config cannot be read.
     """
     import yaml
 
@@ -91,8 +92,7 @@ def settings(path: str | Path, items: list[str]) -> tuple[SurrogateConfig, dict[
         if not sep:
             raise SurrogateError(f"--set {item!r} is not KEY=VALUE")
         overrides[key.strip()] = yaml.safe_load(value)
-    with open(path) as fh:
-        base = (yaml.safe_load(fh) or {}).get("surrogate") or {}
+    base = read_config_file(path).get("surrogate") or {}
     return SurrogateConfig.from_mapping({**base, **overrides}), overrides
 
 
