@@ -101,7 +101,14 @@ def schema_errors(config: Mapping[str, Any], schema: dict[str, Any]) -> list[str
     validator = jsonschema.Draft202012Validator(schema)
     errors = [s for e in validator.iter_errors(config) for s in _specific(e)]
     errors.sort(key=lambda e: [str(p) for p in e.absolute_path])
-    return [f"{'.'.join(map(str, e.absolute_path)) or '<top level>'}: {e.message}" for e in errors]
+    return [f"{'.'.join(map(str, e.absolute_path)) or '<top level>'}: {e.message}"
+            + (STANDS_ALONE if e.validator == "required" and not e.absolute_path else "")
+            for e in errors]
+
+
+#: Said beside a whole section missing: a user who wrote only the sections she changed.
+STANDS_ALONE = (" (a config file stands alone, nothing is taken from config.yaml: start from a "
+                "copy of it and change what you need)")
 
 
 def _with_defaults(validator_class: type) -> type:

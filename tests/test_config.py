@@ -278,6 +278,11 @@ def test_every_schema_violation_is_listed_by_key() -> None:
     assert caught.value.problems[2] == (
         "sweep.C1_kPa.1: -2.0 is less than or equal to the minimum of 0")
     assert str(caught.value).startswith("3 problems:\n  material.density: -1.0 is less")
+    # a whole section missing: the file was written as if it were merged with config.yaml
+    with pytest.raises(ConfigError) as caught:
+        WorkflowConfig.from_mapping({"mesh": raw["mesh"]})
+    assert "<top level>: 'sweep' is a required property (a config file stands alone" in str(
+        caught.value)
 
 
 @pytest.mark.parametrize(
