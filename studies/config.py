@@ -92,6 +92,11 @@ def _specific(error: jsonschema.ValidationError) -> list[jsonschema.ValidationEr
     return [s for e in fitting for s in _specific(e)] or [error]
 
 
+#: Said beside a whole section missing: a user who wrote only the sections she changed.
+STANDS_ALONE = (" (a config file stands alone, nothing is taken from config.yaml: start from a "
+                "copy of it and change what you need)")
+
+
 def schema_errors(config: Mapping[str, Any], schema: dict[str, Any]) -> list[str]:
     """Every schema violation of ``config`` as ``'dotted.key: message'``, sorted by key.
 
@@ -104,11 +109,6 @@ def schema_errors(config: Mapping[str, Any], schema: dict[str, Any]) -> list[str
     return [f"{'.'.join(map(str, e.absolute_path)) or '<top level>'}: {e.message}"
             + (STANDS_ALONE if e.validator == "required" and not e.absolute_path else "")
             for e in errors]
-
-
-#: Said beside a whole section missing: a user who wrote only the sections she changed.
-STANDS_ALONE = (" (a config file stands alone, nothing is taken from config.yaml: start from a "
-                "copy of it and change what you need)")
 
 
 def _with_defaults(validator_class: type) -> type:
