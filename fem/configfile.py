@@ -1,7 +1,8 @@
 """The workflow's config file (YAML) read as a mapping, with errors that name the file.
 
-Every command that takes ``--config`` reads it here, whichever layer it belongs to; the
-workflow's typed config (:mod:`studies.config`) is built from the same mapping.
+Every command of ``fem`` and the layers above it that takes ``--config`` reads it here (the
+two commands of ``meshes``, below, read it themselves); the workflow's typed config
+(:mod:`studies.config`) is built from the same mapping.
 """
 
 from __future__ import annotations
