@@ -1,8 +1,8 @@
-"""The workflow's config file (YAML) read as a mapping, with errors that name the file.
+"""The config file of ``fem``'s commands and of the layers above, with ``fem``'s error type.
 
-Every command of ``fem`` and the layers above it that takes ``--config`` reads it here (the
-two commands of ``meshes``, below, read it themselves); the workflow's typed config
-(:mod:`studies.config`) is built from the same mapping.
+The file is read by :func:`meshes.configfile.read_config_file`; its errors are raised here as
+:class:`ConfigFileError`, an :class:`~fem.exceptions.InvalidParameterError`, which the
+commands of ``fem`` and above catch with their other bad parameters.
 """
 
 from __future__ import annotations
@@ -10,9 +10,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from fem.exceptions import InvalidParameterError
+from meshes import configfile
 
 
 class ConfigFileError(InvalidParameterError):
@@ -26,26 +25,7 @@ def read_config_file(path: str | Path) -> dict[str, Any]:
         ConfigFileError: for a file that cannot be read, is not YAML (with the line and column
             where the parser stopped), or does not hold a mapping of sections.
     """
-    path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as err:
-        raise ConfigFileError(f"{path}: cannot read the config file ({err})") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        words = [getattr(err, "context", None), getattr(err, "problem", None)]
-        what = ", ".join(w for w in words if w) or str(err)
-        syntax = (yaml.scanner.ScannerError, yaml.parser.ParserError)
-        kind = "syntax error" if isinstance(err, syntax) else "error"
-        raise ConfigFileError(f"{path}: YAML {kind}{where}: {what}") from None
-    if data is None:
-        raise ConfigFileError(f"{path}: the config file is empty")
-    if not isinstance(data, dict):
-        raise ConfigFileError(
-            f"{path}: a config file is a mapping of sections (mesh:, fe:, sweep:, ...), this "
-            f"one holds {type(data).__name__}"
-        )
-    return data
+        return configfile.read_config_file(path)
+    except configfile.ConfigFileError as err:
+        raise ConfigFileError(str(err)) from None

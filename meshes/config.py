@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from meshes.configfile import ConfigFileError, read_config_file
 from meshes.exceptions import GeometryError
 from meshes.importing import ImportSpec, write_imported_mesh
 from meshes.parametric import BreastGeometry
@@ -124,3 +125,18 @@ def make_mesh(
     tmp.write_text(json.dumps(report, indent=2))
     os.replace(tmp, target)
     return report
+
+
+def read_mesh_config(path: str | Path) -> MeshConfig:
+    """The ``mesh`` section of a config file, typed; a file without one is named.
+
+    Raises:
+        ConfigFileError: as :func:`meshes.configfile.read_config_file`, or for a file
+            without a ``mesh`` section.
+        GeometryError, MeshInputError: for a ``mesh`` section that is not valid.
+    """
+    values = read_config_file(path)
+    section = values.get("mesh")
+    if not isinstance(section, dict):
+        raise ConfigFileError(f"{path}: the config file has no mesh section")
+    return MeshConfig.from_mapping(section)

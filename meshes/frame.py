@@ -20,9 +20,8 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import yaml
 
-from meshes.config import MeshConfig
+from meshes.config import read_mesh_config
 from meshes.exceptions import GeometryError, MeshInputError
 
 HEADER = ["name", "x", "y", "z"]
@@ -80,13 +79,12 @@ def main(argv: list[str] | None = None) -> int:
                              "file: back")
     args = parser.parse_args(argv)
     try:
-        values = yaml.safe_load(args.config.read_text()) or {}
-        config = MeshConfig.from_mapping(dict(values.get("mesh") or {}))
+        config = read_mesh_config(args.config)
         if config.file is None:
             raise GeometryError(f"{args.config}: mesh.source is not file: the project's frame "
                                 "is the geometry's own")
         names, points = read_points(args.points)
-    except (OSError, yaml.YAMLError, GeometryError, MeshInputError) as err:
+    except (OSError, GeometryError, MeshInputError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     spec = config.file

@@ -15,9 +15,7 @@ import argparse
 import sys
 from pathlib import Path
 
-import yaml
-
-from meshes.config import MeshConfig
+from meshes.config import read_mesh_config
 from meshes.exceptions import GeometryError, MeshInputError
 from meshes.importing import preview_rules
 
@@ -30,12 +28,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--png", type=Path, help="draw the boundary, coloured by rule")
     args = parser.parse_args(argv)
     try:
-        values = yaml.safe_load(args.config.read_text()) or {}
-        config = MeshConfig.from_mapping(dict(values.get("mesh") or {}))
+        config = read_mesh_config(args.config)
         if config.file is None:
             raise GeometryError(f"{args.config}: mesh.source is not file: there is no import")
         summary, problem = preview_rules(config.file, config.size, args.png)
-    except (OSError, yaml.YAMLError, GeometryError, MeshInputError) as err:
+    except (OSError, GeometryError, MeshInputError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     print(f"{'boundary':<10} {'facets':>7} {'area cm²':>10} {'share':>7}  rule")

@@ -136,30 +136,51 @@ def test_the_stability_audit_names_how_many_c1_values() -> None:
     ("", "the config file is empty"),
     ("[1, 2]", "a config file is a mapping of sections .* holds list"),
 ])
-def test_the_fe_commands_name_a_config_file_they_cannot_use(
+def test_the_commands_name_a_config_file_they_cannot_use(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], text: str | None, message: str
 ) -> None:
-    """``fem.cli``, ``fem.chain`` and ``fem.reference`` stop on it by name, writing nothing.
+    """Each command stops on it by name, writing nothing.
 
-    The same reader as the workflow's (``studies.config.read_config_file`` wraps it).
+    ``fem.cli``, ``fem.chain``, ``fem.reference``, ``meshes.preview`` and ``meshes.frame``: the
+    same reader as the workflow's (``studies.config.read_config_file`` wraps it).
     """
     from fem.chain import main as chain
     from fem.cli import main as one_case
     from fem.reference import main as reference
+    from meshes.frame import main as frame
+    from meshes.preview import main as preview
 
     config = tmp_path / "my.yaml"
     if text is not None:
         config.write_text(text)
     out = tmp_path / "out"
-    for main, args in ((one_case, ["--out", str(out)]), (chain, ["--cases", str(out)]),
-                       (reference, ["--out", str(out)])):
-        assert main(["no_mesh.xdmf", "--c1", "1", "--phi", "180", *args,
-                     "--config", str(config)]) == 2
+    case = ["no_mesh.xdmf", "--c1", "1", "--phi", "180", "--config", str(config)]
+    for main, args in ((one_case, [*case, "--out", str(out)]),
+                       (chain, [*case, "--cases", str(out)]),
+                       (reference, [*case, "--out", str(out)]),
+                       (preview, [str(config), "--png", str(out)]),
+                       (frame, [str(config), "points.csv", str(out), "--to", "project"])):
+        assert main(args) == 2
         err = capsys.readouterr().err
         assert re.search(f"^error: {re.escape(str(config))}: {message}", err), err
     assert not out.exists()
     with pytest.raises(ConfigError, match=message):
         read_config_file(config)
+
+
+def test_the_mesh_commands_name_a_config_file_without_a_mesh_section(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``meshes.preview`` and ``meshes.frame`` need the ``mesh`` section; they say so."""
+    from meshes.frame import main as frame
+    from meshes.preview import main as preview
+
+    config = tmp_path / "my.yaml"
+    config.write_text("sweep: {C1_kPa: [1.0]}\n")
+    assert preview([str(config)]) == 2
+    assert frame([str(config), "points.csv", str(tmp_path / "out.csv"), "--to", "file"]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err == [f"error: {config}: the config file has no mesh section"] * 2, err
 
 
 def test_variants_override_the_surrogate_settings() -> None:
