@@ -71,6 +71,8 @@ def predict(args: argparse.Namespace) -> int:
     print(f"{u.shape[0]} points: max |u| = {norms.max():.3f} mm, mean |u| = {norms.mean():.3f} mm")
     if output is not None and output.suffix == ".npy":
         np.save(output, u)
+    if output is not None:
+        print(f"wrote {output}")
     return 0
 
 

@@ -527,7 +527,8 @@ def test_train_command_line_trains_saves_and_names_bad_settings(
     np.testing.assert_array_equal(
         np.load(tmp_path / "u.npy"), Surrogate.load(tmp_path / "m").predict(2.0, 90.0)
     )
-    assert "max |u|" in capsys.readouterr().out
+    said = capsys.readouterr().out
+    assert "max |u|" in said and f"wrote {tmp_path / 'u.npy'}" in said
     assert main(["predict", str(tmp_path / "m"), "--c1", "-1", "--phi", "90"]) == 2
     assert "C1 must be positive" in capsys.readouterr().err
     assert main(["predict", str(tmp_path / "nowhere"), "--c1", "1", "--phi", "90"]) == 2
