@@ -3,10 +3,16 @@
 Examples::
 
     python -m surrogate.cli predict results/surrogate/model --c1 1.0 --phi 180 -o u.xdmf
+    python -m surrogate.cli predict results/surrogate/model --c1 1.0 --phi 0 \
+        --points tumour.csv -o tumour_supine.csv
     python -m surrogate.cli train results/dataset/dataset.h5 --set activation=tanh --out /tmp/m
 
 ``predict`` prints the largest and mean displacement and writes the field with ``-o``:
 ``.npy`` (the (N, 3) array in mm) or ``.xdmf`` (on the mesh of ``--mesh``, for ParaView).
+With ``--points`` (a ``name,x,y,z`` CSV of material points, in the model's reference frame, m:
+the project's frame) it predicts at those points instead, prints each one's displacement and
+position, and writes their positions in that posture with ``-o`` as a ``name,x,y,z`` CSV, which
+``python -m meshes.frame --to file`` carries into an imported file's frame.
 ``train`` trains the ``surrogate`` settings of ``--config`` with the ``--set`` overrides on
 one core, saves the model with ``--out`` and prints one JSON line (validation error, best
 epoch, training time). Bad input exits with status 2 and a message naming it. A setup the
@@ -29,6 +35,7 @@ import numpy as np
 
 from fem.configfile import read_config_file
 from fem.dataset import DatasetError
+from meshes.frame import read_points, write_points
 from surrogate.config import SurrogateConfig
 from surrogate.exceptions import ExtrapolationWarning, SurrogateError
 
@@ -39,15 +46,22 @@ def predict(args: argparse.Namespace) -> int:
     from surrogate.predict import Surrogate
 
     output = Path(args.output) if args.output else None
-    if output is not None and output.suffix not in (".npy", ".xdmf"):
-        print(f"error: --output {output} must end in .npy or .xdmf", file=sys.stderr)
+    suffixes = (".csv",) if args.points else (".npy", ".xdmf")
+    if output is not None and output.suffix not in suffixes:
+        what = "with --points" if args.points else "for the whole field"
+        print(f"error: --output {output} must end in {' or '.join(suffixes)} ({what})",
+              file=sys.stderr)
         return 2
     if output is not None and not output.parent.is_dir():
         print(f"error: --output {output}: the folder {output.parent} does not exist",
               file=sys.stderr)
         return 2
+    names: list[str] = []
     try:
         model = Surrogate.load(args.model)
+        if args.points:
+            names, points = read_points(Path(args.points))
+            model = model.at(points)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", ExtrapolationWarning)
             u = model.predict(args.c1, args.phi, args.theta)
@@ -64,11 +78,21 @@ def predict(args: argparse.Namespace) -> int:
             return 3
         if output is not None and output.suffix == ".xdmf":
             write_prediction_xdmf(output, args.mesh, model, u)
-    except (SurrogateError, ValueError) as err:
+    except (SurrogateError, OSError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     norms = np.linalg.norm(u, axis=1)
-    print(f"{u.shape[0]} points: max |u| = {norms.max():.3f} mm, mean |u| = {norms.mean():.3f} mm")
+    if args.points:
+        moved = model.X + 1e-3 * u
+        print(f"{'name':<12} {'|u| mm':>8} {'u (x, y, z) mm':>26}  position in that posture (m)")
+        for name, x, d, n in zip(names, moved, u, norms, strict=True):
+            print(f"{name:<12} {n:>8.3f} {d[0]:>8.3f} {d[1]:>8.3f} {d[2]:>8.3f}  "
+                  f"{x[0]:.5f} {x[1]:.5f} {x[2]:.5f}")
+        if output is not None:
+            write_points(output, names, moved)
+    else:
+        print(f"{u.shape[0]} points: max |u| = {norms.max():.3f} mm, "
+              f"mean |u| = {norms.mean():.3f} mm")
     if output is not None and output.suffix == ".npy":
         np.save(output, u)
     if output is not None:
@@ -136,6 +160,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output",
                    help="write the displacement: .npy (array, mm) or .xdmf (on the mesh)")
     p.add_argument("--mesh", default="results/mesh/mesh.xdmf", help="mesh for an .xdmf output")
+    p.add_argument("--points", metavar="CSV",
+                   help="predict at these material points instead (name,x,y,z in the model's "
+                        "reference frame, m); -o then writes their positions as a CSV")
     p.add_argument("--strict", action="store_true",
                    help="refuse a setup the model warns at (no FE solution backs it): exit "
                         "status 3, nothing written")

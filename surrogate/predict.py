@@ -315,13 +315,15 @@ class Surrogate:
         every node of a quadratic mesh, linear between the vertices otherwise): a tumour's
         material position, found from the imaged shape (:func:`fem.tracking.to_reference`), is
         predicted directly.
-        Every point goes through the domain network (points strictly inside the body); an
-        exact-Dirichlet model's factor is evaluated at them with the model's own length scale.
-        Each query of the returned model costs in proportion to M.
+        Every point goes through the domain network (points strictly inside the body, not on
+        the clamped chest wall); an exact-Dirichlet model's factor is evaluated at them with the
+        model's own length scale. Each query of the returned model costs in proportion to M.
 
         Raises:
-            ValueError: if ``points`` is not a finite (M, 3) array; for a ``pod`` model, also if
-                its dataset had no mesh cells, or a point lies outside the mesh.
+            ValueError: if ``points`` is not a finite (M, 3) array, or a point lies more than
+                :data:`surrogate.interpolation.OUTSIDE_M` outside the mesh (for a model whose
+                dataset has the mesh's cells); for a ``pod`` model, also if its dataset had no
+                mesh cells.
         """
         points = np.asarray(points, dtype=float)
         if points.ndim != 2 or points.shape[1] != 3 or not points.size:
@@ -348,6 +350,10 @@ class Surrogate:
                     "this pod model answers at its material points only: its dataset has no "
                     "mesh cells to interpolate its modes in (rebuild the dataset with its mesh, "
                     "snakemake --forcerun aggregate, and train again)")
+        elif c.cells is not None:  # the networks answer anywhere; only the body is trained
+            from surrogate.interpolation import locate
+
+            locate(self.X, c.cells, points)
         return Surrogate(replace(
             c, X=points, boundary=np.zeros(len(points), dtype=bool),
             point_factor=None if factor is None else factor.astype(np.float32),

@@ -136,6 +136,60 @@ def test_between_the_points_a_pod_model_interpolates_in_the_tetrahedra(trained) 
         model.at(np.array([[0.5, 0.5, 0.5], [0.5, 0.5, 1.1]]))
 
 
+def test_the_command_line_predicts_at_named_points(
+    trained, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``predict --points``: each point's displacement, and its positions written as a CSV.
+
+    The same numbers as ``Surrogate.at`` in Python; a point outside the body is refused by
+    name, nothing written.
+    """
+    from meshes.frame import read_points
+    from surrogate.cli import main
+    from surrogate.predict import Surrogate
+
+    ds, _, folder = trained
+    centroids = ds.X[ds.cells[:2]].mean(axis=1)
+    points = tmp_path / "tumour.csv"
+    points.write_text("name,x,y,z\n" + "".join(
+        f"t{i},{x!r},{y!r},{z!r}\n" for i, (x, y, z) in enumerate(centroids)))
+    out = tmp_path / "moved.csv"
+    query = ["--c1", "2", "--phi", "60"]
+    assert main(["predict", str(folder), *query, "--points", str(points), "-o", str(out)]) == 0
+    u = Surrogate.load(folder).at(centroids).predict(2.0, 60.0)
+    said = capsys.readouterr().out
+    for i in range(2):
+        assert f"t{i}" in said and f"{np.linalg.norm(u[i]):.3f}" in said, said
+    names, moved = read_points(out)
+    assert names == ["t0", "t1"]
+    np.testing.assert_allclose(moved, centroids + 1e-3 * u, rtol=0, atol=1e-12)
+    # a point outside the body; an output the points cannot fill
+    points.write_text("name,x,y,z\nfar,0.5,0.5,1.5\n")
+    out.unlink()
+    assert main(["predict", str(folder), *query, "--points", str(points), "-o", str(out)]) == 2
+    assert "outside the mesh by more than 1 mm" in capsys.readouterr().err
+    assert main(["predict", str(folder), *query, "--points", str(points),
+                 "-o", str(tmp_path / "u.npy")]) == 2
+    assert "must end in .csv (with --points)" in capsys.readouterr().err
+    assert not out.exists() and not (tmp_path / "u.npy").exists()
+
+
+def test_a_point_network_is_refused_outside_the_body_too(cube: tuple[Path, Path],
+                                                          tmp_path: Path) -> None:
+    """A separable or pointwise network answers anywhere; ``at`` asks the mesh first."""
+    from surrogate.checkpoint import save_model
+    from surrogate.predict import Surrogate
+    from surrogate.train import train_and_evaluate
+
+    ds = read_dataset(cube[0])
+    config = SurrogateConfig(structure="separable", hidden_layers=1, width=4, max_epochs=1)
+    save_model(tmp_path, train_and_evaluate(ds, config, progress=False), ds)
+    model = Surrogate.load(tmp_path)
+    assert model.at(np.array([[0.5, 0.5, 0.5]])).predict(2.0, 60.0).shape == (1, 3)
+    with pytest.raises(ValueError, match="outside the mesh by more than 1 mm"):
+        model.at(np.array([[0.5, 0.5, 0.5], [0.5, 0.5, 1.1]]))
+
+
 def test_a_pod_model_without_the_meshs_cells_answers_at_its_points_only(
     cube: tuple[Path, Path], tmp_path: Path
 ) -> None:
