@@ -86,6 +86,7 @@ def predict(args: argparse.Namespace) -> int:
         moved = model.X + 1e-3 * u
         print(f"{'name':<12} {'|u| mm':>8} {'u (x, y, z) mm':>26}  position in that posture (m)")
         for name, x, d, n in zip(names, moved, u, norms, strict=True):
+            x, d = np.round(x, 5) + 0.0, np.round(d, 3) + 0.0  # no "-0.000"
             print(f"{name:<12} {n:>8.3f} {d[0]:>8.3f} {d[1]:>8.3f} {d[2]:>8.3f}  "
                   f"{x[0]:.5f} {x[1]:.5f} {x[2]:.5f}")
         if output is not None:
