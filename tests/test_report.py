@@ -253,3 +253,46 @@ def test_the_by_c1_cases_are_told_apart_by_whether_their_c1_is_interpolated() ->
                                                     inside_all=ErrorSpread.over(rows))
     page = held_out_part(context)
     assert "c1-bracketed" not in page and "held-out-warned" not in page
+
+
+def test_c1s_effect_is_judged_only_where_the_whole_c1_range_was_solved(tmp_path: Path) -> None:
+    """A band's direction, solved at 1.0 and 1.2 kPa only, barely changes with C1 there.
+
+    Its small spread must not make it a direction that "can use a single C1" over the sweep's
+    0.8–5 kPa: it is drawn and listed apart, with the C1 values it was solved at.
+    """
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from report.context import Context
+    from report.sections.scene import scene_needs_section
+
+    n = 4
+    X = np.linspace(0.0, 1.0, n)[:, None] * np.ones((1, 3))
+
+    def u(C1: float) -> np.ndarray:
+        return 10.0 / C1 * X  # mm: the largest point moves 10 / C1 mm along each axis
+
+    cases = [(C1, 0.0, 0.0) for C1 in (0.8, 1.0, 5.0)]  # the plane's supine, the whole range
+    cases += [(C1, 60.0, -120.0) for C1 in (1.0, 1.2)]  # a band's direction
+    cases += [(C1, 90.0, 0.0) for C1 in (0.8, 1.0, 5.0)]  # the softest case failed
+    ds = SimpleNamespace(
+        C1=np.array([c[0] for c in cases]), phi=np.array([c[1] for c in cases]),
+        theta=np.array([c[2] for c in cases]),
+        displacement=np.stack([u(c[0]) for c in cases]),
+        converged=np.array([True] * 5 + [False, True, True]))
+    context = Context(out_dir=tmp_path, clinical=[], paths={}, clinical_fields=[],
+                      _dataset=ds)
+    page = scene_needs_section(context)
+    assert (tmp_path / "c1_effect.png").stat().st_size > 0
+    verdicts = re.search(r"Over C1 = 0\.8–5 kPa, at the one direction solved over all of it: "
+                         r"(.*?)</p>", page, re.S)
+    assert verdicts, page
+    # supine: 10/0.8 − 10/5 = 10.5 mm per axis at the last point; the best single C1 (1.0)
+    # leaves 8 mm per axis: no need up to 5 mm is met there, and the band's direction
+    # (0.8 mm per axis between 1.0 and 1.2 kPa) is not judged
+    assert "no direction can use a single C1" in verdicts.group(1)
+    assert "60°/-120°" not in verdicts.group(1) and "Left out: 2 directions" in verdicts.group(1)
+    assert re.search(r"<td>60</td><td>-120</td><td>1–1.2</td>", page)
+    assert re.search(r"<td>90</td><td>0</td><td>1–5</td>", page)

@@ -117,6 +117,37 @@ def c1_effect(
     return {k: np.asarray(v, float) for k, v in out.items()}
 
 
+def c1_verdicts(effect: dict[str, np.ndarray], full: np.ndarray,
+                C1_range: tuple[float, float]) -> str:
+    """Per accuracy need, the directions that can use a single C1 over the whole C1 range.
+
+    Only the directions whose converged cases span ``C1_range`` (``full``) are judged: a
+    spread over part of the range says nothing of the rest. The others are counted apart.
+    """
+    span = f"{C1_range[0]:g}–{C1_range[1]:g} kPa"
+    partial = int((~full).sum())
+    tail = (f" Left out: {partial} direction{'s' if partial != 1 else ''} solved over part of "
+            "the range (the table gives each one's C1 values).") if partial else ""
+    single, phi, theta = (effect[k][full] for k in ("single_mm", "phi", "theta"))
+    if not single.size:
+        return (f"No direction has converged cases over the whole C1 range {span}, so no "
+                f"verdict is given.{tail}")
+    sentences = []
+    for need in NEEDS_MM:
+        ok = single <= need
+        if ok.all():
+            sentences.append(f"For a {need:g} mm need, every such direction can use a single C1.")
+        elif not ok.any():
+            sentences.append(f"For a {need:g} mm need, no direction can use a single C1 (the "
+                             f"smallest single-C1 error is {single.min():.3g} mm).")
+        else:
+            angles = ", ".join(f"{p:g}°" if t == 0 else f"{p:g}°/{t:g}°" for p, t in
+                               zip(phi[ok], theta[ok], strict=True))
+            sentences.append(f"For a {need:g} mm need, a single C1 is enough at Φ = {angles}.")
+    judged = (f"the {single.size} directions" if single.size > 1 else "the one direction")
+    return f"Over C1 = {span}, at {judged} solved over all of it: " + " ".join(sentences) + tail
+
+
 def scene_needs_section(ctx: Context) -> str:
     """The scene-needs section: the cheapest model per accuracy need, and C1's effect."""
     cands = candidates(ctx)
@@ -164,40 +195,35 @@ def scene_needs_section(ctx: Context) -> str:
         out.append(para("The sweep has fewer than two converged C1 values at every angle, so "
                       "C1's effect cannot be measured.", "note"))
         return "".join(out)
-    C1_range = (float(effect["C1_min"].min()), float(effect["C1_max"].max()))
+    C1_range = (float(np.min(ds.C1)), float(np.max(ds.C1)))
+    full = ((effect["C1_min"] <= C1_range[0] * (1 + 1e-9))
+            & (effect["C1_max"] >= C1_range[1] * (1 - 1e-9)))
     out.append(para(
-        "For each gravity angle Φ of the sweep: the largest difference, over the material "
-        "points, between the displacement of the softest and the stiffest tissue (circles), "
-        "and the error left if one modelled that angle with a single, best-chosen C1 "
-        "(squares: the largest difference from it to any other C1 of the sweep). A scene "
-        "whose accuracy need (grey lines) lies above the squares can use one C1 at that "
-        "angle. Right: the spread as a share of the largest displacement at that angle.",
-        "caption"))
+        "For each gravity direction of the sweep: the largest difference, over the material "
+        "points, between the displacement of the softest and the stiffest tissue solved there "
+        "(circles), and the error left if one modelled that direction with a single, "
+        "best-chosen C1 (squares: the largest difference from it to any other C1 solved "
+        "there). A scene whose accuracy need (grey lines) lies above the squares can use one "
+        "C1 in that direction. Grey markers: directions whose converged cases span part of the "
+        "sweep's C1 range only (a refinement band's directions, solved at its own C1 values, "
+        "or a direction whose softest cases failed): their spread is C1's effect over that "
+        "part, so they are left out of the verdicts below. Right: the spread as a share of "
+        "the largest displacement in that direction.", "caption"))
     out.append(ctx.figure(
         "c1_effect.png",
         lambda p: fem_plots.plot_c1_effect(effect["phi"], effect["spread_mm"], effect["single_mm"],
                                            effect["relative"], p, NEEDS_MM, C1_range,
-                                           effect["theta"]),
+                                           effect["theta"], full=full),
         "C1's effect on the displacement per gravity angle",
         "Displacement spread across the C1 range against the gravity angle Φ."))
-    sentences = []
-    for need in NEEDS_MM:
-        ok = effect["single_mm"] <= need
-        if ok.all():
-            sentences.append(f"For a {need:g} mm need, every angle can use a single C1.")
-        elif not ok.any():
-            sentences.append(f"For a {need:g} mm need, no angle can use a single C1 (the "
-                             f"smallest single-C1 error is {effect['single_mm'].min():.3g} mm).")
-        else:
-            angles = ", ".join(f"{p:g}°" if t == 0 else f"{p:g}°/{t:g}°" for p, t in
-                               zip(effect["phi"][ok], effect["theta"][ok], strict=True))
-            sentences.append(f"For a {need:g} mm need, a single C1 is enough at Φ = {angles}.")
-    out.append(para(f"Over C1 = {C1_range[0]:g}–{C1_range[1]:g} kPa: " + " ".join(sentences)))
-    rows = [[f"{p:g}", f"{t:g}", f"{s:.3g}", f"{100 * r:.3g}", f"{w:.3g}", f"{b:g}"]
-            for p, t, s, r, w, b in zip(effect["phi"], effect["theta"], effect["spread_mm"],
-                                        effect["relative"], effect["single_mm"], effect["best_C1"],
-                                        strict=True)]
-    out.append(table(["Φ (deg)", "θ (deg)", "spread (mm)", "spread / max |u| (%)",
-                       "best single-C1 error (mm)", "best single C1 (kPa)"], rows,
-                      table_id="c1-effect"))
+    out.append(para(c1_verdicts(effect, full, C1_range)))
+    rows = [[f"{p:g}", f"{t:g}", f"{lo:g}–{hi:g}", f"{s:.3g}", f"{100 * r:.3g}", f"{w:.3g}",
+             f"{b:g}"]
+            for p, t, lo, hi, s, r, w, b in zip(
+                effect["phi"], effect["theta"], effect["C1_min"], effect["C1_max"],
+                effect["spread_mm"], effect["relative"], effect["single_mm"], effect["best_C1"],
+                strict=True)]
+    out.append(table(["Φ (deg)", "θ (deg)", "C1 solved (kPa)", "spread (mm)",
+                       "spread / max |u| (%)", "best single-C1 error (mm)",
+                       "best single C1 (kPa)"], rows, table_id="c1-effect"))
     return "".join(out)

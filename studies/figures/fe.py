@@ -333,6 +333,7 @@ def plot_c1_effect(
     needs_mm: Sequence[float] = (),
     C1_range: tuple[float, float] | None = None,
     theta: np.ndarray | None = None,
+    full: np.ndarray | None = None,
 ) -> None:
     """How much C1 changes the displacement, per gravity direction.
 
@@ -347,19 +348,27 @@ def plot_c1_effect(
         C1_range: the sweep's C1 range (kPa), for the title.
         theta: the directions' θ, degrees; with several values, one column per direction
             (:func:`direction_axis`).
+        full: per direction, whether its cases span the whole C1 range (default: all do);
+            the others are drawn grey, apart from the lines.
     """
     x, ticks, xlabel = direction_axis(phi, theta)
     order = np.argsort(x, kind="stable")
     x, spread_mm = x[order], np.asarray(spread_mm)[order]
     single_mm, relative = np.asarray(single_mm)[order], np.asarray(relative)[order]
+    full = np.ones(len(x), bool) if full is None else np.asarray(full, bool)[order]
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11 if ticks is None else 14, 5.0),
                                    constrained_layout=True)
     # lines join neighbouring angles of the plane; the sphere's columns are not neighbours
     line, dashed = ("-", "--") if ticks is None else ("none", "none")
-    ax1.plot(x, spread_mm, marker="o", linestyle=line, linewidth=3.0, markersize=9, alpha=0.6,
-             label="|u(C1 min) − u(C1 max)|, max over points")
-    ax1.plot(x, single_mm, marker="s", linestyle=dashed, markerfacecolor="none", markersize=7,
-             markeredgewidth=1.5, label="error of the best single C1")
+    ax1.plot(x[full], spread_mm[full], marker="o", linestyle=line, linewidth=3.0, markersize=9,
+             alpha=0.6, label="|u(C1 min) − u(C1 max)|, max over points")
+    ax1.plot(x[full], single_mm[full], marker="s", linestyle=dashed, markerfacecolor="none",
+             markersize=7, markeredgewidth=1.5, label="error of the best single C1")
+    if not full.all():
+        ax1.plot(x[~full], spread_mm[~full], marker="o", linestyle="none", markersize=7,
+                 color="0.6", alpha=0.7, label="over part of the C1 range only")
+        ax1.plot(x[~full], single_mm[~full], marker="s", linestyle="none",
+                 markerfacecolor="none", markersize=6, color="0.6")
     styles = ("--", "-.", ":", (0, (5, 1)))
     for i, need in enumerate(needs_mm):
         ax1.axhline(need, color="grey", linestyle=styles[i % len(styles)], linewidth=1.1,
@@ -369,9 +378,12 @@ def plot_c1_effect(
     _direction_ticks(ax1, ticks)
     ax1.set_xlabel(xlabel)
     ax1.set_ylabel("displacement difference (mm)")
-    ax1.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2)
+    fig.legend(*ax1.get_legend_handles_labels(), fontsize=8, loc="outside lower center",
+               ncol=4)  # below both panels, clear of the direction labels
     ax1.grid(True, which="both", alpha=0.3)
-    ax2.plot(x, 100 * relative, marker="o", linestyle=line, color="tab:purple")
+    ax2.plot(x[full], 100 * relative[full], marker="o", linestyle=line, color="tab:purple")
+    if not full.all():
+        ax2.plot(x[~full], 100 * relative[~full], marker="o", linestyle="none", color="0.6")
     _direction_ticks(ax2, ticks)
     ax2.set_xlabel(xlabel)
     ax2.set_ylabel("spread / max |u| in that direction (%)")
