@@ -264,7 +264,7 @@ def test_small_sweep_report(small_run: Path) -> None:
     selected = table2["selected_architecture"]
     ours = html_table(page, "table2")
     assert f'<tr class="highlight"><td>{selected}</td>' in ours
-    assert f"{table2['rows'][selected]['validation_error_mm']['mean']:.3f}" in ours
+    assert f"{table2['rows'][selected]['validation_error_mm']['mean']:.3g}" in ours
     speed_accuracy = json.loads((results / "fe_study/speed_accuracy.json").read_text())
     variants = html_table(page, "fe-variants")
     for variant in speed_accuracy["variants"]:
