@@ -32,8 +32,8 @@ def reference_section(ctx: Context) -> str:
     worst = max(trips.rows, key=lambda r: r.target_error_mm / r.target_sag_mm)
     naive = min(trips.rows, key=lambda r: r.naive_error_mm / r.target_sag_mm)
     out.append(para(
-        f"The largest error of a prediction from the estimate is {worst.target_error_mm:.3f} "
-        f"mm ({100 * worst.target_error_mm / worst.target_sag_mm:.2f} % of its max |u|); the "
+        f"The largest error of a prediction from the estimate is {worst.target_error_mm:.2g} "
+        f"mm ({100 * worst.target_error_mm / worst.target_sag_mm:.2g} % of its max |u|); the "
         f"smallest error of the naive prediction is {naive.naive_error_mm:.1f} mm "
         f"({100 * naive.naive_error_mm / naive.target_sag_mm:.0f} %)."))
     out.extend(_imaged(ctx))
