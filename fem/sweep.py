@@ -11,6 +11,7 @@ parameters are parsed back from it, so a rounded angle is the angle solved.
 from __future__ import annotations
 
 import copy
+import logging
 import math
 import re
 from collections.abc import Sequence
@@ -21,6 +22,8 @@ import numpy as np
 
 from fem.exceptions import InvalidParameterError
 from fem.parameters import STANDARD_GRAVITY, TISSUE_DENSITY, Gravity, Material
+
+log = logging.getLogger(__name__)
 
 C1_PATTERN = r"[0-9]+\.[0-9]{2}"
 ANGLE_PATTERN = r"-?[0-9]+\.[0-9]"
@@ -355,6 +358,7 @@ def sweep_cases(sweep: dict[str, Any]) -> list[Case]:
         directions += sphere_directions(int(sphere["n"]), sphere.get("part", "whole"))
     if not directions:
         raise InvalidParameterError("sweep needs phi_deg or sphere")
+    directions = _drop_aliases(directions)
     refined: set[tuple[float, float, float]] = set()  # (C1, Φ, θ) of the bands' cases
     for index, band in enumerate(refine_directions(sweep)):
         soft = [c for c in c1s if band.covers(c)]
@@ -390,6 +394,32 @@ def _distinct_folders(name: str, values: Sequence[Any], digits: int, unit: str) 
                 f"{digits} decimal(s) of {unit}): drop one or space them further apart"
             )
         seen[key] = value
+
+
+def _drop_aliases(directions: Sequence[tuple[float, float]]) -> list[tuple[float, float]]:
+    """The directions with each gravity direction once, under the first of its names.
+
+    A grid of Φ × θ names the poles (Φ = 0 or 180°) once per θ, and Φ = 360° is Φ = 0°: each
+    would be solved again in a folder of its own, to the same field. The later names are
+    dropped with a warning; a case asked for under one of them is solved alone, outside the
+    sweep.
+    """
+    from fem.dataset import direction_keys
+
+    keys = direction_keys(np.array([p for p, _ in directions], dtype=float),
+                          np.array([t for _, t in directions], dtype=float))
+    first: dict[str, tuple[float, float]] = {}
+    kept = []
+    for key, pair in zip(keys, directions, strict=True):
+        if str(key) not in first:
+            first[str(key)] = pair
+            kept.append(pair)
+        elif Case(1.0, *first[str(key)]) != Case(1.0, *pair):
+            log.warning("sweep: gravity direction (phi, theta) = (%g, %g) is (%g, %g), already "
+                        "listed (one direction, several names: at phi = 0 or 180 every theta "
+                        "is the same pole, theta = +-180 mirrors phi, phi = 360 is 0): solved "
+                        "once, as (%g, %g)", *pair, *first[str(key)], *first[str(key)])
+    return kept
 
 
 def _one_label_per_direction(directions: Sequence[tuple[float, float]],

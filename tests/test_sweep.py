@@ -154,6 +154,34 @@ def test_the_caudal_half_covers_every_posture_short_of_head_down_evenly() -> Non
     assert {c.phi for c in both if c.theta == 0.0} >= set(PAPER_PHI_DEG)
 
 
+def test_a_direction_named_twice_is_solved_once(caplog: pytest.LogCaptureFixture) -> None:
+    """A Φ × θ grid names each pole once per θ; Φ = 360 is Φ = 0; (90, 0) is (-90, 180).
+
+    Each direction is kept under its first name, the others dropped with a warning that names
+    both: the same field is not solved twice into two folders.
+    """
+    with caplog.at_level("WARNING", logger="fem.sweep"):
+        cases = sweep_cases({"C1_kPa": [1.0, 2.0], "phi_deg": [0.0, 90.0, 180.0, 360.0],
+                             "theta_deg": [0.0, 90.0, 180.0]})
+    # the poles once each, and (90, 0), (90, 90), (90, 180): 5 directions
+    assert {(c.phi, c.theta) for c in cases} == {(0.0, 0.0), (90.0, 0.0), (90.0, 90.0),
+                                                 (90.0, 180.0), (180.0, 0.0)}
+    assert len(cases) == 2 * 5
+    said = caplog.text
+    assert "(360, 0) is (0, 0), already listed" in said
+    assert "(180, 90) is (180, 0), already listed" in said
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="fem.sweep"):
+        assert sweep_cases({"C1_kPa": [1.0], "phi_deg": [-90.0, 90.0],
+                            "theta_deg": [0.0, 180.0]}) == [Case(1.0, -90.0, 0.0),
+                                                           Case(1.0, -90.0, 180.0)]
+    assert "(90, 0) is (-90, 180)" in caplog.text
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="fem.sweep"):
+        sweep_cases({"C1_kPa": [1.0], "phi_deg": [0.0, 0.0, 90.0]})  # the same name twice
+    assert not caplog.text
+
+
 def test_random_cases_are_seeded_within_the_range_and_uniform_in_compliance() -> None:
     from fem.sweep import random_cases
 
