@@ -195,7 +195,7 @@ def estimate_file(observation: Path, reference: Path, model_folder: Path, phi: f
         fe: confirm with FE (else the surrogate's estimate alone).
     """
     from meshes.config import MeshConfig
-    from meshes.frame import read_points
+    from meshes.points import read_points
 
     spec = MeshConfig.from_mapping(dict(mesh_section or {})).file
     _, points = read_points(observation)

@@ -227,8 +227,8 @@ def track_file(points_csv: Path, imaged: Path, reference: Path, model_folder: Pa
     from fem.case import CaseRunner
     from fem.sweep import Case
     from meshes.config import MeshConfig
-    from meshes.frame import read_points
     from meshes.io import read_mesh
+    from meshes.points import read_points
     from surrogate.exceptions import ExtrapolationWarning
     from surrogate.predict import Surrogate
 

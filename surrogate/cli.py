@@ -35,7 +35,7 @@ import numpy as np
 
 from fem.configfile import read_config_file
 from fem.dataset import DatasetError
-from meshes.frame import read_points, write_points
+from meshes.points import read_points, write_points
 from surrogate.config import SurrogateConfig
 from surrogate.exceptions import ExtrapolationWarning, SurrogateError
 

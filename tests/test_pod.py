@@ -144,7 +144,7 @@ def test_the_command_line_predicts_at_named_points(
     The same numbers as ``Surrogate.at`` in Python; a point outside the body is refused by
     name, nothing written.
     """
-    from meshes.frame import read_points
+    from meshes.points import read_points
     from surrogate.cli import main
     from surrogate.predict import Surrogate
 

@@ -1,0 +1,58 @@
+"""Named points as a CSV: a header ``name,x,y,z``, then one point per row.
+
+The form every command that takes or writes points uses: a tumour's centre and margin, points
+carried between frames (:mod:`meshes.frame`), tracked (:mod:`studies.tracking`) or predicted
+(``python -m surrogate.cli predict --points``).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+
+import numpy as np
+
+from meshes.exceptions import MeshInputError
+
+HEADER = ["name", "x", "y", "z"]
+
+
+def read_points(path: Path) -> tuple[list[str], np.ndarray]:
+    """Names and coordinates (n, 3) of a ``name,x,y,z`` CSV.
+
+    Raises:
+        MeshInputError: naming the file and the row for a missing header, a short row or a
+            coordinate that is not a finite number.
+    """
+    with path.open(newline="") as f:
+        rows = list(csv.reader(f))
+    if not rows or [c.strip().lower() for c in rows[0]] != HEADER:
+        raise MeshInputError(f"{path}: the first row must be the header {','.join(HEADER)}")
+    names, points = [], []
+    for number, row in enumerate(rows[1:], start=2):
+        if not row:
+            continue
+        if len(row) != 4:
+            raise MeshInputError(f"{path}, row {number}: expected name,x,y,z, got {row!r}")
+        try:
+            xyz = [float(v) for v in row[1:]]
+        except ValueError:
+            xyz = [math.nan]
+        if not all(math.isfinite(v) for v in xyz):
+            raise MeshInputError(f"{path}, row {number} ({row[0]!r}): coordinates must be "
+                                 f"finite numbers, got {row[1:]!r}")
+        names.append(row[0])
+        points.append(xyz)
+    if not names:
+        raise MeshInputError(f"{path}: no points below the header")
+    return names, np.array(points)
+
+
+def write_points(path: Path, names: list[str], points: np.ndarray) -> None:
+    """Write a ``name,x,y,z`` CSV."""
+    with path.open("w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(HEADER)
+        for name, p in zip(names, points, strict=True):
+            writer.writerow([name, *(repr(float(v)) for v in p)])
