@@ -185,7 +185,10 @@ def lowest_converging(records: list[dict[str, Any]]) -> dict[str, dict[str, Any]
     Returns:
         ``{scheme: {phi: {"lowest_C1": float | None, "failed_below": {C1, first_failure,
         failure_kinds, load_fraction} | None}}}`` plus, per scheme, ``"all_phi"``: the
-        lowest C1 at which every Φ converged.
+        lowest C1 from which every case of every Φ converged (the highest ``lowest_C1``
+        among the Φ where a case failed; where none failed, the lowest C1 solved). A Φ
+        solved only from a stiffer C1 (a refinement band's) does not raise it: nothing
+        failed there.
     """
     out: dict[str, dict[str, Any]] = {}
     schemes = sorted({r["scheme"] for r in records})
@@ -204,8 +207,13 @@ def lowest_converging(records: list[dict[str, Any]]) -> dict[str, dict[str, Any]
                     break
                 lowest = r["C1"]
             per_phi[f"{phi:.1f}"] = {"lowest_C1": lowest, "failed_below": below}
-        values = [v["lowest_C1"] for v in per_phi.values()]
-        per_phi["all_phi"] = None if any(v is None for v in values) else max(values)
+        failed = [v["lowest_C1"] for v in per_phi.values() if v["failed_below"] is not None]
+        if any(v is None for v in failed):
+            per_phi["all_phi"] = None  # a Φ failed at its stiffest C1
+        elif failed:
+            per_phi["all_phi"] = max(failed)
+        else:
+            per_phi["all_phi"] = min(v["lowest_C1"] for v in per_phi.values())
         out[scheme] = per_phi
     return out
 

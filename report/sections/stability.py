@@ -126,7 +126,9 @@ def _sweep_stability(ctx: Context) -> str:
         f"The sweep itself is a stability map at the paper's resolution, solved on the mesh "
         f"of the dataset: {int(failed.sum())} of {len(failed)} cases did not reach the full "
         "load. Per Φ: the lowest C1 from which every stiffer C1 of the sweep converged, and "
-        "what failed first at the next C1 below it (\"—\": every C1 of the sweep converged).",
+        "what failed first at the next C1 below it (\"—\": every C1 solved at that Φ "
+        "converged; a refinement band's directions start at its own C1_min). The last row: "
+        "the lowest C1 from which every case converged.",
         "caption")]
     out.append(lowest_converging_table(lowest_converging(records), "sweep-lowest-converging"))
     if failed.any():
