@@ -296,3 +296,29 @@ def test_c1s_effect_is_judged_only_where_the_whole_c1_range_was_solved(tmp_path:
     assert "60°/-120°" not in verdicts.group(1) and "Left out: 2 directions" in verdicts.group(1)
     assert re.search(r"<td>60</td><td>-120</td><td>1–1.2</td>", page)
     assert re.search(r"<td>90</td><td>0</td><td>1–5</td>", page)
+
+
+def test_the_extrapolation_and_training_tables_say_each_thing_once(tmp_path: Path) -> None:
+    """A failed FE solve is named once, not once per model; a sphere's directions are counted.
+
+    Φ and θ of a sweep over the sphere listed apart read as a grid that was never trained.
+    """
+    from report.context import Context
+    from report.sections.extrapolation import extrapolation_section
+    from report.sections.training import _training_range
+    from studies.surrogate_evaluation import Extrapolation, ExtrapolationBlock
+
+    failed = [{"case": "c1=0.50_phi=0.0_theta=0.0", "reason": "step cut below min_step"}]
+    block = ExtrapolationBlock(rows=[], failed_fe=failed, by_kind={})
+    context = Context(out_dir=tmp_path, clinical=[], paths={}, clinical_fields=[],
+                      results={"extrapolation": Extrapolation(by_sample=block, by_case=block)})
+    assert "(1 FE solves outside the sweep failed)" in extrapolation_section(context)
+    directions = [[phi, 0.0] for phi in range(-150, 180, 10)] + [[45.0, -90.0], [60.0, -30.0]]
+    said = _training_range({"C1_kPa": [0.8, 5.0], "directions": directions,
+                            "phi_deg": sorted({p for p, _ in directions}),
+                            "theta_deg": [-90.0, -30.0, 0.0]})
+    assert said == ("C1 [0.8, 5] kPa; 35 gravity directions (33 in the plane θ = 0; each "
+                    "(Φ, θ) in model.json's training_range)")
+    few = _training_range({"C1_kPa": [1.0, 5.0], "phi_deg": [0.0, 180.0], "theta_deg": [0.0],
+                           "directions": [[0.0, 0.0], [180.0, 0.0]]})
+    assert few == "C1 [1, 5] kPa; Φ ∈ {0, 180}°; θ ∈ {0}°"

@@ -15,10 +15,11 @@ def extrapolation_section(ctx: Context) -> str:
         return missing("results/surrogate/extrapolation.json")
     blocks = {s: getattr(extra, s) for s in ("by_sample", "by_case") if getattr(extra, s)}
     splits = [s for s, block in blocks.items() if block.rows]
+    # each model's block lists the same FE solves that failed: each once
+    failed = list({f.get("case"): f for b in blocks.values() for f in b.failed_fe}.values())
     if not splits:
-        failed = sum(len(block.failed_fe) for block in blocks.values())
-        return para(f"No extrapolation case was compared ({failed} FE solves outside the sweep "
-                    "failed).", "note")
+        return para(f"No extrapolation case was compared ({len(failed)} FE solves outside the "
+                    "sweep failed).", "note")
     ids = list(dict.fromkeys(r.case for s in splits for r in blocks[s].rows))
     rows_of = {s: {r.case: r for r in blocks[s].rows} for s in splits}
     first = {cid: next(rows_of[s][cid] for s in splits if cid in rows_of[s]) for cid in ids}
@@ -67,7 +68,6 @@ def extrapolation_section(ctx: Context) -> str:
                    f"{name}: max error (mm)", f"{name}: at nearest sweep case (mm)",
                    f"{name}: ratio"]
     out.append(table(header, rows, table_id="extrapolation"))
-    failed = [f for s in splits for f in blocks[s].failed_fe]
     if failed:
         out.append(para("FE solves outside the sweep that failed (no comparison): " + "; ".join(
             f"{f.get('case')}: {f.get('reason', '')}" for f in failed), "note"))

@@ -50,12 +50,22 @@ def training_section(ctx: Context) -> str:
     return "".join(out)
 
 
+MAX_LISTED = 24
+"""More training directions than this are counted, not listed, in the training table."""
+
+
 def _training_range(rng: Mapping[str, Any] | None) -> str:
     if not rng:
         return "n/a"
     parts = []
     if rng.get("C1_kPa"):
         parts.append(f"C1 {span(rng['C1_kPa'], 'g')} kPa")
+    directions = rng.get("directions") or []
+    if len(directions) > MAX_LISTED:  # a sphere's directions: Φ and θ are not a grid
+        plane = sum(1 for _, theta in directions if theta == 0)
+        parts.append(f"{len(directions)} gravity directions ({plane} in the plane θ = 0; "
+                     "each (Φ, θ) in model.json's training_range)")
+        return "; ".join(parts)
     for key, name in (("phi_deg", "Φ"), ("theta_deg", "θ")):
         if rng.get(key):
             parts.append(f"{name} ∈ {{{', '.join(f'{v:g}' for v in rng[key])}}}°")
