@@ -213,3 +213,37 @@ def test_the_page_and_its_library_stay_small(viewer: Path) -> None:
 def test_the_report_links_the_view(small_run: Path) -> None:
     report = (small_run / "results" / "report" / "index.html").read_text()
     assert '<a href="../viewer/index.html">' in report
+
+
+def test_a_page_for_any_model_from_the_command_line(
+    small_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``python -m report.viewer``: a model trained outside the workflow gets its page too.
+
+    Without a dataset the FE controls are hidden; a config's postures become its buttons. A
+    model that cannot be read, or a dataset of other material points, is named and nothing is
+    written.
+    """
+    from report.viewer import ViewerError, fe_cases
+    from report.viewer.__main__ import main
+    from tests.conftest import REPO
+
+    results = small_run / "results"
+    model_dir, mesh = results / "surrogate" / "model", results / "mesh" / "mesh.xdmf"
+    page_path = tmp_path / "page.html"
+    assert main([str(model_dir), "-o", str(page_path), "--mesh", str(mesh),
+                 "--config", str(REPO / "tests" / "config.yaml")]) == 0
+    assert capsys.readouterr().out.startswith(f"wrote {page_path}: ")
+    model = Surrogate.load(model_dir)
+    with open_page(page_path, ready=READY) as (page, errors, _):
+        in_page = np.asarray(page.evaluate("window.viewer.predictAll(2.0, 180, 0)"))
+        assert np.abs(in_page.reshape(-1, 3) - model.predict(2.0, 180.0)).max() <= 1e-4
+        assert page.locator("#fe-controls").is_hidden()
+        assert page.locator(".presets button").all_inner_texts() == ["prone", "standing"]
+        assert not errors
+    missing = tmp_path / "missing.html"
+    assert main([str(tmp_path / "no_model"), "-o", str(missing), "--mesh", str(mesh)]) == 2
+    assert "cannot read a surrogate model" in capsys.readouterr().err
+    assert not missing.exists()
+    with pytest.raises(ViewerError, match="not the model's"):
+        fe_cases(results / "dataset" / "dataset.h5", np.arange(3), points=model.X + 0.01)

@@ -85,9 +85,18 @@ def fe_cases(
     vertices: np.ndarray,
     clinical: Sequence[dict[str, Any]] = (),
     limit: int = MAX_FE_CASES,
+    points: np.ndarray | None = None,
 ) -> list[dict[str, Any]]:
-    """FE surface displacements (mm) of the clinical cases and of others spread over the sweep."""
+    """FE surface displacements (mm) of the clinical cases and of others spread over the sweep.
+
+    Raises:
+        ViewerError: if ``points`` (the model's material points) are not the dataset's.
+    """
     ds = read_dataset(dataset_path)
+    if points is not None and (ds.X.shape != points.shape
+                               or not np.allclose(ds.X, points, rtol=0, atol=1e-9)):
+        raise ViewerError(f"{dataset_path} holds {ds.n_points} material points that are not "
+                          f"the model's {len(points)}: give the dataset the model was trained on")
     good = np.flatnonzero(ds.converged)
     chosen: list[int] = []
     labels: dict[int, str] = {}
@@ -122,7 +131,7 @@ def fe_cases(
 def build_viewer(
     model_dir: str | Path,
     mesh_xdmf: str | Path,
-    dataset_path: str | Path,
+    dataset_path: str | Path | None,
     output: str | Path,
     clinical: Sequence[dict[str, Any]] = (),
     postures: Sequence[dict[str, Any]] = (),
@@ -132,7 +141,7 @@ def build_viewer(
     Args:
         model_dir: the surrogate's model folder.
         mesh_xdmf: the mesh the surrogate was trained on.
-        dataset_path: the sweep's dataset (the FE cases to compare with).
+        dataset_path: the sweep's dataset (the FE cases to compare with); None: no FE cases.
         output: the page to write.
         clinical: the config's clinical cases (carried first, with their labels).
         postures: the postures offered as buttons, ``{name, phi, theta, note}`` each
@@ -144,7 +153,8 @@ def build_viewer(
     """
     model = Surrogate.load(model_dir)
     vertices, triangles = surface(model, mesh_xdmf)
-    cases = fe_cases(dataset_path, vertices, clinical)
+    cases = ([] if dataset_path is None
+             else fe_cases(dataset_path, vertices, clinical, points=model.X))
     data = {
         "model": export_web(model),
         "surface": {"points": encode_array(vertices, "int32"),
@@ -162,6 +172,7 @@ def build_viewer(
         subtitle=f"{model.config.architecture} {model.config.activation} network, "
         f"{len(model.X)} material points, predicted in this page",
         initial={"C1": first["C1"], "phi": first["phi"], "theta": first["theta"]},
+        fe_cases=bool(cases),  # without a dataset, no FE controls
         presets=[{"theta": 0.0, "note": "", **posture} for posture in postures],
         axes="x anterior→posterior · y medial→lateral · z caudal→cranial",
         provenance=f"model {Path(model_dir).name}, mesh {Path(mesh_xdmf).name}; three.js "

@@ -1,0 +1,59 @@
+"""The interactive 3D view of any surrogate model, built outside the workflow.
+
+    .venv/bin/python -m report.viewer MODEL -o page.html [--mesh results/mesh/mesh.xdmf]
+        [--dataset results/dataset/dataset.h5] [--config config.yaml]
+
+``MODEL`` is a model folder (the workflow's ``results/surrogate/model``, or one trained with
+``python -m surrogate.cli train --out``); ``--mesh`` the mesh it was trained on. With
+``--dataset`` (the sweep's, of the same material points) the page can show FE solutions beside
+the surrogate's; with ``--config`` it offers the config's postures as buttons and labels its
+clinical cases. The page opens from the file system, as the workflow's does. Exit status 2
+names a model, mesh, dataset or config that cannot be used; nothing is written then.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from fem.configfile import read_config_file
+from fem.dataset import DatasetError
+from fem.exceptions import InvalidParameterError
+from report.viewer import ViewerError, build_viewer
+from surrogate.exceptions import SurrogateError
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Build the page; returns the exit status."""
+    parser = argparse.ArgumentParser(prog="python -m report.viewer",
+                                     description=__doc__.split("\n\n")[0])
+    parser.add_argument("model", type=Path, help="the surrogate's model folder")
+    parser.add_argument("-o", "--output", type=Path, required=True, help="the page to write")
+    parser.add_argument("--mesh", type=Path, default=Path("results/mesh/mesh.xdmf"),
+                        help="the mesh the model was trained on")
+    parser.add_argument("--dataset", type=Path,
+                        help="the sweep's dataset, to show FE solutions beside the surrogate's")
+    parser.add_argument("--config", type=Path,
+                        help="a config: its postures become buttons, its clinical cases labels")
+    args = parser.parse_args(argv)
+    if not args.output.parent.is_dir():
+        print(f"error: --output {args.output}: the folder {args.output.parent} does not exist",
+              file=sys.stderr)
+        return 2
+    try:
+        values = read_config_file(args.config) if args.config else {}
+        study = values.get("surrogate_study") or {}
+        postures = (study.get("postures") or {}).get("directions") or []
+        info = build_viewer(args.model, args.mesh, args.dataset, args.output,
+                            values.get("clinical") or [], postures)
+    except (SurrogateError, DatasetError, ViewerError, InvalidParameterError, OSError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    print(f"wrote {args.output}: {info['points']} material points, {info['surface_vertices']} "
+          f"surface vertices, {info['fe_cases']} FE cases, {len(postures)} postures")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
