@@ -378,11 +378,15 @@ def test_the_workflow_runs_from_an_imaged_mesh_to_tracked_points_and_the_stiffne
     imaged mesh; the second observation is the skin of an FE solve on the reference at
     C1 = 2.5 kPa, supine, with 0.5 mm of noise.
     """
+    import json
+    import re
+
     import yaml
 
     from studies.reference_state import ReferenceRecord
     from studies.stiffness import Estimator, StiffnessResult
     from studies.tracking import TrackingResult
+    from surrogate.export import decode_array
     from tests.conftest import REPO, snakemake
 
     config = yaml.safe_load((REPO / "tests" / "config.yaml").read_text())
@@ -401,7 +405,8 @@ def test_the_workflow_runs_from_an_imaged_mesh_to_tracked_points_and_the_stiffne
     centroids = nodes[::max(1, len(nodes) // 5)].mean(axis=1)[:5]
     (tmp_path / "tumour.csv").write_text("name,x,y,z\n" + "".join(
         f"t{i},{x!r},{y!r},{z!r}\n" for i, (x, y, z) in enumerate(centroids)))
-    run = snakemake(tmp_path, "-j2", "results/tracking/tumour.csv", config=path)
+    run = snakemake(tmp_path, "-j2", "results/tracking/tumour.csv", "results/viewer/index.html",
+                    config=path)
     assert run.returncode == 0, run.stderr[-3000:]
 
     record = ReferenceRecord.read(tmp_path / "results/mesh/reference.json")
@@ -418,6 +423,12 @@ def test_the_workflow_runs_from_an_imaged_mesh_to_tracked_points_and_the_stiffne
 
     model = Surrogate.load(tmp_path / "results/surrogate/model")
     assert max(tracked.difference_mm) <= 3 * model.metrics["validation_error_domain_mm"]
+    # the 3D view carries the tracked points at their material positions, named by their set
+    page = (tmp_path / "results/viewer/index.html").read_text()
+    data = json.loads(re.search(r'id="viewer-data"[^>]*>(.*?)</script>', page, re.S).group(1))
+    assert data["inner"]["names"] == [f"tumour: t{i}" for i in range(5)]
+    np.testing.assert_allclose(decode_array(data["inner"]["model"]["X_m"]), tracked.reference,
+                               atol=1e-6)
 
     with Estimator(tmp_path / "results/mesh/mesh.xdmf", tmp_path / "results/surrogate/model",
                    SolverSettings()) as estimator:

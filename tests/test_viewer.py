@@ -220,19 +220,27 @@ def test_a_page_for_any_model_from_the_command_line(
 ) -> None:
     """``python -m report.viewer``: a model trained outside the workflow gets its page too.
 
-    Without a dataset the FE controls are hidden; a config's postures become its buttons. A
-    model that cannot be read, or a dataset of other material points, is named and nothing is
-    written.
+    Without a dataset the FE controls are hidden; a config's postures become its buttons;
+    named points inside the body (``--points``, a tumour) are predicted in the page as
+    ``Surrogate.at`` predicts them, listed and drawn through a skin one can see through. A
+    model that cannot be read, a point outside the body, or a dataset of other material points
+    is named and nothing is written.
     """
+    from fem.dataset import read_dataset
     from report.viewer import ViewerError, fe_cases
     from report.viewer.__main__ import main
     from tests.conftest import REPO
 
     results = small_run / "results"
     model_dir, mesh = results / "surrogate" / "model", results / "mesh" / "mesh.xdmf"
+    ds = read_dataset(results / "dataset" / "dataset.h5")
+    inside = ds.X[ds.cells[:2]].mean(axis=1)  # two cells' centroids
+    points = tmp_path / "tumour.csv"
+    points.write_text("name,x,y,z\n" + "".join(
+        f"t<{i}>,{x!r},{y!r},{z!r}\n" for i, (x, y, z) in enumerate(inside)))
     page_path = tmp_path / "page.html"
     assert main([str(model_dir), "-o", str(page_path), "--mesh", str(mesh),
-                 "--config", str(REPO / "tests" / "config.yaml")]) == 0
+                 "--config", str(REPO / "tests" / "config.yaml"), "--points", str(points)]) == 0
     assert capsys.readouterr().out.startswith(f"wrote {page_path}: ")
     model = Surrogate.load(model_dir)
     with open_page(page_path, ready=READY) as (page, errors, _):
@@ -240,10 +248,23 @@ def test_a_page_for_any_model_from_the_command_line(
         assert np.abs(in_page.reshape(-1, 3) - model.predict(2.0, 180.0)).max() <= 1e-4
         assert page.locator("#fe-controls").is_hidden()
         assert page.locator(".presets button").all_inner_texts() == ["prone", "standing"]
+        for C1, phi in ((1.0, 180.0), (4.0, 0.0)):
+            at = np.asarray(page.evaluate(f"window.viewer.predictInner({C1}, {phi}, 0)"))
+            assert np.abs(at.reshape(-1, 3) - model.at(inside).predict(C1, phi)).max() <= 1e-4
+        page.evaluate("window.viewer.setQuery(1.0, 0, 0)")
+        rows = page.locator("#points tr").all_inner_texts()
+        assert [r.split("\t")[0] for r in rows] == ["● t<0>", "● t<1>"], rows  # as text
+        assert page.evaluate("window.viewer.state()")["seeThrough"]
+        page.uncheck("#see-through")
+        assert not page.evaluate("window.viewer.state()")["seeThrough"]
         assert not errors
     missing = tmp_path / "missing.html"
     assert main([str(tmp_path / "no_model"), "-o", str(missing), "--mesh", str(mesh)]) == 2
     assert "cannot read a surrogate model" in capsys.readouterr().err
+    points.write_text("name,x,y,z\nfar,1.0,1.0,1.0\n")
+    assert main([str(model_dir), "-o", str(missing), "--mesh", str(mesh),
+                 "--points", str(points)]) == 2
+    assert "the named points (far): 1 of 1 points lie outside the mesh" in capsys.readouterr().err
     assert not missing.exists()
     with pytest.raises(ViewerError, match="not the model's"):
         fe_cases(results / "dataset" / "dataset.h5", np.arange(3), points=model.X + 0.01)

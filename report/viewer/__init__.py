@@ -128,6 +128,25 @@ def fe_cases(
     return out
 
 
+def inner_points(model: Surrogate, points: Sequence[tuple[str, Sequence[float]]]
+                 ) -> dict[str, Any] | None:
+    """Named material points for the page: their names and the model answering at them.
+
+    Raises:
+        ViewerError: if a point lies outside the body (or the model cannot answer between its
+            own points), naming the points.
+    """
+    if not len(points):
+        return None
+    names = [str(name) for name, _ in points]
+    X = np.array([list(xyz) for _, xyz in points], dtype=float)
+    try:
+        at = model.at(X)
+    except ValueError as err:
+        raise ViewerError(f"the named points ({', '.join(names)}): {err}") from None
+    return {"names": names, "model": export_web(at)}
+
+
 def build_viewer(
     model_dir: str | Path,
     mesh_xdmf: str | Path,
@@ -135,6 +154,7 @@ def build_viewer(
     output: str | Path,
     clinical: Sequence[dict[str, Any]] = (),
     postures: Sequence[dict[str, Any]] = (),
+    points: Sequence[tuple[str, Sequence[float]]] = (),
 ) -> dict[str, Any]:
     """Write the viewer page ``output`` (and three.js's licence beside it).
 
@@ -147,9 +167,17 @@ def build_viewer(
         postures: the postures offered as buttons, ``{name, phi, theta, note}`` each
             (``surrogate_study.postures.directions``): g = [cos Φ, sin Φ cos θ,
             sin Φ sin θ] in the body's frame.
+        points: named material points inside the body, ``(name, (x, y, z))`` in the model's
+            reference frame, m (a tumour's centre and margin): the page predicts and draws
+            them too (:meth:`surrogate.predict.Surrogate.at`).
 
     Returns:
-        What the page holds: points, surface vertices and triangles, FE cases, bytes.
+        What the page holds: points, surface vertices and triangles, FE cases, named points,
+        bytes.
+
+    Raises:
+        ViewerError: if a named point lies outside the body, or the dataset is not the
+            model's.
     """
     model = Surrogate.load(model_dir)
     vertices, triangles = surface(model, mesh_xdmf)
@@ -160,6 +188,7 @@ def build_viewer(
         "surface": {"points": encode_array(vertices, "int32"),
                     "triangles": encode_array(triangles, "int32")},
         "fe_cases": cases,
+        "inner": inner_points(model, points),
     }
     C1s = [c for c in model.range_checks()["c1_kPa"] if c is not None]
     first = cases[0] if cases else {"C1": float(np.median(C1s)) if C1s else 1.0, "phi": 180.0,
@@ -173,6 +202,7 @@ def build_viewer(
         f"{len(model.X)} material points, predicted in this page",
         initial={"C1": first["C1"], "phi": first["phi"], "theta": first["theta"]},
         fe_cases=bool(cases),  # without a dataset, no FE controls
+        inner=bool(points),
         presets=[{"theta": 0.0, "note": "", **posture} for posture in postures],
         axes="x anterior→posterior · y medial→lateral · z caudal→cranial",
         provenance=f"model {Path(model_dir).name}, mesh {Path(mesh_xdmf).name}; three.js "
@@ -188,6 +218,7 @@ def build_viewer(
     shutil.copyfile(THREE_LICENSE, output.parent / "THREE-LICENSE.txt")
     info = {"points": len(model.X), "surface_vertices": int(len(vertices)),
             "triangles": len(triangles),
-            "fe_cases": len(cases), "bytes": output.stat().st_size}
+            "fe_cases": len(cases), "named_points": len(points),
+            "bytes": output.stat().st_size}
     log.info("viewer: %s", info)
     return info

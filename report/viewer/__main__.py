@@ -1,13 +1,15 @@
 """The interactive 3D view of any surrogate model, built outside the workflow.
 
     .venv/bin/python -m report.viewer MODEL -o page.html [--mesh results/mesh/mesh.xdmf]
-        [--dataset results/dataset/dataset.h5] [--config config.yaml]
+        [--dataset results/dataset/dataset.h5] [--config config.yaml] [--points tumour.csv]
 
 ``MODEL`` is a model folder (the workflow's ``results/surrogate/model``, or one trained with
 ``python -m surrogate.cli train --out``); ``--mesh`` the mesh it was trained on. With
 ``--dataset`` (the sweep's, of the same material points) the page can show FE solutions beside
 the surrogate's; with ``--config`` it offers the config's postures as buttons and labels its
-clinical cases. The page opens from the file system, as the workflow's does. Exit status 2
+clinical cases; with ``--points`` (a ``name,x,y,z`` CSV of material points inside the body, in
+the model's reference frame, m, as ``surrogate.cli predict --points`` reads) it draws where the
+surrogate moves them. The page opens from the file system, as the workflow's does. Exit status 2
 names a model, mesh, dataset or config that cannot be used; nothing is written then.
 """
 
@@ -20,6 +22,8 @@ from pathlib import Path
 from fem.configfile import read_config_file
 from fem.dataset import DatasetError
 from fem.exceptions import InvalidParameterError
+from meshes.exceptions import MeshInputError
+from meshes.points import read_points
 from report.viewer import ViewerError, build_viewer
 from surrogate.exceptions import SurrogateError
 
@@ -36,6 +40,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="the sweep's dataset, to show FE solutions beside the surrogate's")
     parser.add_argument("--config", type=Path,
                         help="a config: its postures become buttons, its clinical cases labels")
+    parser.add_argument("--points", type=Path, metavar="CSV",
+                        help="named material points inside the body (name,x,y,z, m) to draw")
     args = parser.parse_args(argv)
     if not args.output.parent.is_dir():
         print(f"error: --output {args.output}: the folder {args.output.parent} does not exist",
@@ -45,13 +51,17 @@ def main(argv: list[str] | None = None) -> int:
         values = read_config_file(args.config) if args.config else {}
         study = values.get("surrogate_study") or {}
         postures = (study.get("postures") or {}).get("directions") or []
+        names, X = read_points(args.points) if args.points else ([], [])
+        named = list(zip(names, X, strict=True))
         info = build_viewer(args.model, args.mesh, args.dataset, args.output,
-                            values.get("clinical") or [], postures)
-    except (SurrogateError, DatasetError, ViewerError, InvalidParameterError, OSError) as err:
+                            values.get("clinical") or [], postures, named)
+    except (SurrogateError, DatasetError, ViewerError, InvalidParameterError, MeshInputError,
+            OSError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     print(f"wrote {args.output}: {info['points']} material points, {info['surface_vertices']} "
-          f"surface vertices, {info['fe_cases']} FE cases, {len(postures)} postures")
+          f"surface vertices, {info['fe_cases']} FE cases, {len(postures)} postures, "
+          f"{info['named_points']} named points")
     return 0
 
 

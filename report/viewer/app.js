@@ -411,6 +411,10 @@ const nv = surface.length;
 const onSurface = surrogate.evaluator(Array.from(surface));
 const everywhere = surrogate.evaluator(Array.from({ length: surrogate.n }, (_, i) => i));
 const feCases = DATA.fe_cases.map((c) => ({ ...c, u: decode(c.u_mm) }));
+// named points inside the body (a tumour's centre and margin): the model at those points
+const inner = DATA.inner ? new WebSurrogate(DATA.inner.model) : null;
+const innerNames = DATA.inner ? DATA.inner.names : [];
+const inside = inner ? inner.evaluator(Array.from({ length: inner.n }, (_, i) => i)) : null;
 
 const reference = new Float32Array(3 * nv);
 const magnitude = new Float32Array(nv);
@@ -504,7 +508,7 @@ function update() {
   const g = new Vector3(Math.cos(p), Math.sin(p) * Math.cos(t), Math.sin(p) * Math.sin(t));
   gravityArrow.setDirection(g);  // drawn beside the body, centred on its anchor
   gravityArrow.position.copy(arrowAnchor).addScaledVector(g, -0.35 * radius);
-  placePoints(shown);
+  placePoints(shown, inner ? inner.evaluate(inside, q.C1, q.phi, q.theta) : null);
   renderer.render(scene, camera);
   state.lastMs = performance.now() - start;
   showState(q, mode, top, largest);
@@ -533,16 +537,39 @@ function showState(q, mode, top, largest) {
 // -- named points ---------------------------------------------------------------------------
 const pointGeometry = new SphereGeometry(radius / 30, 16, 12);
 const fixed1 = (x) => x.toFixed(1).replace(/^-(0\.0)$/, '$1');  // no "-0.0"
-function placePoints(shown) {
-  const rows = state.points.map((point) => {
+const row = (name, colour, u) => `<tr><td><span style="color:${colour}">●</span> ${name}</td>`
+  + `<td>${Math.hypot(...u).toFixed(2)}</td><td>${u.map(fixed1).join(', ')}</td></tr>`;
+const escapeHtml = (text) => text.replace(/[&<>"']/g, (c) => `&#${c.charCodeAt(0)};`);
+// the named points inside: grey at rest, blue where the surrogate moves them (in every mode:
+// the page's FE fields are on the skin only)
+const innerMarkers = innerNames.map((name, i) => {
+  const ref = new Mesh(pointGeometry, new MeshBasicMaterial({ color: 0x8a8a8a }));
+  ref.position.set(...[0, 1, 2].map((d) => 1000 * inner.X[3 * i + d]));
+  const deformed = new Mesh(pointGeometry, new MeshBasicMaterial({ color: 0x1f77b4 }));
+  scene.add(ref, deformed);
+  return { name: escapeHtml(name), deformed };
+});
+function placePoints(shown, innerU) {
+  const rows = innerMarkers.map((point, i) => {
+    const u = [0, 1, 2].map((d) => innerU[3 * i + d]);
+    point.deformed.position.set(...[0, 1, 2].map((d) => 1000 * inner.X[3 * i + d] + u[d]));
+    return row(point.name, '#1f77b4', u);
+  });
+  for (const point of state.points) {
     const v = point.vertex;
     point.deformed.position.set(...[0, 1, 2].map((d) => reference[3 * v + d] + shown[3 * v + d]));
-    const u = [0, 1, 2].map((d) => shown[3 * v + d]);
-    const size = Math.hypot(...u);
-    return `<tr><td>${point.name}</td><td>${size.toFixed(2)}</td>`
-      + `<td>${u.map(fixed1).join(', ')}</td></tr>`;
-  });
+    rows.push(row(point.name, '#d62728', [0, 1, 2].map((d) => shown[3 * v + d])));
+  }
   $('points').innerHTML = rows.join('');
+}
+
+function seeThrough(on) {
+  const material = breast.material;
+  material.transparent = on;
+  material.opacity = on ? 0.35 : 1;
+  material.depthWrite = !on;
+  material.needsUpdate = true;
+  renderer.render(scene, camera);
 }
 
 function addPoint(vertex) {
@@ -601,6 +628,10 @@ select.addEventListener('change', () => {
 for (const radio of document.querySelectorAll('input[name=mode]')) {
   radio.addEventListener('change', () => { state.mode = radio.value; update(); });
 }
+if ($('see-through')) {
+  $('see-through').addEventListener('change', (e) => seeThrough(e.target.checked));
+  seeThrough($('see-through').checked);
+}
 controls.addEventListener('change', () => renderer.render(scene, camera));
 window.addEventListener('resize', () => { resize(); renderer.render(scene, camera); });
 resize();
@@ -613,11 +644,16 @@ window.viewer = {
   nSurface: nv,
   // displacement (mm) of every material point, in the model's order
   predictAll: (C1, phi, theta) => Array.from(surrogate.evaluate(everywhere, C1, phi, theta)),
+  // displacement (mm) of the named points inside, in their order (empty without them)
+  innerNames,
+  predictInner: (C1, phi, theta) => (inner
+    ? Array.from(inner.evaluate(inside, C1, phi, theta)) : []),
   warnings: (C1, phi, theta) => surrogate.warnings(C1, phi, theta),
   setQuery,
   addPoint,
   state: () => ({ ...query(), mode: state.fe ? state.mode : 'surrogate',
     fe: state.fe && state.fe.id, lastMs: state.lastMs,
+    seeThrough: breast.material.transparent,
     warnings: $('warnings').hidden ? [] : $('warnings').textContent.split('\n') }),
   // n predictions at the surface vertices alone (no drawing), in ms
   benchmarkPrediction: (n) => {

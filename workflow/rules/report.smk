@@ -54,6 +54,8 @@ rule viewer:
         model=MODEL,
         mesh=MESH,
         dataset=DATASET,
+        # with reference_state.points: each set's material positions, found by rule tracking
+        tracked=[path.replace(".csv", ".json") for path in TRACKING],
     output:
         html=VIEWER,
         licence="results/viewer/THREE-LICENSE.txt",

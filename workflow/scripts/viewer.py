@@ -8,8 +8,14 @@ configure_cpu()
 
 from report.viewer import build_viewer  # noqa: E402
 from studies.joblog import job_log  # noqa: E402
+from studies.tracking import TrackingResult  # noqa: E402
 
 job_log(snakemake.log[0])
+points = []  # each tracked set's points at their material (reference) positions
+for path in snakemake.input.tracked:
+    tracked = TrackingResult.read(path)
+    points += [(f"{Path(path).stem}: {name}", xyz)
+               for name, xyz in zip(tracked.names, tracked.reference, strict=True)]
 build_viewer(
     Path(snakemake.input.model).parent,
     snakemake.input.mesh,
@@ -17,4 +23,5 @@ build_viewer(
     snakemake.output.html,
     snakemake.params.clinical,
     snakemake.params.postures,
+    points,
 )
