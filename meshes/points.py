@@ -56,3 +56,18 @@ def write_points(path: Path, names: list[str], points: np.ndarray) -> None:
         writer.writerow(HEADER)
         for name, p in zip(names, points, strict=True):
             writer.writerow([name, *(repr(float(v)) for v in p)])
+
+
+def moved_table(names: list[str], X: np.ndarray, u_mm: np.ndarray) -> str:
+    """What a command prints for points ``X`` (m) moved by ``u_mm`` (mm), one line each.
+
+    Under a header: each point's name, the size of its displacement and the displacement (mm),
+    and its position in that posture (m).
+    """
+    lines = [f"{'name':<12} {'|u| mm':>8} {'u (x, y, z) mm':>26}  position in that posture (m)"]
+    for name, x, d in zip(names, np.asarray(X) + 1e-3 * np.asarray(u_mm), u_mm, strict=True):
+        size = float(np.linalg.norm(d))
+        x, d = np.round(x, 5) + 0.0, np.round(d, 3) + 0.0  # no "-0.000"
+        lines.append(f"{name:<12} {size:>8.3f} {d[0]:>8.3f} {d[1]:>8.3f} {d[2]:>8.3f}  "
+                     f"{x[0]:.5f} {x[1]:.5f} {x[2]:.5f}")
+    return "\n".join(lines)

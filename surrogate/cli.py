@@ -35,7 +35,7 @@ import numpy as np
 
 from fem.configfile import read_config_file
 from fem.dataset import DatasetError
-from meshes.points import read_points, write_points
+from meshes.points import moved_table, read_points, write_points
 from surrogate.config import SurrogateConfig
 from surrogate.exceptions import ExtrapolationWarning, SurrogateError
 
@@ -83,14 +83,9 @@ def predict(args: argparse.Namespace) -> int:
         return 2
     norms = np.linalg.norm(u, axis=1)
     if args.points:
-        moved = model.X + 1e-3 * u
-        print(f"{'name':<12} {'|u| mm':>8} {'u (x, y, z) mm':>26}  position in that posture (m)")
-        for name, x, d, n in zip(names, moved, u, norms, strict=True):
-            x, d = np.round(x, 5) + 0.0, np.round(d, 3) + 0.0  # no "-0.000"
-            print(f"{name:<12} {n:>8.3f} {d[0]:>8.3f} {d[1]:>8.3f} {d[2]:>8.3f}  "
-                  f"{x[0]:.5f} {x[1]:.5f} {x[2]:.5f}")
+        print(moved_table(names, model.X, u))
         if output is not None:
-            write_points(output, names, moved)
+            write_points(output, names, model.X + 1e-3 * u)
     else:
         print(f"{u.shape[0]} points: max |u| = {norms.max():.3f} mm, "
               f"mean |u| = {norms.mean():.3f} mm")

@@ -97,7 +97,7 @@ def _cells_holding(X: np.ndarray, cells: np.ndarray, points: np.ndarray
         raise ValueError(
             f"{int(outside.sum())} of {len(points)} points lie outside the mesh by more than "
             f"{1e3 * OUTSIDE_M:g} mm (the farthest {1e3 * gap.max():.1f} mm, point "
-            f"{int(np.argmax(gap))}): the model is trained inside the body only")
+            f"{int(np.argmax(gap))}): fields are known inside the body only")
     return which, weights
 
 

@@ -175,6 +175,18 @@ def test_the_dataset_holds_the_fields_at_every_node(sweep) -> None:
     assert read_dataset(folder / "ds.h5").nodes is None  # read only when asked for
 
 
+def test_a_cases_field_at_named_points_is_the_quadratic_field_there(sweep) -> None:
+    """``studies.case_points``: a case's field between the nodes, exactly where it is quadratic."""
+    from studies.case_points import fe_at_points
+
+    folder, summaries, _, _ = sweep
+    case = Path(summaries[7]).parent
+    C1, phi, theta = (json.loads(Path(summaries[7]).read_text())[k] for k in ("C1", "phi", "theta"))
+    points = np.random.default_rng(3).uniform(0.1 * SIZE, 0.9 * SIZE, size=(20, 3))
+    np.testing.assert_allclose(fe_at_points(case, points), 1e3 * _field(points, C1, phi, theta),
+                               rtol=0, atol=1e-9)
+
+
 def test_a_case_on_another_mesh_is_named_and_nothing_is_written(sweep, tmp_path: Path) -> None:
     from meshes.io import GEOMETRY_DATASET
 

@@ -211,6 +211,51 @@ def test_small_sweep_surrogate_predicts_the_fe(small_run: Path) -> None:
     assert total_err < 0.15 * total_norm
 
 
+def test_a_cases_fe_field_answers_at_named_points(
+    small_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``studies.case_points``: a case's FE displacement at material points, by its shape functions.
+
+    At the mesh's vertices it is the case's own ``points.h5``; between them, at a cell's
+    centroid, the field's value there (the quadratic field's on a quadratic mesh, the corners'
+    mean on the test config's linear one). A case that did not converge is refused.
+    """
+    import json
+    import shutil
+
+    from fem.dataset import read_dataset, read_node_displacement
+    from meshes.points import read_points
+    from studies.case_points import CasePointsError, fe_at_points, main
+    from surrogate.interpolation import at_centroids
+
+    ds = read_dataset(small_run / "results/dataset/dataset.h5")
+    case = small_run / "results/cases" / str(ds.ids[0])
+    assert np.allclose(fe_at_points(case, ds.X[:50]), ds.displacement[0][:50], atol=1e-9)
+    u, cells, nodes = read_node_displacement(case / "fields.h5")
+    if cells.shape[1] == 10:  # a quadratic mesh: the quadratic field at the centroid
+        centroids, at_them = at_centroids(nodes, cells[:3]), at_centroids(u, cells[:3])
+    else:  # a linear one (the test config's): the mean of the corners
+        centroids, at_them = nodes[cells[:3]].mean(axis=1), u[cells[:3]].mean(axis=1)
+    np.testing.assert_allclose(fe_at_points(case, centroids), 1e3 * at_them, atol=1e-9)
+    points = tmp_path / "tumour.csv"
+    points.write_text("name,x,y,z\n" + "".join(
+        f"t{i},{x!r},{y!r},{z!r}\n" for i, (x, y, z) in enumerate(centroids)))
+    out = tmp_path / "moved.csv"
+    assert main([str(case), str(points), "-o", str(out)]) == 0
+    assert "t2 " in capsys.readouterr().out
+    names, moved = read_points(out)
+    assert names == ["t0", "t1", "t2"]
+    np.testing.assert_allclose(moved, centroids + at_them, atol=1e-12)
+    failed = tmp_path / "failed"
+    shutil.copytree(case, failed)
+    summary = json.loads((failed / "summary.json").read_text())
+    summary.update(status="failed", reason="diverged_max_it", load_fraction=0.5)
+    (failed / "summary.json").write_text(json.dumps(summary))
+    with pytest.raises(CasePointsError, match="did not converge .*at 50 % of the load"):
+        fe_at_points(failed, centroids)
+    assert main([str(failed), str(points)]) == 2
+
+
 REPORT_SECTIONS = (
     "Mesh",
     "FE speed against accuracy",
