@@ -50,4 +50,3 @@ def read_config_file(path: str | Path) -> dict[str, Any]:
             f"one holds {type(data).__name__}"
         )
     return data
-

@@ -51,7 +51,7 @@ def _table2(ctx: Context) -> str:
             continue
         predict = predict_s(row)
         rows.append([name, fmt(row.parameters, "d"), fmt(row.runs, "d"),
-                     pm(row.validation_error_mm.mean, row.validation_error_mm.sd),  # .3g
+                     pm(row.validation_error_mm.mean, row.validation_error_mm.sd),  # 3 digits
                      pm(*p_err, ".2f") if p_err else "n/a",
                      pm(row.train_s.mean, row.train_s.sd, ".3g"),
                      pm(*p_train, ".0f") if p_train else "n/a",
