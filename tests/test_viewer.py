@@ -261,6 +261,11 @@ def test_a_page_for_any_model_from_the_command_line(
     missing = tmp_path / "missing.html"
     assert main([str(tmp_path / "no_model"), "-o", str(missing), "--mesh", str(mesh)]) == 2
     assert "cannot read a surrogate model" in capsys.readouterr().err
+    partial = tmp_path / "partial.yaml"
+    partial.write_text("surrogate_study: {postures: {directions: [{name: prone}]}}\n")
+    assert main([str(model_dir), "-o", str(missing), "--mesh", str(mesh),
+                 "--config", str(partial)]) == 2
+    assert f"error: {partial}: invalid configuration: " in capsys.readouterr().err
     points.write_text("name,x,y,z\nfar,1.0,1.0,1.0\n")
     assert main([str(model_dir), "-o", str(missing), "--mesh", str(mesh),
                  "--points", str(points)]) == 2

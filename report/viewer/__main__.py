@@ -6,11 +6,12 @@
 ``MODEL`` is a model folder (the workflow's ``results/surrogate/model``, or one trained with
 ``python -m surrogate.cli train --out``); ``--mesh`` the mesh it was trained on. With
 ``--dataset`` (the sweep's, of the same material points) the page can show FE solutions beside
-the surrogate's; with ``--config`` it offers the config's postures as buttons and labels its
-clinical cases; with ``--points`` (a ``name,x,y,z`` CSV of material points inside the body, in
-the model's reference frame, m, as ``surrogate.cli predict --points`` reads) it draws where the
-surrogate moves them. The page opens from the file system, as the workflow's does. Exit status 2
-names a model, mesh, dataset or config that cannot be used; nothing is written then.
+the surrogate's; with ``--config`` (a whole workflow config, checked as a run checks it) it
+offers the config's postures as buttons and labels its clinical cases; with ``--points`` (a
+``name,x,y,z`` CSV of material points inside the body, in the model's reference frame, m, as
+``surrogate.cli predict --points`` reads) it draws where the surrogate moves them. The page
+opens from the file system, as the workflow's does. Exit status 2 names a model, mesh,
+dataset, config or point that cannot be used; nothing is written then.
 """
 
 from __future__ import annotations
@@ -19,13 +20,25 @@ import argparse
 import sys
 from pathlib import Path
 
-from fem.configfile import read_config_file
 from fem.dataset import DatasetError
-from fem.exceptions import InvalidParameterError
 from meshes.exceptions import MeshInputError
 from meshes.points import read_points
 from report.viewer import ViewerError, build_viewer
+from studies.config import ConfigError, WorkflowConfig, read_config_file
 from surrogate.exceptions import SurrogateError
+
+
+def _checked(path: Path) -> WorkflowConfig:
+    """The config at ``path``, validated as a run validates it.
+
+    Raises:
+        ConfigError: naming the file, and the key for a value out of its bounds.
+    """
+    values = read_config_file(path)  # its errors name the file
+    try:
+        return WorkflowConfig.from_mapping(values)
+    except ConfigError as err:
+        raise ConfigError(f"{path}: invalid configuration: {err}") from None
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -48,14 +61,16 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     try:
-        values = read_config_file(args.config) if args.config else {}
-        study = values.get("surrogate_study") or {}
-        postures = (study.get("postures") or {}).get("directions") or []
+        clinical, postures = [], []
+        if args.config:  # checked as a run checks it
+            config = _checked(args.config)
+            clinical = config.section("clinical")
+            postures = config.section("surrogate_study", "postures", "directions")
         names, X = read_points(args.points) if args.points else ([], [])
         named = list(zip(names, X, strict=True))
-        info = build_viewer(args.model, args.mesh, args.dataset, args.output,
-                            values.get("clinical") or [], postures, named)
-    except (SurrogateError, DatasetError, ViewerError, InvalidParameterError, MeshInputError,
+        info = build_viewer(args.model, args.mesh, args.dataset, args.output, clinical,
+                            postures, named)
+    except (ConfigError, SurrogateError, DatasetError, ViewerError, MeshInputError,
             OSError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
