@@ -222,13 +222,17 @@ def test_a_page_for_any_model_from_the_command_line(
 
     Without a dataset the FE controls are hidden; a config's postures become its buttons;
     named points inside the body (``--points``, a tumour) are predicted in the page as
-    ``Surrogate.at`` predicts them, listed and drawn through a skin one can see through. A
+    ``Surrogate.at`` predicts them, listed and drawn through a skin one can see through, and
+    with a dataset the FE cases' displacement there is shown and compared too. A
     model that cannot be read, a point outside the body, or a dataset of other material points
     is named and nothing is written.
     """
+    import json
+
     from fem.dataset import read_dataset
     from report.viewer import ViewerError, fe_cases
     from report.viewer.__main__ import main
+    from studies.case_points import fe_at_points
     from tests.conftest import REPO
 
     results = small_run / "results"
@@ -257,6 +261,26 @@ def test_a_page_for_any_model_from_the_command_line(
         assert page.evaluate("window.viewer.state()")["seeThrough"]
         page.uncheck("#see-through")
         assert not page.evaluate("window.viewer.state()")["seeThrough"]
+        assert not errors
+    # with the dataset, each FE case carries its field at the points: the FE mode moves them
+    # there, the difference mode lists the surrogate's error at them
+    with_fe = tmp_path / "with_fe.html"
+    assert main([str(model_dir), "-o", str(with_fe), "--mesh", str(mesh), "--points", str(points),
+                 "--dataset", str(results / "dataset" / "dataset.h5")]) == 0
+    data = json.loads(re.search(r'id="viewer-data"[^>]*>(.*?)</script>', with_fe.read_text(),
+                                re.S).group(1))
+    fe_case = data["fe_cases"][0]
+    fe = decode_array(fe_case["inner_u_mm"])
+    np.testing.assert_allclose(fe, fe_at_points(results / "cases" / fe_case["id"], inside),
+                               atol=1e-4)  # the dataset's fields and the case's own files
+    surrogate = model.at(inside).predict(fe_case["C1"], fe_case["phi"], fe_case["theta"])
+    with open_page(with_fe, ready=READY) as (page, errors, _):
+        page.select_option("#fe-case", index=1)
+        for mode, expected in (("fe", fe), ("difference", surrogate - fe)):
+            page.check(f"input[name=mode][value={mode}]")
+            sizes = [float(r[1]) for r in page.evaluate("window.viewer.pointRows()")]
+            assert np.allclose(sizes, np.linalg.norm(expected, axis=1), atol=0.006), mode
+        assert page.inner_text("#points-u") == "u surrogate − u FE (mm)"
         assert not errors
     missing = tmp_path / "missing.html"
     assert main([str(tmp_path / "no_model"), "-o", str(missing), "--mesh", str(mesh)]) == 2

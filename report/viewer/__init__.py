@@ -86,13 +86,18 @@ def fe_cases(
     clinical: Sequence[dict[str, Any]] = (),
     limit: int = MAX_FE_CASES,
     points: np.ndarray | None = None,
+    inner: np.ndarray | None = None,
 ) -> list[dict[str, Any]]:
     """FE surface displacements (mm) of the clinical cases and of others spread over the sweep.
+
+    With ``inner`` (named material points inside the body, (M, 3), m), each case carries the FE
+    displacement there too (``inner_u_mm``), by the mesh's own shape functions (quadratic where
+    the dataset has the fields at every node), where the dataset has the mesh's cells.
 
     Raises:
         ViewerError: if ``points`` (the model's material points) are not the dataset's.
     """
-    ds = read_dataset(dataset_path)
+    ds = read_dataset(dataset_path, nodes=inner is not None)
     if points is not None and (ds.X.shape != points.shape
                                or not np.allclose(ds.X, points, rtol=0, atol=1e-6)):
         raise ViewerError(f"{dataset_path} holds {ds.n_points} material points that are not "
@@ -114,18 +119,43 @@ def fe_cases(
             break
         if int(i) not in chosen:
             chosen.append(int(i))
+    at_inner = _fe_at(ds, inner) if inner is not None else None
     out = []
     for i in chosen:
         name = f"C1 = {ds.C1[i]:g} kPa, Φ = {ds.phi[i]:g}°, θ = {ds.theta[i]:g}°"
-        out.append({
+        case = {
             "id": str(ds.ids[i]),
             "label": f"{labels[i]}: {name}" if labels.get(i) else name,
             "C1": float(ds.C1[i]),
             "phi": float(ds.phi[i]),
             "theta": float(ds.theta[i]),
             "u_mm": encode_array(ds.displacement[i][vertices], "float32"),
-        })
+        }
+        if at_inner is not None:
+            case["inner_u_mm"] = encode_array(at_inner(i), "float32")
+        out.append(case)
     return out
+
+
+def _fe_at(ds: Any, points: np.ndarray) -> Any:
+    """A function of a case's index: its FE displacement (mm) at ``points``; None without cells.
+
+    Raises:
+        ViewerError: if a point lies outside the mesh.
+    """
+    from surrogate.interpolation import interpolate, locate, locate_quadratic
+
+    try:
+        if ds.nodes is not None and ds.nodes.displacement is not None:
+            rows, weights = locate_quadratic(ds.nodes.X, ds.nodes.cells, points)
+            return lambda i: interpolate(ds.nodes.displacement[i].astype(np.float64), rows,
+                                         weights)
+        if ds.cells is not None:
+            rows, weights = locate(ds.X, ds.cells, points)
+            return lambda i: interpolate(ds.displacement[i], rows, weights)
+    except ValueError as err:
+        raise ViewerError(f"the named points: {err}") from None
+    return None
 
 
 def inner_points(model: Surrogate, points: Sequence[tuple[str, Sequence[float]]]
@@ -181,14 +211,16 @@ def build_viewer(
     """
     model = Surrogate.load(model_dir)
     vertices, triangles = surface(model, mesh_xdmf)
+    inner = inner_points(model, points)  # first: a point outside the body is named here
+    named = np.array([list(xyz) for _, xyz in points], dtype=float) if len(points) else None
     cases = ([] if dataset_path is None
-             else fe_cases(dataset_path, vertices, clinical, points=model.X))
+             else fe_cases(dataset_path, vertices, clinical, points=model.X, inner=named))
     data = {
         "model": export_web(model),
         "surface": {"points": encode_array(vertices, "int32"),
                     "triangles": encode_array(triangles, "int32")},
         "fe_cases": cases,
-        "inner": inner_points(model, points),
+        "inner": inner,
     }
     C1s = [c for c in model.range_checks()["c1_kPa"] if c is not None]
     first = cases[0] if cases else {"C1": float(np.median(C1s)) if C1s else 1.0, "phi": 180.0,

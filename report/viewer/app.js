@@ -410,7 +410,8 @@ const triangles = decode(DATA.surface.triangles);   // vertex indices, 3 per tri
 const nv = surface.length;
 const onSurface = surrogate.evaluator(Array.from(surface));
 const everywhere = surrogate.evaluator(Array.from({ length: surrogate.n }, (_, i) => i));
-const feCases = DATA.fe_cases.map((c) => ({ ...c, u: decode(c.u_mm) }));
+const feCases = DATA.fe_cases.map((c) => ({ ...c, u: decode(c.u_mm),
+  innerU: c.inner_u_mm ? decode(c.inner_u_mm) : null }));
 // named points inside the body (a tumour's centre and margin): the model at those points
 const inner = DATA.inner ? new WebSurrogate(DATA.inner.model) : null;
 const innerNames = DATA.inner ? DATA.inner.names : [];
@@ -508,7 +509,7 @@ function update() {
   const g = new Vector3(Math.cos(p), Math.sin(p) * Math.cos(t), Math.sin(p) * Math.sin(t));
   gravityArrow.setDirection(g);  // drawn beside the body, centred on its anchor
   gravityArrow.position.copy(arrowAnchor).addScaledVector(g, -0.35 * radius);
-  placePoints(shown, inner ? inner.evaluate(inside, q.C1, q.phi, q.theta) : null);
+  placePoints(mode, shown, inner ? inner.evaluate(inside, q.C1, q.phi, q.theta) : null);
   renderer.render(scene, camera);
   state.lastMs = performance.now() - start;
   showState(q, mode, top, largest);
@@ -537,11 +538,14 @@ function showState(q, mode, top, largest) {
 // -- named points ---------------------------------------------------------------------------
 const pointGeometry = new SphereGeometry(radius / 30, 16, 12);
 const fixed1 = (x) => x.toFixed(1).replace(/^-(0\.0)$/, '$1');  // no "-0.0"
-const row = (name, colour, u) => `<tr><td><span style="color:${colour}">●</span> ${name}</td>`
-  + `<td>${Math.hypot(...u).toFixed(2)}</td><td>${u.map(fixed1).join(', ')}</td></tr>`;
+const fixed3 = (x) => x.toFixed(3).replace(/^-(0\.000)$/, '$1');
+// one row of the points' table; a difference (small) to the micrometre
+const row = (name, colour, u, small = false) => `<tr><td><span style="color:${colour}">●</span> `
+  + `${name}</td><td>${Math.hypot(...u).toFixed(small ? 3 : 2)}</td>`
+  + `<td>${u.map(small ? fixed3 : fixed1).join(', ')}</td></tr>`;
 const escapeHtml = (text) => text.replace(/[&<>"']/g, (c) => `&#${c.charCodeAt(0)};`);
-// the named points inside: grey at rest, blue where the surrogate moves them (in every mode:
-// the page's FE fields are on the skin only)
+// the named points inside: grey at rest, blue where the surrogate (or, in the FE mode, the
+// FE case where the page carries it there) moves them
 const innerMarkers = innerNames.map((name, i) => {
   const ref = new Mesh(pointGeometry, new MeshBasicMaterial({ color: 0x8a8a8a }));
   ref.position.set(...[0, 1, 2].map((d) => 1000 * inner.X[3 * i + d]));
@@ -549,18 +553,31 @@ const innerMarkers = innerNames.map((name, i) => {
   scene.add(ref, deformed);
   return { name: escapeHtml(name), deformed };
 });
-function placePoints(shown, innerU) {
+// Each point where the mode's field moves it; the table lists that displacement, or in the
+// difference mode the surrogate's minus the FE case's.
+function placePoints(mode, shown, innerSurrogate) {
+  const difference = mode === 'difference';
+  const feInner = state.fe ? state.fe.innerU : null;
   const rows = innerMarkers.map((point, i) => {
-    const u = [0, 1, 2].map((d) => innerU[3 * i + d]);
+    const sur = [0, 1, 2].map((d) => innerSurrogate[3 * i + d]);
+    const fe = feInner ? [0, 1, 2].map((d) => feInner[3 * i + d]) : null;
+    const u = mode === 'fe' && fe ? fe : sur;
     point.deformed.position.set(...[0, 1, 2].map((d) => 1000 * inner.X[3 * i + d] + u[d]));
-    return row(point.name, '#1f77b4', u);
+    return difference && fe ? row(point.name, '#1f77b4', sur.map((s, d) => s - fe[d]), true)
+      : row(point.name, '#1f77b4', u);
   });
   for (const point of state.points) {
     const v = point.vertex;
-    point.deformed.position.set(...[0, 1, 2].map((d) => reference[3 * v + d] + shown[3 * v + d]));
-    rows.push(row(point.name, '#d62728', [0, 1, 2].map((d) => shown[3 * v + d])));
+    const u = [0, 1, 2].map((d) => shown[3 * v + d]);
+    point.deformed.position.set(...[0, 1, 2].map((d) => reference[3 * v + d] + u[d]));
+    rows.push(difference
+      ? row(point.name, '#d62728', [0, 1, 2].map((d) => current[3 * v + d] - state.fe.u[3 * v + d]),
+        true)
+      : row(point.name, '#d62728', u));
   }
   $('points').innerHTML = rows.join('');
+  $('points-size').textContent = difference ? '|Δu| mm' : '|u| mm';
+  $('points-u').textContent = difference ? 'u surrogate − u FE (mm)' : 'u (x, y, z) mm';
 }
 
 function seeThrough(on) {
@@ -648,6 +665,9 @@ window.viewer = {
   innerNames,
   predictInner: (C1, phi, theta) => (inner
     ? Array.from(inner.evaluate(inside, C1, phi, theta)) : []),
+  // the table of points as shown: [name, |u|, u] per row
+  pointRows: () => Array.from(document.querySelectorAll('#points tr'),
+    (tr) => Array.from(tr.cells, (td) => td.textContent.replace(/^● /, ''))),
   warnings: (C1, phi, theta) => surrogate.warnings(C1, phi, theta),
   setQuery,
   addPoint,
