@@ -25,6 +25,7 @@ from fem.dataset import DatasetError, read_node_displacement
 from fem.io import SUMMARY_NAME
 from meshes.exceptions import MeshInputError
 from meshes.points import moved_table, read_points, write_points
+from surrogate.exceptions import OutsideMeshError
 from surrogate.interpolation import interpolate, locate, locate_quadratic
 
 
@@ -38,7 +39,7 @@ def fe_at_points(case: str | Path, points: np.ndarray) -> np.ndarray:
     Raises:
         CasePointsError: for a folder without ``summary.json`` or a case that did not converge.
         fem.dataset.DatasetError: for fields that cannot be read.
-        ValueError: for a point more than 1 mm outside the mesh.
+        surrogate.exceptions.OutsideMeshError: for a point more than 1 mm outside the mesh.
     """
     case = Path(case)
     try:
@@ -71,9 +72,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: --output {args.output} must be a .csv in a folder that exists",
               file=sys.stderr)
         return 2
+    names: list[str] = []
     try:
         names, points = read_points(args.points)
         u = fe_at_points(args.case, points)
+    except OutsideMeshError as err:
+        print(f"error: {err.naming(names)}", file=sys.stderr)
+        return 2
     except (CasePointsError, DatasetError, MeshInputError, OSError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2

@@ -37,7 +37,7 @@ from fem.configfile import read_config_file
 from fem.dataset import DatasetError
 from meshes.points import moved_table, read_points, write_points
 from surrogate.config import SurrogateConfig
-from surrogate.exceptions import ExtrapolationWarning, SurrogateError
+from surrogate.exceptions import ExtrapolationWarning, OutsideMeshError, SurrogateError
 
 
 def predict(args: argparse.Namespace) -> int:
@@ -61,7 +61,10 @@ def predict(args: argparse.Namespace) -> int:
         model = Surrogate.load(args.model)
         if args.points:
             names, points = read_points(Path(args.points))
-            model = model.at(points)
+            try:
+                model = model.at(points)
+            except OutsideMeshError as err:
+                raise OutsideMeshError(err.naming(names), err.gaps_m, err.limit_m) from None
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", ExtrapolationWarning)
             u = model.predict(args.c1, args.phi, args.theta)

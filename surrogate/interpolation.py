@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from surrogate.exceptions import OutsideMeshError
+
 CANDIDATES = 24
 """Cells whose centroids are nearest a point, among which the one that holds it is sought."""
 OUTSIDE_M = 1e-3
@@ -60,7 +62,8 @@ def locate(X: np.ndarray, cells: np.ndarray, points: np.ndarray) -> tuple[np.nda
         :data:`OUTSIDE_M` of one gets that cell's weights clipped to it.
 
     Raises:
-        ValueError: naming how many points lie farther outside the mesh, and the farthest.
+        OutsideMeshError: naming how many points lie farther outside the mesh, and the
+            farthest.
     """
     which, weights = _cells_holding(X, cells, points)
     return cells[which], weights
@@ -94,10 +97,11 @@ def _cells_holding(X: np.ndarray, cells: np.ndarray, points: np.ndarray
     gap = np.linalg.norm(np.einsum("mj,mjd->md", weights, X[rows]) - points, axis=1)
     outside = gap > OUTSIDE_M
     if outside.any():
-        raise ValueError(
+        raise OutsideMeshError(
             f"{int(outside.sum())} of {len(points)} points lie outside the mesh by more than "
             f"{1e3 * OUTSIDE_M:g} mm (the farthest {1e3 * gap.max():.1f} mm, point "
-            f"{int(np.argmax(gap))}): fields are known inside the body only")
+            f"{int(np.argmax(gap))}): fields are known inside the body only",
+            {int(i): float(gap[i]) for i in np.flatnonzero(outside)}, OUTSIDE_M)
     return which, weights
 
 

@@ -293,7 +293,8 @@ def test_a_page_for_any_model_from_the_command_line(
     points.write_text("name,x,y,z\nfar,1.0,1.0,1.0\n")
     assert main([str(model_dir), "-o", str(missing), "--mesh", str(mesh),
                  "--points", str(points)]) == 2
-    assert "the named points (far): 1 of 1 points lie outside the mesh" in capsys.readouterr().err
+    assert ("the named points: 1 of 1 points lie outside the mesh by more than 1 mm: far ("
+            in capsys.readouterr().err)
     assert not missing.exists()
     with pytest.raises(ViewerError, match="not the model's"):
         fe_cases(results / "dataset" / "dataset.h5", np.arange(3), points=model.X + 0.01)

@@ -27,6 +27,7 @@ import numpy as np
 
 from fem.dataset import read_dataset
 from meshes.quality import exterior_faces
+from surrogate.exceptions import OutsideMeshError
 from surrogate.export import encode_array, export_web
 from surrogate.fields import read_mesh_vertices
 from surrogate.predict import Surrogate
@@ -172,6 +173,8 @@ def inner_points(model: Surrogate, points: Sequence[tuple[str, Sequence[float]]]
     X = np.array([list(xyz) for _, xyz in points], dtype=float)
     try:
         at = model.at(X)
+    except OutsideMeshError as err:
+        raise ViewerError(f"the named points: {err.naming(names)}") from None
     except ValueError as err:
         raise ViewerError(f"the named points ({', '.join(names)}): {err}") from None
     return {"names": names, "model": export_web(at)}
