@@ -26,7 +26,7 @@ from fem.io import SUMMARY_NAME
 from meshes.exceptions import MeshInputError
 from meshes.points import moved_table, read_points, write_points
 from surrogate.exceptions import OutsideMeshError
-from surrogate.interpolation import interpolate, locate, locate_quadratic
+from surrogate.interpolation import interpolate, locate_in
 
 
 class CasePointsError(ValueError):
@@ -51,11 +51,7 @@ def fe_at_points(case: str | Path, points: np.ndarray) -> np.ndarray:
             f"{case}: the case did not converge ({summary.get('reason')}): its fields are at "
             f"{100 * float(summary.get('load_fraction') or 0):.0f} % of the load")
     u, cells, nodes = read_node_displacement(case / "fields.h5")
-    if cells.shape[1] == 10:
-        rows, weights = locate_quadratic(nodes, cells, points)
-    else:
-        rows, weights = locate(nodes, cells[:, :4], points)
-    return 1e3 * interpolate(u, rows, weights)
+    return 1e3 * interpolate(u, *locate_in(nodes, cells, points))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -187,6 +187,21 @@ def locate_quadratic(
     return rows, quadratic_weights(bary, pairs)
 
 
+def locate_in(X: np.ndarray, cells: np.ndarray, points: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """Each point's cell and its shape functions there, by the cells' own order.
+
+    10-node cells: the quadratic ones (:func:`locate_quadratic`); otherwise the linear ones of
+    the corners (:func:`locate`).
+
+    Raises:
+        OutsideMeshError: as :func:`locate`.
+    """
+    if cells.shape[1] == 10:
+        return locate_quadratic(X, cells, points)
+    return locate(X, cells[:, :4], points)
+
+
 def interpolate(field: np.ndarray, rows: np.ndarray, weights: np.ndarray) -> np.ndarray:
     """A field at the nodes (N, ...) at the located points (M, ...)."""
     return np.einsum("mj,mj...->m...", weights, field[rows])

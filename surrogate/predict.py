@@ -320,10 +320,11 @@ class Surrogate:
         model's own length scale. Each query of the returned model costs in proportion to M.
 
         Raises:
-            ValueError: if ``points`` is not a finite (M, 3) array, or a point lies more than
+            ValueError: if ``points`` is not a finite (M, 3) array; for a ``pod`` model, also
+                if its dataset had no mesh cells.
+            surrogate.exceptions.OutsideMeshError: if a point lies more than
                 :data:`surrogate.interpolation.OUTSIDE_M` outside the mesh (for a model whose
-                dataset has the mesh's cells); for a ``pod`` model, also if its dataset had no
-                mesh cells.
+                dataset has the mesh's cells).
         """
         points = np.asarray(points, dtype=float)
         if points.ndim != 2 or points.shape[1] != 3 or not points.size:

@@ -297,4 +297,4 @@ def test_a_page_for_any_model_from_the_command_line(
             in capsys.readouterr().err)
     assert not missing.exists()
     with pytest.raises(ViewerError, match="not the model's"):
-        fe_cases(results / "dataset" / "dataset.h5", np.arange(3), points=model.X + 0.01)
+        fe_cases(results / "dataset" / "dataset.h5", np.arange(3), material_points=model.X + 0.01)

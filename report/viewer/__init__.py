@@ -86,7 +86,7 @@ def fe_cases(
     vertices: np.ndarray,
     clinical: Sequence[dict[str, Any]] = (),
     limit: int = MAX_FE_CASES,
-    points: np.ndarray | None = None,
+    material_points: np.ndarray | None = None,
     inner: np.ndarray | None = None,
 ) -> list[dict[str, Any]]:
     """FE surface displacements (mm) of the clinical cases and of others spread over the sweep.
@@ -96,13 +96,15 @@ def fe_cases(
     the dataset has the fields at every node), where the dataset has the mesh's cells.
 
     Raises:
-        ViewerError: if ``points`` (the model's material points) are not the dataset's.
+        ViewerError: if ``material_points`` (the model's) are not the dataset's.
     """
     ds = read_dataset(dataset_path, nodes=inner is not None)
-    if points is not None and (ds.X.shape != points.shape
-                               or not np.allclose(ds.X, points, rtol=0, atol=1e-6)):
+    if material_points is not None and (
+            ds.X.shape != material_points.shape
+            or not np.allclose(ds.X, material_points, rtol=0, atol=1e-6)):
         raise ViewerError(f"{dataset_path} holds {ds.n_points} material points that are not "
-                          f"the model's {len(points)}: give the dataset the model was trained on")
+                          f"the model's {len(material_points)}: give the dataset the model was "
+                          "trained on")
     good = np.flatnonzero(ds.converged)
     chosen: list[int] = []
     labels: dict[int, str] = {}
@@ -144,33 +146,30 @@ def _fe_at(ds: Any, points: np.ndarray) -> Any:
     Raises:
         ViewerError: if a point lies outside the mesh.
     """
-    from surrogate.interpolation import interpolate, locate, locate_quadratic
+    from surrogate.interpolation import interpolate, locate_in
 
+    if ds.nodes is not None and ds.nodes.displacement is not None:  # every node: quadratic
+        X, cells, field = ds.nodes.X, ds.nodes.cells, ds.nodes.displacement
+    elif ds.cells is not None:
+        X, cells, field = ds.X, ds.cells, ds.displacement
+    else:
+        return None
     try:
-        if ds.nodes is not None and ds.nodes.displacement is not None:
-            rows, weights = locate_quadratic(ds.nodes.X, ds.nodes.cells, points)
-            return lambda i: interpolate(ds.nodes.displacement[i].astype(np.float64), rows,
-                                         weights)
-        if ds.cells is not None:
-            rows, weights = locate(ds.X, ds.cells, points)
-            return lambda i: interpolate(ds.displacement[i], rows, weights)
+        rows, weights = locate_in(X, cells, points)
     except ValueError as err:
         raise ViewerError(f"the named points: {err}") from None
-    return None
+    return lambda i: interpolate(field[i].astype(np.float64), rows, weights)
 
 
-def inner_points(model: Surrogate, points: Sequence[tuple[str, Sequence[float]]]
-                 ) -> dict[str, Any] | None:
-    """Named material points for the page: their names and the model answering at them.
+def inner_points(model: Surrogate, names: list[str], X: np.ndarray) -> dict[str, Any] | None:
+    """Named material points ``X`` (M, 3), m, for the page: their names and the model there.
 
     Raises:
         ViewerError: if a point lies outside the body (or the model cannot answer between its
             own points), naming the points.
     """
-    if not len(points):
+    if not names:
         return None
-    names = [str(name) for name, _ in points]
-    X = np.array([list(xyz) for _, xyz in points], dtype=float)
     try:
         at = model.at(X)
     except OutsideMeshError as err:
@@ -214,10 +213,11 @@ def build_viewer(
     """
     model = Surrogate.load(model_dir)
     vertices, triangles = surface(model, mesh_xdmf)
-    inner = inner_points(model, points)  # first: a point outside the body is named here
-    named = np.array([list(xyz) for _, xyz in points], dtype=float) if len(points) else None
+    names = [str(name) for name, _ in points]
+    X = np.array([list(xyz) for _, xyz in points], dtype=float) if names else None
+    inner = inner_points(model, names, X)  # first: a point outside the body is named here
     cases = ([] if dataset_path is None
-             else fe_cases(dataset_path, vertices, clinical, points=model.X, inner=named))
+             else fe_cases(dataset_path, vertices, clinical, material_points=model.X, inner=X))
     data = {
         "model": export_web(model),
         "surface": {"points": encode_array(vertices, "int32"),
@@ -237,7 +237,7 @@ def build_viewer(
         f"{len(model.X)} material points, predicted in this page",
         initial={"C1": first["C1"], "phi": first["phi"], "theta": first["theta"]},
         fe_cases=bool(cases),  # without a dataset, no FE controls
-        inner=bool(points),
+        inner=bool(names),
         presets=[{"theta": 0.0, "note": "", **posture} for posture in postures],
         axes="x anterior→posterior · y medial→lateral · z caudal→cranial",
         provenance=f"model {Path(model_dir).name}, mesh {Path(mesh_xdmf).name}; three.js "

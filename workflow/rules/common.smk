@@ -129,6 +129,7 @@ BUILT_MESH = IMAGED_MESH if IMAGED is not None else MESH
 REFERENCE_RECORD = "results/mesh/reference.json"
 STIFFNESS_JSON = "results/stiffness/stiffness.json"
 TRACKING = [f"results/tracking/{name}.csv" for name in (IMAGED.points if IMAGED else {})]
+TRACKING_JSON = [f"results/tracking/{name}.json" for name in (IMAGED.points if IMAGED else {})]
 
 
 def imaged_results():

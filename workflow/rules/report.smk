@@ -29,7 +29,7 @@ rule report:
         reference_roundtrip=REFERENCE_ROUNDTRIP_JSON,
         # the imaged chain's results where reference_state.imaged is set (else empty)
         reference_record=[REFERENCE_RECORD] if IMAGED else [],
-        tracking=[path.replace(".csv", ".json") for path in TRACKING],
+        tracking=TRACKING_JSON,
         stiffness=[STIFFNESS_JSON] if IMAGED and IMAGED.observation else [],
         viewer=VIEWER,
     output:
@@ -55,7 +55,7 @@ rule viewer:
         mesh=MESH,
         dataset=DATASET,
         # with reference_state.points: each set's material positions, found by rule tracking
-        tracked=[path.replace(".csv", ".json") for path in TRACKING],
+        tracked=TRACKING_JSON,
     output:
         html=VIEWER,
         licence="results/viewer/THREE-LICENSE.txt",
