@@ -251,6 +251,7 @@ class Surrogate:
         """
         if not cases:
             return []
+        phi, theta = self.plane_name(phi, theta)
         if self._directions is not None:
             cos = np.clip(units @ _unit_directions([(phi, theta)])[0], -1.0, 1.0)
             angles = np.degrees(np.arccos(cos))
@@ -265,6 +266,23 @@ class Surrogate:
             if abs(t - theta) < 1e-6
             and any(abs((p - n + 180.0) % 360.0 - 180.0) < 1e-6 for n in (below, above))
         ]
+
+    def plane_name(self, phi: float, theta: float) -> tuple[float, float]:
+        """A query in a one-plane model's plane under the plane's own name, (Φ', θ0).
+
+        Gravity at (Φ, θ0 + 180°) is gravity at (−Φ, θ0), and θ0 ± 360° is θ0: such a query
+        is judged as the sweep named that direction (Φ' in (−180°, 180°], to 1e-6°). A query
+        off the plane, or a model trained off it, keeps its angles.
+        """
+        if (self._directions is not None or len(self._thetas) != 1
+                or abs(theta - self._thetas[0]) < 1e-6):
+            return phi, theta
+        t0 = math.radians(self._thetas[0])
+        g = _unit_directions([(phi, theta)])[0]
+        if abs(g[2] * math.cos(t0) - g[1] * math.sin(t0)) > 1e-9:
+            return phi, theta
+        along = g[1] * math.cos(t0) + g[2] * math.sin(t0)
+        return round(math.degrees(math.atan2(along, g[0])), 6) + 0.0, self._thetas[0]
 
     def unconverged_beside(
         self, C1: float, phi: float, theta: float
@@ -410,7 +428,8 @@ class Surrogate:
         """The angle (degrees) from gravity at (Φ, θ) to the nearest training direction.
 
         Only where it lies outside them (beyond :data:`DIRECTION_REACH` spacings), for a model
-        trained off the plane; None otherwise, and for a model of the plane (judged by Φ and θ).
+        trained off the plane; None otherwise, and for a model of the plane (judged by Φ and θ,
+        under the plane's own name: :meth:`plane_name`).
         """
         if self._directions is None:
             return None
@@ -421,13 +440,18 @@ class Surrogate:
     def _warn_if_outside(self, C1: float, phi: float, theta: float) -> None:
         messages = []
         lo, hi = self._c1_range
+        given = f"Φ = {phi}°, θ = {theta}°"
+        renamed = self.plane_name(phi, theta) != (phi, theta)
+        phi, theta = self.plane_name(phi, theta)
         if not lo - 1e-9 <= C1 <= hi + 1e-9:
             messages.append(f"C1 = {C1} kPa is outside the training range [{lo}, {hi}] kPa")
         if self._phi_gap is not None:
             start, width = self._phi_gap
             offset = (phi - start) % 360.0
             if 1e-6 < offset < width - 1e-6:
-                messages.append(f"Φ = {phi}° lies in a {width:.0f}° arc without training angles")
+                named = (f"gravity at {given} (Φ = {phi}° in the trained plane)" if renamed
+                         else f"Φ = {phi}°")
+                messages.append(f"{named} lies in a {width:.0f}° arc without training angles")
         nearest = self.direction_outside(phi, theta)
         if nearest is not None:
             messages.append(
@@ -446,7 +470,7 @@ class Surrogate:
         def at(p: float, t: float) -> str:  # a sweep direction: Φ alone in the plane
             return f"Φ = {p:g}°" if self._directions is None else f"Φ = {p:g}°, θ = {t:g}°"
 
-        query = f"C1 = {C1} kPa, Φ = {phi}°, θ = {theta}°"
+        query = f"C1 = {C1} kPa, {given}"
         failed = self.unconverged_beside(C1, phi, theta)
         if failed is not None:
             c1, p, t = failed

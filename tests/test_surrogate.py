@@ -276,6 +276,24 @@ def test_prediction_warns_where_the_sweep_did_not_converge(
     for C1, phi in ((2.0, -90.0), (1.5, 270.0), (1.2, -45.0), (2.0, -135.0)):
         with pytest.warns(ExtrapolationWarning, match="did not converge at C1 = 2 kPa, Φ = -90°"):
             model.predict(C1, phi)
+    # the same directions under other names: (90°, θ = 180°) is (-90°, 0°), θ = 360° is θ = 0°;
+    # the plane judges them by its own name, and the θ of a direction in it is no extrapolation
+    assert model.plane_name(90.0, 180.0) == (-90.0, 0.0)
+    assert model.plane_name(45.0, 360.0) == (45.0, 0.0)
+    assert model.plane_name(90.0, 20.0) == (90.0, 20.0)
+    with pytest.warns(ExtrapolationWarning) as caught:
+        model.predict(2.0, 90.0, 180.0)
+    assert [str(w.message) for w in caught] == [
+        "the sweep's FE solve did not converge at C1 = 2 kPa, Φ = -90° (beside C1 = 2.0 kPa, "
+        "Φ = 90.0°, θ = 180.0°), so no FE solution backs C1 ≤ 2 kPa there; the prediction is "
+        "an extrapolation"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for C1, phi, theta in ((2.5, 90.0, 180.0), (1.0, -90.0, 180.0), (1.0, 45.0, 360.0),
+                               (1.0, 180.0, 180.0)):
+            model.predict(C1, phi, theta)
+    with pytest.warns(ExtrapolationWarning, match="trained at θ = 0.0° only"):
+        model.predict(2.5, 90.0, 20.0)
     # the copy keeps the run's record of each angle's softest trained C1 (1 kPa at -90°, from
     # the dataset it was saved with): stiffer than every failure, or beside angles without
     # failures, it does not warn

@@ -137,7 +137,10 @@ def test_outside_the_training_range_the_page_says_what_predict_warns(
 ) -> None:
     lo, hi = model.range_checks()["c1_kPa"]
     with open_page(viewer, ready=READY) as (page, _, _):
-        for C1, phi, theta in ((hi * 1.4, 180.0, 0.0), (lo, 120.0, 30.0), (lo, 180.0, 0.0)):
+        # the last two: directions of the trained plane under other names, judged as Python
+        # judges them (no θ warning)
+        for C1, phi, theta in ((hi * 1.4, 180.0, 0.0), (lo, 120.0, 30.0), (lo, 180.0, 0.0),
+                               (hi * 1.4, 90.0, 180.0), (lo, -45.0, -180.0)):
             shown = _warnings_as_python(page, model, C1, phi, theta)
             assert page.locator("#warnings").is_visible() == bool(shown)
 
@@ -182,7 +185,8 @@ def test_below_a_directions_softest_trained_c1_the_page_says_what_predict_warns(
     assert model.range_checks()["c1_kPa"] == [1.0, 5.0]
     with open_page(page_path, ready=READY) as (page, errors, _):
         for C1, phi, theta, expected in ((1.0, 90.0, 0.0, 1), (3.0, 45.0, 0.0, 1),
-                                         (5.0, 90.0, 0.0, 0), (1.0, 0.0, 0.0, 0)):
+                                         (5.0, 90.0, 0.0, 0), (1.0, 0.0, 0.0, 0),
+                                         (1.0, -90.0, 180.0, 1), (5.0, -90.0, 180.0, 0)):
             shown = _warnings_as_python(page, model, C1, phi, theta)
             assert len(shown) == expected, shown
             assert all("softest FE solution at Φ = 90°" in m for m in shown)

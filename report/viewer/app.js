@@ -299,11 +299,28 @@ class WebSurrogate {
     return ev.out;
   }
 
+  // A query in a one-plane model's plane under the plane's own name, as Surrogate.plane_name:
+  // gravity at (Φ, θ0 + 180°) is gravity at (−Φ, θ0).
+  planeName(phi, theta) {
+    const r = this.range;
+    if (r.directions || r.theta_deg.length !== 1 || Math.abs(theta - r.theta_deg[0]) < 1e-6) {
+      return [phi, theta];
+    }
+    const [p, t, t0] = [phi, theta, r.theta_deg[0]].map((a) => (a * Math.PI) / 180);
+    const g = [Math.cos(p), Math.sin(p) * Math.cos(t), Math.sin(p) * Math.sin(t)];
+    if (Math.abs(g[2] * Math.cos(t0) - g[1] * Math.sin(t0)) > 1e-9) return [phi, theta];
+    const along = g[1] * Math.cos(t0) + g[2] * Math.sin(t0);
+    return [Math.round((Math.atan2(along, g[0]) * 180 * 1e6) / Math.PI) / 1e6 + 0, r.theta_deg[0]];
+  }
+
   // The reasons a query is an extrapolation, in the words of Surrogate._warn_if_outside
   // (numbers as Python prints a float: 7.0, 0.8).
-  warnings(C1, phi, theta) {
+  warnings(C1, givenPhi, givenTheta) {
     const r = this.range;
     const py = (x) => (Number.isInteger(x) ? x.toFixed(1) : String(x));
+    const given = `Φ = ${py(givenPhi)}°, θ = ${py(givenTheta)}°`;
+    const [phi, theta] = this.planeName(givenPhi, givenTheta);
+    const renamed = phi !== givenPhi || theta !== givenTheta;
     const messages = [];
     const [lo, hi] = r.c1_kPa;
     if ((lo !== null && C1 < lo - 1e-9) || (hi !== null && C1 > hi + 1e-9)) {
@@ -314,7 +331,9 @@ class WebSurrogate {
       const [start, width] = r.phi_gap;
       const offset = mod(phi - start);
       if (offset > 1e-6 && offset < width - 1e-6) {
-        messages.push(`Φ = ${py(phi)}° lies in a ${width.toFixed(0)}° arc without training angles`);
+        const named = renamed ? `gravity at ${given} (Φ = ${py(phi)}° in the trained plane)`
+          : `Φ = ${py(phi)}°`;
+        messages.push(`${named} lies in a ${width.toFixed(0)}° arc without training angles`);
       }
     }
     if (r.directions) {
@@ -369,7 +388,7 @@ class WebSurrogate {
       if (C1 <= c1 + 1e-9) {
         failed = true;
         messages.push(`the sweep's FE solve did not converge at C1 = ${c1} kPa, ${at(p, t)} `
-          + `(beside C1 = ${py(C1)} kPa, Φ = ${py(phi)}°, θ = ${py(theta)}°), so no FE solution `
+          + `(beside C1 = ${py(C1)} kPa, ${given}), so no FE solution `
           + `backs C1 ≤ ${c1} kPa there`);
       }
     }
@@ -378,7 +397,7 @@ class WebSurrogate {
     if (!failed && !(lo !== null && C1 < lo - 1e-9) && stiffer.length) {
       const [c1, p, t] = greatest(stiffer);
       messages.push(`the sweep's softest FE solution at ${at(p, t)} (beside C1 = ${py(C1)} kPa, `
-        + `Φ = ${py(phi)}°, θ = ${py(theta)}°) is at C1 = ${c1} kPa, so no FE solution backs `
+        + `${given}) is at C1 = ${c1} kPa, so no FE solution backs `
         + `C1 < ${c1} kPa there`);
     }
     return messages.map((m) => `${m}; the prediction is an extrapolation`);
