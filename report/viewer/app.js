@@ -541,7 +541,8 @@ function showState(q, mode, top, largest) {
   const title = { surrogate: '|u|, surrogate', fe: '|u|, FE', difference: '|u surrogate − u FE|' };
   $('scale-title').textContent = `${title[mode]} (mm)`;
   [0, 0.25, 0.5, 0.75, 1].forEach((f, i) => {
-    $(`tick-${i}`).textContent = (f * top).toPrecision(3).replace(/\.?0+$/, '');
+    // three significant digits without trailing zeros: 100, 62.5, 0.25
+    $(`tick-${i}`).textContent = String(Number((f * top).toPrecision(3)));
   });
   $('max-value').textContent = `largest ${largest.toFixed(2)} mm`;
   $('timing').textContent = `update ${state.lastMs.toFixed(1)} ms`;
