@@ -485,6 +485,10 @@ class ImagedConfig:
                                                   observation.get("theta", 0.0)),
         )
 
+    def posture(self) -> dict[str, Any]:
+        """The imaged posture as the 3D view names a posture: movement is measured from it."""
+        return {"name": "as imaged", "phi": self.case.phi, "theta": self.case.theta}
+
     def input_files(self) -> list[str]:
         """The points and observation files (inputs of the workflow)."""
         return [*self.point_files.values(), *([self.observation] if self.observation else [])]

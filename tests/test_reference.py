@@ -429,6 +429,21 @@ def test_the_workflow_runs_from_an_imaged_mesh_to_tracked_points_and_the_stiffne
     assert data["inner"]["names"] == [f"tumour: t{i}" for i in range(5)]
     np.testing.assert_allclose(decode_array(data["inner"]["model"]["X_m"]), tracked.reference,
                                atol=1e-6)
+    # and it measures movement from the posture the breast was imaged in: at the tracked
+    # posture, the table gives each point's way from where the image saw it (the surrogate's)
+    assert data["starts"][-1] == {"name": "as imaged", "phi": 180.0, "theta": 0.0,
+                                  "selected": True}
+    from studies.browser import open_page
+
+    moved = (model.at(tracked.reference).predict(1.0, 0.0)
+             - model.at(tracked.reference).predict(1.0, 180.0))
+    with open_page(tmp_path / "results/viewer/index.html",
+                   ready="window.viewer && window.viewer.ready") as (page, errors, _):
+        page.evaluate("window.viewer.setQuery(1.0, 0, 0)")
+        assert page.evaluate("window.viewer.state()")["start"] == "as imaged"
+        sizes = [float(r[1]) for r in page.evaluate("window.viewer.pointRows()")]
+        np.testing.assert_allclose(sizes, np.linalg.norm(moved, axis=1), atol=0.006)
+        assert not errors
 
     with Estimator(tmp_path / "results/mesh/mesh.xdmf", tmp_path / "results/surrogate/model",
                    SolverSettings()) as estimator:

@@ -321,3 +321,68 @@ def test_a_page_for_any_model_from_the_command_line(
     assert not missing.exists()
     with pytest.raises(ViewerError, match="not the model's"):
         fe_cases(results / "dataset" / "dataset.h5", np.arange(3), material_points=model.X + 0.01)
+
+
+def test_movement_is_measured_from_a_posture_the_user_chooses(
+    small_run: Path, tmp_path: Path, model: Surrogate
+) -> None:
+    """"Movement from": rest, a config's posture, or the sliders' posture, at the sliders' C1.
+
+    A tumour seen prone and operated on supine: from prone, the table gives each named point's
+    way between the two postures, ``Surrogate.at``'s difference of the two predictions, and
+    the colours the same for the skin. The FE modes show the movement from rest, and say so.
+    """
+    from report.viewer.__main__ import main
+    from tests.conftest import REPO
+
+    results = small_run / "results"
+    inside = model.X[model.X[:, 0] < np.median(model.X[:, 0])][:3] * 0.98 + 0.02 * model.X.mean(0)
+    points = tmp_path / "tumour.csv"
+    points.write_text("name,x,y,z\n" + "".join(
+        f"t{i},{x!r},{y!r},{z!r}\n" for i, (x, y, z) in enumerate(inside)))
+    page_path = tmp_path / "page.html"
+    assert main([str(results / "surrogate" / "model"), "-o", str(page_path), "--mesh",
+                 str(results / "mesh" / "mesh.xdmf"), "--dataset",
+                 str(results / "dataset" / "dataset.h5"), "--config",
+                 str(REPO / "tests" / "config.yaml"), "--points", str(points)]) == 0
+    at = model.at(inside)
+
+    def rows(page) -> tuple[np.ndarray, np.ndarray]:
+        shown = page.evaluate("window.viewer.pointRows()")
+        return (np.array([float(r[1]) for r in shown]),
+                np.array([[float(x) for x in r[2].split(", ")] for r in shown]))
+
+    with open_page(page_path, ready=READY) as (page, errors, _):
+        assert page.locator("#start option").all_inner_texts() == [
+            "rest (the unloaded shape)", "prone", "standing",
+            "the sliders' posture (choose to fix it)"]
+        page.evaluate("window.viewer.setQuery(1.0, 0, 0)")
+        assert page.evaluate("window.viewer.state()")["start"] is None
+        sizes, _ = rows(page)
+        assert np.allclose(sizes, np.linalg.norm(at.predict(1.0, 0.0), axis=1), atol=0.006)
+        page.select_option("#start", label="prone")
+        moved = at.predict(1.0, 0.0) - at.predict(1.0, 180.0)
+        sizes, components = rows(page)
+        assert np.allclose(sizes, np.linalg.norm(moved, axis=1), atol=0.006)
+        assert np.allclose(components, moved, atol=0.06)
+        assert page.inner_text("#scale-title") == "movement from prone, surrogate (mm)"
+        # the skin's colours: the largest movement of a surface vertex between the postures
+        largest = float(re.search(r"largest ([\d.]+) mm", page.inner_text("#max-value"))[1])
+        whole = model.predict(1.0, 0.0) - model.predict(1.0, 180.0)
+        assert 0.5 * np.linalg.norm(whole, axis=1).max() < largest <= (
+            np.linalg.norm(whole, axis=1).max() + 0.006)
+        # the sliders' posture, fixed when chosen: the way from lying on the side to supine
+        page.evaluate("window.viewer.setQuery(2.0, 90, 0)")
+        page.select_option("#start", value="here")
+        assert page.evaluate("window.viewer.state()")["start"] == "Φ = 90°, θ = 0°"
+        assert np.allclose(rows(page)[0], 0, atol=0.006)
+        page.evaluate("window.viewer.setQuery(2.0, 0, 0)")
+        moved = at.predict(2.0, 0.0) - at.predict(2.0, 90.0)
+        assert np.allclose(rows(page)[0], np.linalg.norm(moved, axis=1), atol=0.006)
+        # an FE case shown: from rest, the start disabled and said so
+        page.select_option("#fe-case", index=1)
+        page.check("input[name=mode][value=fe]")
+        assert page.is_disabled("#start")
+        assert "from rest" in page.inner_text("#start-note")
+        assert page.inner_text("#scale-title") == "|u|, FE (mm)"
+        assert not errors

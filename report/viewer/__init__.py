@@ -18,7 +18,7 @@ import json
 import logging
 import shutil
 import subprocess
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -187,6 +187,7 @@ def build_viewer(
     clinical: Sequence[dict[str, Any]] = (),
     postures: Sequence[dict[str, Any]] = (),
     points: Sequence[tuple[str, Sequence[float]]] = (),
+    start: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Write the viewer page ``output`` (and three.js's licence beside it).
 
@@ -202,6 +203,9 @@ def build_viewer(
         points: named material points inside the body, ``(name, (x, y, z))`` in the model's
             reference frame, m (a tumour's centre and margin): the page predicts and draws
             them too (:meth:`surrogate.predict.Surrogate.at`).
+        start: the posture the page first measures movement from, ``{name, phi, theta}``
+            (e.g. the posture an imaged breast was imaged in); None: from rest. The user can
+            choose rest, any posture of ``postures`` or the sliders' posture in the page.
 
     Returns:
         What the page holds: points, surface vertices and triangles, FE cases, named points,
@@ -224,7 +228,13 @@ def build_viewer(
                     "triangles": encode_array(triangles, "int32")},
         "fe_cases": cases,
         "inner": inner,
+        # the postures a movement can be measured from, as the page's select lists them
+        "starts": [{"name": str(p["name"]), "phi": float(p["phi"]),
+                    "theta": float(p.get("theta", 0.0)), "selected": False}
+                   for p in [*postures, *([start] if start else [])]],
     }
+    if start:
+        data["starts"][-1]["selected"] = True
     C1s = [c for c in model.range_checks()["c1_kPa"] if c is not None]
     first = cases[0] if cases else {"C1": float(np.median(C1s)) if C1s else 1.0, "phi": 180.0,
                                     "theta": 0.0}
@@ -239,6 +249,7 @@ def build_viewer(
         fe_cases=bool(cases),  # without a dataset, no FE controls
         inner=bool(names),
         presets=[{"theta": 0.0, "note": "", **posture} for posture in postures],
+        starts=data["starts"],
         axes="x anterior→posterior · y medial→lateral · z caudal→cranial",
         provenance=f"model {Path(model_dir).name}, mesh {Path(mesh_xdmf).name}; three.js "
         "(MIT licence, THREE-LICENSE.txt beside this page)",

@@ -7,7 +7,8 @@
 ``python -m surrogate.cli train --out``); ``--mesh`` the mesh it was trained on. With
 ``--dataset`` (the sweep's, of the same material points) the page can show FE solutions beside
 the surrogate's; with ``--config`` (a whole workflow config, checked as a run checks it) it
-offers the config's postures as buttons and labels its clinical cases; with ``--points`` (a
+offers the config's postures as buttons (and, with ``reference_state.imaged``, measures
+movement from the imaged posture first) and labels its clinical cases; with ``--points`` (a
 ``name,x,y,z`` CSV of material points inside the body, in the model's reference frame, m, as
 ``surrogate.cli predict --points`` reads) it draws where the surrogate moves them. The page
 opens from the file system, as the workflow's does. Exit status 2 names a model, mesh,
@@ -61,15 +62,16 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     try:
-        clinical, postures = [], []
+        clinical, postures, start = [], [], None
         if args.config:  # checked as a run checks it
             config = _checked(args.config)
             clinical = config.section("clinical")
             postures = config.section("surrogate_study", "postures", "directions")
+            start = config.imaged.posture() if config.imaged else None
         names, X = read_points(args.points) if args.points else ([], [])
         named = list(zip(names, X, strict=True))
         info = build_viewer(args.model, args.mesh, args.dataset, args.output, clinical,
-                            postures, named)
+                            postures, named, start)
     except (ConfigError, SurrogateError, DatasetError, ViewerError, MeshInputError,
             OSError) as err:
         print(f"error: {err}", file=sys.stderr)

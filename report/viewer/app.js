@@ -428,6 +428,7 @@ const surface = decode(DATA.surface.points);        // material-point index of e
 const triangles = decode(DATA.surface.triangles);   // vertex indices, 3 per triangle
 const nv = surface.length;
 const onSurface = surrogate.evaluator(Array.from(surface));
+const onSurfaceFrom = surrogate.evaluator(Array.from(surface));  // the start posture's, apart
 const everywhere = surrogate.evaluator(Array.from({ length: surrogate.n }, (_, i) => i));
 const feCases = DATA.fe_cases.map((c) => ({ ...c, u: decode(c.u_mm),
   innerU: c.inner_u_mm ? decode(c.inner_u_mm) : null }));
@@ -435,6 +436,9 @@ const feCases = DATA.fe_cases.map((c) => ({ ...c, u: decode(c.u_mm),
 const inner = DATA.inner ? new WebSurrogate(DATA.inner.model) : null;
 const innerNames = DATA.inner ? DATA.inner.names : [];
 const inside = inner ? inner.evaluator(Array.from({ length: inner.n }, (_, i) => i)) : null;
+const insideFrom = inner ? inner.evaluator(Array.from({ length: inner.n }, (_, i) => i)) : null;
+// the postures a movement can be measured from (the select's options after "rest")
+const starts = DATA.starts || [];
 
 const reference = new Float32Array(3 * nv);
 const magnitude = new Float32Array(nv);
@@ -487,7 +491,10 @@ const inputs = { C1: $('c1'), phi: $('phi'), theta: $('theta') };
 const [c1Lo, c1Hi] = surrogate.range.c1_kPa;
 inputs.C1.min = String(Math.max(0.05, 0.5 * (c1Lo ?? 1)));
 inputs.C1.max = String(1.5 * (c1Hi ?? 5));
-const state = { mode: 'surrogate', fe: null, points: [], lastMs: 0 };
+// start: the posture the movement is measured from ({name, phi, theta}, at the sliders' C1),
+// or null for rest
+const state = { mode: 'surrogate', fe: null, points: [], lastMs: 0,
+  start: starts.find((s) => s.selected) || null };
 let current = null;  // surrogate displacement of the surface vertices, mm
 
 function query() {
@@ -501,19 +508,23 @@ function matchingFeCase({ C1, phi, theta }) {
 }
 
 function update() {
-  const start = performance.now();
+  const began = performance.now();
   const q = query();
   current = surrogate.evaluate(onSurface, q.C1, q.phi, q.theta);
   state.fe = matchingFeCase(q);
   const mode = state.fe ? state.mode : 'surrogate';
   const shown = mode === 'fe' ? state.fe.u : current;
+  // the movement from a start posture (the surrogate's, at the same C1): the surrogate mode only
+  const start = mode === 'surrogate' ? state.start : null;
+  const from = start ? surrogate.evaluate(onSurfaceFrom, q.C1, start.phi, start.theta) : null;
   let largest = 0;
   for (let v = 0; v < nv; v += 1) {
     let s = 0;
     for (let d = 0; d < 3; d += 1) {
       positions.array[3 * v + d] = reference[3 * v + d] + shown[3 * v + d];
-      const diff = mode === 'difference' ? current[3 * v + d] - state.fe.u[3 * v + d]
-        : shown[3 * v + d];
+      let diff = shown[3 * v + d];
+      if (mode === 'difference') diff = current[3 * v + d] - state.fe.u[3 * v + d];
+      else if (from) diff -= from[3 * v + d];
       s += diff * diff;
     }
     magnitude[v] = Math.sqrt(s);
@@ -528,31 +539,39 @@ function update() {
   const g = new Vector3(Math.cos(p), Math.sin(p) * Math.cos(t), Math.sin(p) * Math.sin(t));
   gravityArrow.setDirection(g);  // drawn beside the body, centred on its anchor
   gravityArrow.position.copy(arrowAnchor).addScaledVector(g, -0.35 * radius);
-  placePoints(mode, shown, inner ? inner.evaluate(inside, q.C1, q.phi, q.theta) : null);
+  placePoints(mode, shown, inner ? inner.evaluate(inside, q.C1, q.phi, q.theta) : null, start,
+    from && inner ? inner.evaluate(insideFrom, q.C1, start.phi, start.theta) : null, from);
   renderer.render(scene, camera);
-  state.lastMs = performance.now() - start;
-  showState(q, mode, top, largest);
+  state.lastMs = performance.now() - began;
+  showState(q, mode, top, largest, start);
 }
 
-function showState(q, mode, top, largest) {
+function showState(q, mode, top, largest, start) {
   $('c1-value').textContent = `${q.C1.toFixed(2)} kPa`;
   $('phi-value').textContent = `${q.phi.toFixed(0)}°`;
   $('theta-value').textContent = `${q.theta.toFixed(0)}°`;
   const title = { surrogate: '|u|, surrogate', fe: '|u|, FE', difference: '|u surrogate − u FE|' };
-  $('scale-title').textContent = `${title[mode]} (mm)`;
+  $('scale-title').textContent = start ? `movement from ${start.name}, surrogate (mm)`
+    : `${title[mode]} (mm)`;
   [0, 0.25, 0.5, 0.75, 1].forEach((f, i) => {
     // three significant digits without trailing zeros: 100, 62.5, 0.25
     $(`tick-${i}`).textContent = String(Number((f * top).toPrecision(3)));
   });
   $('max-value').textContent = `largest ${largest.toFixed(2)} mm`;
   $('timing').textContent = `update ${state.lastMs.toFixed(1)} ms`;
-  const warnings = surrogate.warnings(q.C1, q.phi, q.theta);
+  const warnings = surrogate.warnings(q.C1, q.phi, q.theta).concat(start
+    ? surrogate.warnings(q.C1, start.phi, start.theta).map((w) => `from ${start.name}: ${w}`)
+    : []);
   $('warnings').textContent = warnings.join('\n');
   $('warnings').hidden = !warnings.length;
   $('fe-controls').classList.toggle('disabled', !state.fe);
   for (const radio of document.querySelectorAll('input[name=mode]')) radio.disabled = !state.fe;
   $('fe-note').textContent = state.fe ? `FE case ${state.fe.id}`
     : 'choose an FE case to compare (the sliders then sit on a solved case)';
+  $('start').disabled = mode !== 'surrogate';
+  $('start-note').textContent = mode !== 'surrogate' ? 'the FE modes show the movement from rest'
+    : (start ? `grey: where the points are ${start.name}; blue: where they are now; the table `
+      + 'and colours give the movement between them' : '');
 }
 
 // -- named points ---------------------------------------------------------------------------
@@ -571,33 +590,39 @@ const innerMarkers = innerNames.map((name, i) => {
   ref.position.set(...[0, 1, 2].map((d) => 1000 * inner.X[3 * i + d]));
   const deformed = new Mesh(pointGeometry, new MeshBasicMaterial({ color: 0x1f77b4 }));
   scene.add(ref, deformed);
-  return { name: escapeHtml(name), deformed };
+  return { name: escapeHtml(name), ref, deformed };
 });
-// Each point where the mode's field moves it; the table lists that displacement, or in the
-// difference mode the surrogate's minus the FE case's.
-function placePoints(mode, shown, innerSurrogate) {
+// Each point where the mode's field moves it; the table lists that displacement, in the
+// difference mode the surrogate's minus the FE case's, and from a start posture the movement
+// from it (the grey marker then stands where the point is in that posture).
+function placePoints(mode, shown, innerSurrogate, start, innerFrom, from) {
   const difference = mode === 'difference';
   const feInner = state.fe ? state.fe.innerU : null;
   const rows = innerMarkers.map((point, i) => {
     const sur = [0, 1, 2].map((d) => innerSurrogate[3 * i + d]);
     const fe = feInner ? [0, 1, 2].map((d) => feInner[3 * i + d]) : null;
     const u = mode === 'fe' && fe ? fe : sur;
+    const before = [0, 1, 2].map((d) => (start ? innerFrom[3 * i + d] : 0));
     point.deformed.position.set(...[0, 1, 2].map((d) => 1000 * inner.X[3 * i + d] + u[d]));
+    point.ref.position.set(...[0, 1, 2].map((d) => 1000 * inner.X[3 * i + d] + before[d]));
     return difference && fe ? row(point.name, '#1f77b4', sur.map((s, d) => s - fe[d]), true)
-      : row(point.name, '#1f77b4', u);
+      : row(point.name, '#1f77b4', u.map((x, d) => x - before[d]));
   });
   for (const point of state.points) {
     const v = point.vertex;
     const u = [0, 1, 2].map((d) => shown[3 * v + d]);
+    const before = [0, 1, 2].map((d) => (start ? from[3 * v + d] : 0));
     point.deformed.position.set(...[0, 1, 2].map((d) => reference[3 * v + d] + u[d]));
+    point.ref.position.set(...[0, 1, 2].map((d) => reference[3 * v + d] + before[d]));
     rows.push(difference
       ? row(point.name, '#d62728', [0, 1, 2].map((d) => current[3 * v + d] - state.fe.u[3 * v + d]),
         true)
-      : row(point.name, '#d62728', u));
+      : row(point.name, '#d62728', u.map((x, d) => x - before[d])));
   }
   $('points').innerHTML = rows.join('');
-  $('points-size').textContent = difference ? '|Δu| mm' : '|u| mm';
-  $('points-u').textContent = difference ? 'u surrogate − u FE (mm)' : 'u (x, y, z) mm';
+  $('points-size').textContent = difference || start ? '|Δu| mm' : '|u| mm';
+  $('points-u').textContent = (difference && 'u surrogate − u FE (mm)')
+    || (start && 'Δu, moved since (mm)') || 'u (x, y, z) mm';
 }
 
 function seeThrough(on) {
@@ -662,6 +687,29 @@ select.addEventListener('change', () => {
   const c = feCases[Number(select.value)];
   if (c) setQuery(c.C1, c.phi, c.theta);
 });
+// the movement's start: rest, a posture, or the sliders' posture when chosen (kept as its own
+// option, so that choosing "here" again fixes the sliders' new posture)
+function setStart(value) {
+  const select = $('start');
+  if (value === 'here') {
+    const q = query();
+    const name = `Φ = ${q.phi.toFixed(0)}°, θ = ${q.theta.toFixed(0)}°`;
+    let fixed = select.querySelector('option[value=fixed]');
+    if (!fixed) {
+      fixed = document.createElement('option');
+      fixed.value = 'fixed';
+      select.insertBefore(fixed, select.querySelector('option[value=here]'));
+    }
+    fixed.textContent = name;
+    state.start = { name, phi: q.phi, theta: q.theta };
+    select.value = 'fixed';
+  } else if (value !== 'fixed') {
+    state.start = value === 'rest' ? null : starts[Number(value)];
+    select.value = value;
+  }
+  update();
+}
+$('start').addEventListener('change', (e) => setStart(e.target.value));
 for (const radio of document.querySelectorAll('input[name=mode]')) {
   radio.addEventListener('change', () => { state.mode = radio.value; update(); });
 }
@@ -691,7 +739,9 @@ window.viewer = {
   warnings: (C1, phi, theta) => surrogate.warnings(C1, phi, theta),
   setQuery,
   addPoint,
+  setStart,
   state: () => ({ ...query(), mode: state.fe ? state.mode : 'surrogate',
+    start: state.start && state.start.name,
     fe: state.fe && state.fe.id, lastMs: state.lastMs,
     seeThrough: breast.material.transparent,
     warnings: $('warnings').hidden ? [] : $('warnings').textContent.split('\n') }),

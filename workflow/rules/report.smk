@@ -62,6 +62,8 @@ rule viewer:
     params:
         clinical=CONFIG.section("clinical"),
         postures=CONFIG.section("surrogate_study", "postures", "directions"),
+        # with an imaged breast, movement is first measured from the posture it was imaged in
+        start=None if IMAGED is None else IMAGED.posture(),
     log:
         "results/logs/viewer.log",
     threads: 1

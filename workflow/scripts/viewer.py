@@ -24,4 +24,5 @@ build_viewer(
     snakemake.params.clinical,
     snakemake.params.postures,
     points,
+    snakemake.params.start,
 )
