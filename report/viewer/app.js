@@ -620,9 +620,9 @@ function placePoints(mode, shown, innerSurrogate, start, innerFrom, from) {
       : row(point.name, '#d62728', u.map((x, d) => x - before[d])));
   }
   $('points').innerHTML = rows.join('');
-  $('points-size').textContent = difference || start ? '|Δu| mm' : '|u| mm';
+  $('points-size').textContent = (difference && '|Δu| mm') || (start && '|Δx| mm') || '|u| mm';
   $('points-u').textContent = (difference && 'u surrogate − u FE (mm)')
-    || (start && 'Δu, moved since (mm)') || 'u (x, y, z) mm';
+    || (start && 'Δx (x, y, z) mm') || 'u (x, y, z) mm';
 }
 
 function seeThrough(on) {
