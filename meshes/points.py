@@ -71,3 +71,16 @@ def moved_table(names: list[str], X: np.ndarray, u_mm: np.ndarray) -> str:
         lines.append(f"{name:<12} {size:>8.3f} {d[0]:>8.3f} {d[1]:>8.3f} {d[2]:>8.3f}  "
                      f"{x[0]:.5f} {x[1]:.5f} {x[2]:.5f}")
     return "\n".join(lines)
+
+
+def movement_table(names: list[str], dx_mm: np.ndarray) -> str:
+    """What a command prints for points moved by ``dx_mm`` (mm) between two postures.
+
+    One line each: the name, the distance moved and the movement (mm).
+    """
+    lines = [f"{'name':<12} {'|Δx| mm':>8} {'Δx (x, y, z) mm':>26}"]
+    for name, d in zip(names, dx_mm, strict=True):
+        size = float(np.linalg.norm(d))
+        d = np.round(d, 3) + 0.0  # no "-0.000"
+        lines.append(f"{name:<12} {size:>8.3f} {d[0]:>8.3f} {d[1]:>8.3f} {d[2]:>8.3f}")
+    return "\n".join(lines)

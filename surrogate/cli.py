@@ -12,7 +12,9 @@ Examples::
 With ``--points`` (a ``name,x,y,z`` CSV of material points, in the model's reference frame, m:
 the project's frame) it predicts at those points instead, prints each one's displacement and
 position, and writes their positions in that posture with ``-o`` as a ``name,x,y,z`` CSV, which
-``python -m meshes.frame --to file`` carries into an imported file's frame.
+``python -m meshes.frame --to file`` carries into an imported file's frame. With
+``--from-phi`` (and ``--from-theta``) it also prints each point's movement from that posture to
+this one at the same C1 (a tumour seen prone, at supine: ``--phi 0 --from-phi 180``).
 ``train`` trains the ``surrogate`` settings of ``--config`` with the ``--set`` overrides on
 one core, saves the model with ``--out`` and prints one JSON line (validation error, best
 epoch, training time). Bad input exits with status 2 and a message naming it. A setup the
@@ -35,7 +37,7 @@ import numpy as np
 
 from fem.configfile import read_config_file
 from fem.dataset import DatasetError
-from meshes.points import moved_table, read_points, write_points
+from meshes.points import moved_table, movement_table, read_points, write_points
 from surrogate.config import SurrogateConfig
 from surrogate.exceptions import ExtrapolationWarning, OutsideMeshError, SurrogateError
 
@@ -56,7 +58,15 @@ def predict(args: argparse.Namespace) -> int:
         print(f"error: --output {output}: the folder {output.parent} does not exist",
               file=sys.stderr)
         return 2
+    if args.from_phi is None and args.from_theta is not None:
+        print("error: --from-theta needs --from-phi", file=sys.stderr)
+        return 2
+    if args.from_phi is not None and not args.points:
+        print("error: --from-phi measures the movement of named points: give --points",
+              file=sys.stderr)
+        return 2
     names: list[str] = []
+    since = None if args.from_phi is None else (args.from_phi, args.from_theta or 0.0)
     try:
         model = Surrogate.load(args.model)
         if args.points:
@@ -68,11 +78,16 @@ def predict(args: argparse.Namespace) -> int:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", ExtrapolationWarning)
             u = model.predict(args.c1, args.phi, args.theta)
+        with warnings.catch_warnings(record=True) as caught_since:
+            warnings.simplefilter("always", ExtrapolationWarning)
+            u_since = None if since is None else model.predict(args.c1, *since)
         extrapolated = False
-        for warning in caught:  # one line each, as a user reads it (not Python's source line)
+        # one line each, as a user reads it (not Python's source line)
+        for prefix, warning in [("", w) for w in caught] + [
+                (f"from Φ = {since[0]:g}°, θ = {since[1]:g}°: ", w) for w in caught_since]:
             if issubclass(warning.category, ExtrapolationWarning):
                 extrapolated = True
-                print(f"{'error' if args.strict else 'warning'}: {warning.message}",
+                print(f"{'error' if args.strict else 'warning'}: {prefix}{warning.message}",
                       file=sys.stderr)
             else:
                 warnings.showwarning(warning.message, warning.category, warning.filename,
@@ -87,6 +102,9 @@ def predict(args: argparse.Namespace) -> int:
     norms = np.linalg.norm(u, axis=1)
     if args.points:
         print(moved_table(names, model.X, u))
+        if u_since is not None:
+            print(f"\nmoved from Φ = {since[0]:g}°, θ = {since[1]:g}° (at the same C1):")
+            print(movement_table(names, u - u_since))
         if output is not None:
             write_points(output, names, model.X + 1e-3 * u)
     else:
@@ -162,6 +180,11 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--points", metavar="CSV",
                    help="predict at these material points instead (name,x,y,z in the model's "
                         "reference frame, m); -o then writes their positions as a CSV")
+    p.add_argument("--from-phi", type=float, metavar="PHI",
+                   help="with --points: also print each point's movement from the posture at "
+                        "this Φ (degrees) to the one asked, at the same C1")
+    p.add_argument("--from-theta", type=float, metavar="THETA",
+                   help="θ of the --from-phi posture, degrees (default 0)")
     p.add_argument("--strict", action="store_true",
                    help="refuse a setup the model warns at (no FE solution backs it): exit "
                         "status 3, nothing written")

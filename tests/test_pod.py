@@ -164,6 +164,18 @@ def test_the_command_line_predicts_at_named_points(
     names, moved = read_points(out)
     assert names == ["t0", "t1"]
     np.testing.assert_allclose(moved, centroids + 1e-3 * u, rtol=0, atol=1e-12)
+    # the movement from another posture at the same C1: the two predictions' difference
+    assert main(["predict", str(folder), *query, "--points", str(points),
+                 "--from-phi", "180"]) == 0
+    said = capsys.readouterr().out
+    moved_from = u - Surrogate.load(folder).at(centroids).predict(2.0, 180.0)
+    table = said.split("moved from Φ = 180°, θ = 0° (at the same C1):\n")[1].splitlines()
+    assert [line.split()[0] for line in table[1:]] == ["t0", "t1"]
+    for line, d in zip(table[1:], moved_from, strict=True):
+        np.testing.assert_allclose([float(x) for x in line.split()[1:]],
+                                   [np.linalg.norm(d), *d], atol=6e-4)
+    assert main(["predict", str(folder), *query, "--from-phi", "180"]) == 2
+    assert "give --points" in capsys.readouterr().err
     # a point outside the body; an output the points cannot fill
     points.write_text("name,x,y,z\nfar,0.5,0.5,1.5\n")
     out.unlink()
