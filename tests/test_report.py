@@ -255,6 +255,30 @@ def test_the_by_c1_cases_are_told_apart_by_whether_their_c1_is_interpolated() ->
     assert "c1-bracketed" not in page and "held-out-warned" not in page
 
 
+def test_each_need_names_the_cheapest_model_and_the_cheapest_fe_model() -> None:
+    """The cheapest model per need, and the cheapest FE model apart.
+
+    A need met by a surrogate and by two FE variants: the surrogate is the cheapest, the
+    cheaper FE variant the FE answer; a need no FE meets says none, and the counts add up.
+    """
+    from report.sections.scene import NEEDS_HEADER, Candidate, needs_rows
+
+    cands = [Candidate("surrogate", 0.02, 0.001, 1e-4, "FE default solution"),
+             Candidate("FE coarse", 2.0, 0.3, 0.5, "refined FE reference", fe=True),
+             Candidate("FE fine", 0.4, 0.04, 9.8, "refined FE reference", fe=True),
+             Candidate("FE untimed", 0.1, 0.01, None, "refined FE reference", fe=True)]
+    rows = {row[0]: dict(zip(NEEDS_HEADER, row, strict=True)) for row in needs_rows(cands)}
+    assert set(rows) == {"0.5 mm", "1 mm", "5 mm"}
+    half, five = rows["0.5 mm"], rows["5 mm"]
+    assert half["cheapest at every point"] == "surrogate (100 µs)"
+    assert half["cheapest FE at every point"] == "FE fine (9.8 s)"
+    assert half["cheapest FE on average"] == "FE coarse (500 ms)"
+    assert five["cheapest FE at every point"] == "FE coarse (500 ms)"
+    assert half["models meeting it (every point / on average)"] == "3 / 4 of 4"
+    only_coarse = needs_rows([cands[0], cands[1]])
+    assert only_coarse[0][2] == "none" and only_coarse[0][4] == "FE coarse (500 ms)"
+
+
 def test_c1s_effect_is_judged_only_where_the_whole_c1_range_was_solved(tmp_path: Path) -> None:
     """A band's direction, solved at 1.0 and 1.2 kPa only, barely changes with C1 there.
 
