@@ -1,7 +1,7 @@
 """The FE displacement of a solved case at named points inside the body.
 
     .venv/bin/python -m studies.case_points results/cases/c1=1.00_phi=0.0_theta=0.0 tumour.csv \
-        [-o tumour_supine_fe.csv]
+        [-o tumour_supine_fe.csv] [--from results/cases/c1=1.00_phi=180.0_theta=0.0]
 
 The FE counterpart of ``surrogate.cli predict --points``: the case's displacement (its
 ``fields.h5``, given at every node of the mesh) interpolated at the points by the mesh's own
@@ -9,7 +9,10 @@ shape functions (quadratic on a quadratic mesh, as the FE field is), printed in 
 and the points' positions in the case's posture written with ``-o`` as a ``name,x,y,z`` CSV. Any
 case folder will do: the sweep's, one of ``fem.cli`` or of ``fem.chain`` (where the surrogate
 warns). The points are material points in the mesh's frame, m. A case that did not converge is
-refused: its fields are those of a part of the load. Exit status 2 names what cannot be used.
+refused: its fields are those of a part of the load. With ``--from`` another solved case (of
+the same body, usually the same C1 in another posture) it also prints each point's movement
+from that case's posture to this one's, as ``surrogate.cli predict --from-phi`` does. Exit
+status 2 names what cannot be used.
 """
 
 from __future__ import annotations
@@ -24,7 +27,7 @@ import numpy as np
 from fem.dataset import DatasetError, read_node_displacement
 from fem.io import SUMMARY_NAME
 from meshes.exceptions import MeshInputError
-from meshes.points import moved_table, read_points, write_points
+from meshes.points import moved_table, movement_table, read_points, write_points
 from surrogate.exceptions import OutsideMeshError
 from surrogate.interpolation import interpolate, locate_in
 
@@ -62,6 +65,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("points", type=Path, help="CSV name,x,y,z of material points, m")
     parser.add_argument("-o", "--output", type=Path,
                         help="write the points' positions in the case's posture (CSV)")
+    parser.add_argument("--from", dest="since", type=Path, metavar="CASE",
+                        help="another solved case: also print the points' movement from its "
+                             "posture to this case's")
     args = parser.parse_args(argv)
     if args.output is not None and (args.output.suffix != ".csv"
                                     or not args.output.parent.is_dir()):
@@ -72,6 +78,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         names, points = read_points(args.points)
         u = fe_at_points(args.case, points)
+        u_since = None if args.since is None else fe_at_points(args.since, points)
     except OutsideMeshError as err:
         print(f"error: {err.naming(names)}", file=sys.stderr)
         return 2
@@ -79,6 +86,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {err}", file=sys.stderr)
         return 2
     print(moved_table(names, points, u))
+    if u_since is not None:
+        print(f"\nmoved from {args.since.name} to {args.case.name}:")
+        print(movement_table(names, u - u_since))
     if args.output is not None:
         write_points(args.output, names, points + 1e-3 * u)
         print(f"wrote {args.output}")

@@ -246,6 +246,14 @@ def test_a_cases_fe_field_answers_at_named_points(
     names, moved = read_points(out)
     assert names == ["t0", "t1", "t2"]
     np.testing.assert_allclose(moved, centroids + at_them, atol=1e-12)
+    # --from another case: the points' movement between the two cases' postures
+    other = small_run / "results/cases" / str(ds.ids[1])
+    assert main([str(case), str(points), "--from", str(other)]) == 0
+    table = capsys.readouterr().out.split(f"moved from {other.name} to {case.name}:\n")[1]
+    way = 1e3 * at_them - fe_at_points(other, centroids)
+    for line, d in zip(table.splitlines()[1:], way, strict=True):
+        np.testing.assert_allclose([float(x) for x in line.split()[1:]],
+                                   [np.linalg.norm(d), *d], atol=6e-4)
     failed = tmp_path / "failed"
     shutil.copytree(case, failed)
     summary = json.loads((failed / "summary.json").read_text())
@@ -254,6 +262,8 @@ def test_a_cases_fe_field_answers_at_named_points(
     with pytest.raises(CasePointsError, match="did not converge .*at 50 % of the load"):
         fe_at_points(failed, centroids)
     assert main([str(failed), str(points)]) == 2
+    assert main([str(case), str(points), "--from", str(failed)]) == 2
+    assert "did not converge" in capsys.readouterr().err
 
 
 REPORT_SECTIONS = (
