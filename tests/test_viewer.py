@@ -330,9 +330,12 @@ def test_movement_is_measured_from_a_posture_the_user_chooses(
 
     A tumour seen prone and operated on supine: from prone, the table gives each named point's
     way between the two postures, ``Surrogate.at``'s difference of the two predictions, and
-    the colours the same for the skin. The FE modes show the movement from rest, and say so.
+    the colours the same for the skin. The FE modes measure from the start's FE case where the
+    page carries it (the FE movement, and the surrogate's error in it), else from rest, and
+    say which.
     """
     from report.viewer.__main__ import main
+    from studies.case_points import fe_at_points
     from tests.conftest import REPO
 
     results = small_run / "results"
@@ -365,7 +368,7 @@ def test_movement_is_measured_from_a_posture_the_user_chooses(
         sizes, components = rows(page)
         assert np.allclose(sizes, np.linalg.norm(moved, axis=1), atol=0.006)
         assert np.allclose(components, moved, atol=0.06)
-        assert page.inner_text("#scale-title") == "movement from prone, surrogate (mm)"
+        assert page.inner_text("#scale-title") == "movement, surrogate, from prone (mm)"
         # the skin's colours: the largest movement of a surface vertex between the postures
         largest = float(re.search(r"largest ([\d.]+) mm", page.inner_text("#max-value"))[1])
         whole = model.predict(1.0, 0.0) - model.predict(1.0, 180.0)
@@ -379,10 +382,29 @@ def test_movement_is_measured_from_a_posture_the_user_chooses(
         page.evaluate("window.viewer.setQuery(2.0, 0, 0)")
         moved = at.predict(2.0, 0.0) - at.predict(2.0, 90.0)
         assert np.allclose(rows(page)[0], np.linalg.norm(moved, axis=1), atol=0.006)
-        # an FE case shown: from rest, the start disabled and said so
-        page.select_option("#fe-case", index=1)
+        # FE: from prone to supine at 1 kPa, both sweep cases: the FE movement, and in the
+        # difference mode the surrogate's error in it, to the micrometre
+        fe = {phi: fe_at_points(results / "cases" / f"c1=1.00_phi={phi:.1f}_theta=0.0", inside)
+              for phi in (0.0, 180.0)}
+        page.select_option("#start", label="prone")
+        page.evaluate("window.viewer.setQuery(1.0, 0, 0)")
         page.check("input[name=mode][value=fe]")
-        assert page.is_disabled("#start")
-        assert "from rest" in page.inner_text("#start-note")
+        assert page.inner_text("#scale-title") == "movement, FE, from prone (mm)"
+        assert "FE from the case c1=1.00_phi=180.0_theta=0.0" in page.inner_text("#start-note")
+        sizes, components = rows(page)
+        assert np.allclose(sizes, np.linalg.norm(fe[0.0] - fe[180.0], axis=1), atol=0.006)
+        page.check("input[name=mode][value=difference]")
+        error = (at.predict(1.0, 0.0) - at.predict(1.0, 180.0)) - (fe[0.0] - fe[180.0])
+        sizes, components = rows(page)
+        assert np.allclose(sizes, np.linalg.norm(error, axis=1), atol=6e-4)
+        assert np.allclose(components, error, atol=6e-4)
+        assert page.inner_text("#points-u") == "Δx surrogate − Δx FE (mm)"
+        # a start without an FE case at that C1: the FE modes from rest, and said so
+        page.evaluate("window.viewer.setQuery(1.0, 45, 0)")
+        page.select_option("#start", value="here")
+        page.evaluate("window.viewer.setQuery(1.0, 0, 0)")
+        page.check("input[name=mode][value=fe]")
+        assert "no FE case Φ = 45°, θ = 0° at C1 = 1.00 kPa" in page.inner_text("#start-note")
+        assert np.allclose(rows(page)[0], np.linalg.norm(fe[0.0], axis=1), atol=0.006)
         assert page.inner_text("#scale-title") == "|u|, FE (mm)"
         assert not errors

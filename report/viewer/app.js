@@ -514,17 +514,21 @@ function update() {
   state.fe = matchingFeCase(q);
   const mode = state.fe ? state.mode : 'surrogate';
   const shown = mode === 'fe' ? state.fe.u : current;
-  // the movement from a start posture (the surrogate's, at the same C1): the surrogate mode only
-  const start = mode === 'surrogate' ? state.start : null;
+  // The movement from a start posture at the same C1: the surrogate's in the surrogate mode;
+  // in the FE modes where the page carries the FE case of the start posture too (feFrom).
+  const feFrom = state.start && mode !== 'surrogate'
+    ? matchingFeCase({ C1: q.C1, phi: state.start.phi, theta: state.start.theta }) : null;
+  const start = state.start && (mode === 'surrogate' || feFrom) ? state.start : null;
   const from = start ? surrogate.evaluate(onSurfaceFrom, q.C1, start.phi, start.theta) : null;
   let largest = 0;
   for (let v = 0; v < nv; v += 1) {
     let s = 0;
     for (let d = 0; d < 3; d += 1) {
-      positions.array[3 * v + d] = reference[3 * v + d] + shown[3 * v + d];
-      let diff = shown[3 * v + d];
-      if (mode === 'difference') diff = current[3 * v + d] - state.fe.u[3 * v + d];
-      else if (from) diff -= from[3 * v + d];
+      const i = 3 * v + d;
+      positions.array[i] = reference[i] + shown[i];
+      const sur = current[i] - (from ? from[i] : 0);
+      const fe = state.fe ? state.fe.u[i] - (feFrom ? feFrom.u[i] : 0) : 0;
+      const diff = { surrogate: sur, fe, difference: sur - fe }[mode];
       s += diff * diff;
     }
     magnitude[v] = Math.sqrt(s);
@@ -539,19 +543,21 @@ function update() {
   const g = new Vector3(Math.cos(p), Math.sin(p) * Math.cos(t), Math.sin(p) * Math.sin(t));
   gravityArrow.setDirection(g);  // drawn beside the body, centred on its anchor
   gravityArrow.position.copy(arrowAnchor).addScaledVector(g, -0.35 * radius);
-  placePoints(mode, shown, inner ? inner.evaluate(inside, q.C1, q.phi, q.theta) : null, start,
-    from && inner ? inner.evaluate(insideFrom, q.C1, start.phi, start.theta) : null, from);
+  placePoints(mode, inner ? inner.evaluate(inside, q.C1, q.phi, q.theta) : null,
+    from && inner ? inner.evaluate(insideFrom, q.C1, start.phi, start.theta) : null, from, feFrom);
   renderer.render(scene, camera);
   state.lastMs = performance.now() - began;
-  showState(q, mode, top, largest, start);
+  showState(q, mode, top, largest, start, feFrom);
 }
 
-function showState(q, mode, top, largest, start) {
+function showState(q, mode, top, largest, start, feFrom) {
   $('c1-value').textContent = `${q.C1.toFixed(2)} kPa`;
   $('phi-value').textContent = `${q.phi.toFixed(0)}°`;
   $('theta-value').textContent = `${q.theta.toFixed(0)}°`;
   const title = { surrogate: '|u|, surrogate', fe: '|u|, FE', difference: '|u surrogate − u FE|' };
-  $('scale-title').textContent = start ? `movement from ${start.name}, surrogate (mm)`
+  const moved = { surrogate: 'movement, surrogate', fe: 'movement, FE',
+    difference: '|Δx surrogate − Δx FE|' };
+  $('scale-title').textContent = start ? `${moved[mode]}, from ${start.name} (mm)`
     : `${title[mode]} (mm)`;
   [0, 0.25, 0.5, 0.75, 1].forEach((f, i) => {
     // three significant digits without trailing zeros: 100, 62.5, 0.25
@@ -568,10 +574,14 @@ function showState(q, mode, top, largest, start) {
   for (const radio of document.querySelectorAll('input[name=mode]')) radio.disabled = !state.fe;
   $('fe-note').textContent = state.fe ? `FE case ${state.fe.id}`
     : 'choose an FE case to compare (the sliders then sit on a solved case)';
-  $('start').disabled = mode !== 'surrogate';
-  $('start-note').textContent = mode !== 'surrogate' ? 'the FE modes show the movement from rest'
-    : (start ? `grey: where the points are ${start.name}; blue: where they are now; the table `
-      + 'and colours give the movement between them' : '');
+  let note = start ? `grey: where the points are ${start.name}; blue: where they are now; the `
+    + 'table and colours give the movement between them' : '';
+  if (feFrom) note = `FE from the case ${feFrom.id}; ${note}`;
+  else if (state.start && !start) {
+    note = `no FE case ${state.start.name} at C1 = ${q.C1.toFixed(2)} kPa in this page: the FE `
+      + 'modes show the movement from rest';
+  }
+  $('start-note').textContent = note;
 }
 
 // -- named points ---------------------------------------------------------------------------
@@ -590,39 +600,54 @@ const innerMarkers = innerNames.map((name, i) => {
   ref.position.set(...[0, 1, 2].map((d) => 1000 * inner.X[3 * i + d]));
   const deformed = new Mesh(pointGeometry, new MeshBasicMaterial({ color: 0x1f77b4 }));
   scene.add(ref, deformed);
-  return { name: escapeHtml(name), ref, deformed };
+  return { name: escapeHtml(name), colour: '#1f77b4', ref, deformed };
 });
-// Each point where the mode's field moves it; the table lists that displacement, in the
-// difference mode the surrogate's minus the FE case's, and from a start posture the movement
-// from it (the grey marker then stands where the point is in that posture).
-function placePoints(mode, shown, innerSurrogate, start, innerFrom, from) {
-  const difference = mode === 'difference';
-  const feInner = state.fe ? state.fe.innerU : null;
+// Each point where the mode's field moves it. The table lists that displacement, or from a
+// start posture the movement from it (the grey marker then stands where the point is in that
+// posture); in the difference mode, the surrogate's minus the FE case's. A field at the points
+// is `now` (the sliders' posture) and `before` (the start's: zero from rest), for the surrogate
+// and, where the page carries it, for FE.
+function placePoints(mode, innerSurrogate, innerFrom, from, feFrom) {
+  const at = (field, k) => (field ? [0, 1, 2].map((d) => field[3 * k + d]) : [0, 0, 0]);
+  const place = (point, origin, now, before, colour) => {
+    point.deformed.position.set(...origin.map((x, d) => x + now[d]));
+    point.ref.position.set(...origin.map((x, d) => x + before[d]));
+    return row(point.name, colour, now.map((x, d) => x - before[d]));
+  };
+  const compare = (point, sur, surBefore, fe, feBefore, origin) => {
+    point.deformed.position.set(...origin.map((x, d) => x + sur[d]));
+    point.ref.position.set(...origin.map((x, d) => x + surBefore[d]));
+    return row(point.name, point.colour, sur.map((x, d) => x - surBefore[d] - fe[d] + feBefore[d]),
+      true);
+  };
   const rows = innerMarkers.map((point, i) => {
-    const sur = [0, 1, 2].map((d) => innerSurrogate[3 * i + d]);
-    const fe = feInner ? [0, 1, 2].map((d) => feInner[3 * i + d]) : null;
-    const u = mode === 'fe' && fe ? fe : sur;
-    const before = [0, 1, 2].map((d) => (start ? innerFrom[3 * i + d] : 0));
-    point.deformed.position.set(...[0, 1, 2].map((d) => 1000 * inner.X[3 * i + d] + u[d]));
-    point.ref.position.set(...[0, 1, 2].map((d) => 1000 * inner.X[3 * i + d] + before[d]));
-    return difference && fe ? row(point.name, '#1f77b4', sur.map((s, d) => s - fe[d]), true)
-      : row(point.name, '#1f77b4', u.map((x, d) => x - before[d]));
+    const origin = at(inner.X, i).map((x) => 1000 * x);
+    const sur = at(innerSurrogate, i);
+    const surBefore = at(innerFrom, i);
+    const fe = state.fe && state.fe.innerU ? at(state.fe.innerU, i) : null;
+    const feBefore = at(feFrom && feFrom.innerU, i);
+    if (mode === 'difference' && fe) return compare(point, sur, surBefore, fe, feBefore, origin);
+    return mode === 'fe' && fe ? place(point, origin, fe, feBefore, point.colour)
+      : place(point, origin, sur, surBefore, point.colour);
   });
   for (const point of state.points) {
     const v = point.vertex;
-    const u = [0, 1, 2].map((d) => shown[3 * v + d]);
-    const before = [0, 1, 2].map((d) => (start ? from[3 * v + d] : 0));
-    point.deformed.position.set(...[0, 1, 2].map((d) => reference[3 * v + d] + u[d]));
-    point.ref.position.set(...[0, 1, 2].map((d) => reference[3 * v + d] + before[d]));
-    rows.push(difference
-      ? row(point.name, '#d62728', [0, 1, 2].map((d) => current[3 * v + d] - state.fe.u[3 * v + d]),
-        true)
-      : row(point.name, '#d62728', u.map((x, d) => x - before[d])));
+    const origin = at(reference, v);
+    const sur = at(current, v);
+    const surBefore = at(from, v);
+    const fe = state.fe ? at(state.fe.u, v) : null;
+    const feBefore = at(feFrom && feFrom.u, v);
+    if (mode === 'difference') rows.push(compare(point, sur, surBefore, fe, feBefore, origin));
+    else if (mode === 'fe') rows.push(place(point, origin, fe, feBefore, point.colour));
+    else rows.push(place(point, origin, sur, surBefore, point.colour));
   }
+  const moving = Boolean(from);
   $('points').innerHTML = rows.join('');
-  $('points-size').textContent = (difference && '|Δu| mm') || (start && '|Δx| mm') || '|u| mm';
-  $('points-u').textContent = (difference && 'u surrogate − u FE (mm)')
-    || (start && 'Δx (x, y, z) mm') || 'u (x, y, z) mm';
+  $('points-size').textContent = (mode === 'difference' && '|Δu| mm') || (moving && '|Δx| mm')
+    || '|u| mm';
+  $('points-u').textContent = (mode === 'difference'
+    && (moving ? 'Δx surrogate − Δx FE (mm)' : 'u surrogate − u FE (mm)'))
+    || (moving && 'Δx (x, y, z) mm') || 'u (x, y, z) mm';
 }
 
 function seeThrough(on) {
@@ -640,7 +665,7 @@ function addPoint(vertex) {
   ref.position.set(...[0, 1, 2].map((d) => reference[3 * vertex + d]));
   const deformed = new Mesh(pointGeometry, new MeshBasicMaterial({ color: 0xd62728 }));
   scene.add(ref, deformed);
-  state.points.push({ name, vertex, ref, deformed });
+  state.points.push({ name, colour: '#d62728', vertex, ref, deformed });
   update();
 }
 
