@@ -441,8 +441,9 @@ class Surrogate:
         messages = []
         lo, hi = self._c1_range
         given = f"Φ = {phi}°, θ = {theta}°"
-        renamed = self.plane_name(phi, theta) != (phi, theta)
-        phi, theta = self.plane_name(phi, theta)
+        named_as = self.plane_name(phi, theta)
+        renamed = named_as != (phi, theta)
+        phi, theta = named_as
         if not lo - 1e-9 <= C1 <= hi + 1e-9:
             messages.append(f"C1 = {C1} kPa is outside the training range [{lo}, {hi}] kPa")
         if self._phi_gap is not None:
