@@ -388,6 +388,8 @@ def test_movement_is_measured_from_a_posture_the_user_chooses(
               for phi in (0.0, 180.0)}
         page.select_option("#start", label="prone")
         page.evaluate("window.viewer.setQuery(1.0, 0, 0)")
+        selected = page.eval_on_selector("#fe-case", "s => s.options[s.selectedIndex].text")
+        assert selected.endswith("C1 = 1 kPa, Φ = 0°, θ = 0°"), selected
         page.check("input[name=mode][value=fe]")
         assert page.inner_text("#scale-title") == "movement, FE, from prone (mm)"
         assert "FE from the case c1=1.00_phi=180.0_theta=0.0" in page.inner_text("#start-note")

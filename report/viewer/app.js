@@ -571,6 +571,8 @@ function showState(q, mode, top, largest, start, feFrom) {
   $('warnings').textContent = warnings.join('\n');
   $('warnings').hidden = !warnings.length;
   $('fe-controls').classList.toggle('disabled', !state.fe);
+  // the select names the FE case the sliders sit on, however they got there
+  $('fe-case').value = state.fe ? String(feCases.indexOf(state.fe)) : '';
   for (const radio of document.querySelectorAll('input[name=mode]')) radio.disabled = !state.fe;
   $('fe-note').textContent = state.fe ? `FE case ${state.fe.id}`
     : 'choose an FE case to compare (the sliders then sit on a solved case)';
