@@ -409,4 +409,9 @@ def test_movement_is_measured_from_a_posture_the_user_chooses(
         assert "no FE case Φ = 45°, θ = 0° at C1 = 1.00 kPa" in page.inner_text("#start-note")
         assert np.allclose(rows(page)[0], np.linalg.norm(fe[0.0], axis=1), atol=0.006)
         assert page.inner_text("#scale-title") == "|u|, FE (mm)"
+        # a solved direction under another name is that case
+        for phi, theta, case in ((-180, 0, "c1=1.00_phi=180.0_theta=0.0"),
+                                 (-90, 180, "c1=1.00_phi=90.0_theta=0.0")):
+            page.evaluate(f"window.viewer.setQuery(1.0, {phi}, {theta})")
+            assert page.evaluate("window.viewer.state()")["fe"] == case
         assert not errors

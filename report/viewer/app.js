@@ -502,9 +502,16 @@ function query() {
     theta: Number(inputs.theta.value) };
 }
 
+// the FE case at this C1 whose gravity is the query's, under any name: Φ = -180° is 180°, and
+// (Φ, θ + 180°) is (-Φ, θ)
 function matchingFeCase({ C1, phi, theta }) {
-  return feCases.find((c) => Math.abs(c.C1 - C1) < 1e-6 && Math.abs(c.phi - phi) < 1e-6
-    && Math.abs(c.theta - theta) < 1e-6) || null;
+  const unit = (p, t) => {
+    const [a, b] = [(p * Math.PI) / 180, (t * Math.PI) / 180];
+    return [Math.cos(a), Math.sin(a) * Math.cos(b), Math.sin(a) * Math.sin(b)];
+  };
+  const g = unit(phi, theta);
+  return feCases.find((c) => Math.abs(c.C1 - C1) < 1e-6
+    && Math.hypot(...unit(c.phi, c.theta).map((x, d) => x - g[d])) < 1e-6) || null;
 }
 
 function update() {
