@@ -618,10 +618,10 @@ const innerMarkers = innerNames.map((name, i) => {
 // and, where the page carries it, for FE.
 function placePoints(mode, innerSurrogate, innerFrom, from, feFrom) {
   const at = (field, k) => (field ? [0, 1, 2].map((d) => field[3 * k + d]) : [0, 0, 0]);
-  const place = (point, origin, now, before, colour) => {
+  const place = (point, origin, now, before) => {
     point.deformed.position.set(...origin.map((x, d) => x + now[d]));
     point.ref.position.set(...origin.map((x, d) => x + before[d]));
-    return row(point.name, colour, now.map((x, d) => x - before[d]));
+    return row(point.name, point.colour, now.map((x, d) => x - before[d]));
   };
   const compare = (point, sur, surBefore, fe, feBefore, origin) => {
     point.deformed.position.set(...origin.map((x, d) => x + sur[d]));
@@ -636,8 +636,8 @@ function placePoints(mode, innerSurrogate, innerFrom, from, feFrom) {
     const fe = state.fe && state.fe.innerU ? at(state.fe.innerU, i) : null;
     const feBefore = at(feFrom && feFrom.innerU, i);
     if (mode === 'difference' && fe) return compare(point, sur, surBefore, fe, feBefore, origin);
-    return mode === 'fe' && fe ? place(point, origin, fe, feBefore, point.colour)
-      : place(point, origin, sur, surBefore, point.colour);
+    return mode === 'fe' && fe ? place(point, origin, fe, feBefore)
+      : place(point, origin, sur, surBefore);
   });
   for (const point of state.points) {
     const v = point.vertex;
@@ -647,8 +647,8 @@ function placePoints(mode, innerSurrogate, innerFrom, from, feFrom) {
     const fe = state.fe ? at(state.fe.u, v) : null;
     const feBefore = at(feFrom && feFrom.u, v);
     if (mode === 'difference') rows.push(compare(point, sur, surBefore, fe, feBefore, origin));
-    else if (mode === 'fe') rows.push(place(point, origin, fe, feBefore, point.colour));
-    else rows.push(place(point, origin, sur, surBefore, point.colour));
+    else if (mode === 'fe') rows.push(place(point, origin, fe, feBefore));
+    else rows.push(place(point, origin, sur, surBefore));
   }
   const moving = Boolean(from);
   $('points').innerHTML = rows.join('');
