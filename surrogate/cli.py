@@ -13,8 +13,10 @@ With ``--points`` (a ``name,x,y,z`` CSV of material points, in the model's refer
 the project's frame) it predicts at those points instead, prints each one's displacement and
 position, and writes their positions in that posture with ``-o`` as a ``name,x,y,z`` CSV, which
 ``python -m meshes.frame --to file`` carries into an imported file's frame. With
-``--from-phi`` (and ``--from-theta``) it also prints each point's movement from that posture to
-this one at the same C1 (a tumour seen prone, at supine: ``--phi 0 --from-phi 180``).
+``--from-phi`` (and ``--from-theta``) it also gives each point's movement from that posture to
+this one at the same C1 (a tumour seen prone, at supine: ``--phi 0 --from-phi 180``): printed
+for named points, and for the whole field its largest and mean, written to an ``.xdmf`` as the
+fields ``movement_mm`` and ``movement_magnitude_mm`` beside the displacement.
 ``train`` trains the ``surrogate`` settings of ``--config`` with the ``--set`` overrides on
 one core, saves the model with ``--out`` and prints one JSON line (validation error, best
 epoch, training time). Bad input exits with status 2 and a message naming it. A setup the
@@ -61,9 +63,9 @@ def predict(args: argparse.Namespace) -> int:
     if args.from_phi is None and args.from_theta is not None:
         print("error: --from-theta needs --from-phi", file=sys.stderr)
         return 2
-    if args.from_phi is not None and not args.points:
-        print("error: --from-phi measures the movement of named points: give --points",
-              file=sys.stderr)
+    if args.from_phi is not None and output is not None and output.suffix == ".npy":
+        print(f"error: --output {output}: an .npy holds the displacement alone; write an .xdmf "
+              "for the movement from --from-phi beside it", file=sys.stderr)
         return 2
     names: list[str] = []
     since = None if args.from_phi is None else (args.from_phi, args.from_theta or 0.0)
@@ -95,7 +97,8 @@ def predict(args: argparse.Namespace) -> int:
         if extrapolated and args.strict:
             return 3
         if output is not None and output.suffix == ".xdmf":
-            write_prediction_xdmf(output, args.mesh, model, u)
+            write_prediction_xdmf(output, args.mesh, model, u,
+                                  None if u_since is None else u - u_since)
     except (SurrogateError, OSError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
@@ -110,6 +113,10 @@ def predict(args: argparse.Namespace) -> int:
     else:
         print(f"{u.shape[0]} points: max |u| = {norms.max():.3f} mm, "
               f"mean |u| = {norms.mean():.3f} mm")
+        if u_since is not None:
+            way = np.linalg.norm(u - u_since, axis=1)
+            print(f"moved from Φ = {since[0]:g}°, θ = {since[1]:g}° (at the same C1): max |Δx| "
+                  f"= {way.max():.3f} mm, mean |Δx| = {way.mean():.3f} mm")
     if output is not None and output.suffix == ".npy":
         np.save(output, u)
     if output is not None:
@@ -181,8 +188,8 @@ def parser() -> argparse.ArgumentParser:
                    help="predict at these material points instead (name,x,y,z in the model's "
                         "reference frame, m); -o then writes their positions as a CSV")
     p.add_argument("--from-phi", type=float, metavar="PHI",
-                   help="with --points: also print each point's movement from the posture at "
-                        "this Φ (degrees) to the one asked, at the same C1")
+                   help="also give the movement from the posture at this Φ (degrees) to the "
+                        "one asked, at the same C1: per named point, or the field's (.xdmf)")
     p.add_argument("--from-theta", type=float, metavar="THETA",
                    help="θ of the --from-phi posture, degrees (default 0)")
     p.add_argument("--strict", action="store_true",

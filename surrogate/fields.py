@@ -51,13 +51,16 @@ def write_point_fields_xdmf(
 
 
 def write_prediction_xdmf(
-    path: str | Path, mesh_xdmf: str | Path, model: Surrogate, u_mm: np.ndarray
+    path: str | Path, mesh_xdmf: str | Path, model: Surrogate, u_mm: np.ndarray,
+    movement_mm: np.ndarray | None = None,
 ) -> None:
-    """Write a predicted displacement (mm) and its magnitude on the mesh as XDMF."""
-    write_point_fields_xdmf(
-        path,
-        mesh_xdmf,
-        model.node_index,
-        model.X,
-        {"displacement_mm": u_mm, "displacement_magnitude_mm": np.linalg.norm(u_mm, axis=1)},
-    )
+    """Write a predicted displacement (mm) and its magnitude on the mesh as XDMF.
+
+    With ``movement_mm`` (each point's movement from another posture, mm) that field and its
+    magnitude too, as ``movement_mm`` and ``movement_magnitude_mm``.
+    """
+    fields = {"displacement_mm": u_mm, "displacement_magnitude_mm": np.linalg.norm(u_mm, axis=1)}
+    if movement_mm is not None:
+        fields |= {"movement_mm": movement_mm,
+                   "movement_magnitude_mm": np.linalg.norm(movement_mm, axis=1)}
+    write_point_fields_xdmf(path, mesh_xdmf, model.node_index, model.X, fields)

@@ -174,8 +174,6 @@ def test_the_command_line_predicts_at_named_points(
     for line, d in zip(table[1:], moved_from, strict=True):
         np.testing.assert_allclose([float(x) for x in line.split()[1:]],
                                    [np.linalg.norm(d), *d], atol=6e-4)
-    assert main(["predict", str(folder), *query, "--from-phi", "180"]) == 2
-    assert "give --points" in capsys.readouterr().err
     # a point outside the body; an output the points cannot fill
     points.write_text("name,x,y,z\nfar,0.5,0.5,1.5\n")
     out.unlink()

@@ -211,6 +211,39 @@ def test_small_sweep_surrogate_predicts_the_fe(small_run: Path) -> None:
     assert total_err < 0.15 * total_norm
 
 
+def test_the_movement_between_two_postures_is_written_for_paraview(
+    small_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``predict --from-phi`` on the whole field: each point's way from prone to supine.
+
+    The ``.xdmf`` holds the displacement and, beside it, the movement from the other posture,
+    the difference of the two predictions; the command prints its largest and mean.
+    """
+    import meshio
+
+    from surrogate.cli import main
+    from surrogate.predict import Surrogate
+
+    model_dir = small_run / "results/surrogate/model"
+    out = tmp_path / "moved.xdmf"
+    assert main(["predict", str(model_dir), "--c1", "1.0", "--phi", "0", "--from-phi", "180",
+                 "--mesh", str(small_run / "results/mesh/mesh.xdmf"), "-o", str(out)]) == 0
+    model = Surrogate.load(model_dir)
+    way = np.linalg.norm(model.predict(1.0, 0.0) - model.predict(1.0, 180.0), axis=1)
+    said = capsys.readouterr().out
+    assert (f"moved from Φ = 180°, θ = 0° (at the same C1): max |Δx| = {way.max():.3f} mm, "
+            f"mean |Δx| = {way.mean():.3f} mm") in said
+    fields = meshio.read(out).point_data
+    np.testing.assert_allclose(np.sort(fields["movement_magnitude_mm"]), np.sort(way),
+                               atol=1e-4)
+    before = fields["displacement_mm"] - fields["movement_mm"]  # prone's, in the file's order
+    np.testing.assert_allclose(np.sort(np.linalg.norm(before, axis=1)), np.sort(
+        np.linalg.norm(model.predict(1.0, 180.0), axis=1)), atol=1e-4)
+    assert main(["predict", str(model_dir), "--c1", "1.0", "--phi", "0", "--from-phi", "180",
+                 "-o", str(tmp_path / "u.npy")]) == 2
+    assert "an .npy holds the displacement alone" in capsys.readouterr().err
+
+
 def test_a_cases_fe_field_answers_at_named_points(
     small_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
