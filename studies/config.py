@@ -489,6 +489,14 @@ class ImagedConfig:
         """The imaged posture as the 3D view names a posture: movement is measured from it."""
         return {"name": "as imaged", "phi": self.case.phi, "theta": self.case.theta}
 
+    def view_query(self) -> dict[str, float]:
+        """Where the 3D view opens, so that the movement from the image shows at once.
+
+        The first tracked set's target posture at the imaged C1, else the imaged posture.
+        """
+        case = next(iter(self.points.values()), self.case)
+        return {"C1": case.C1, "phi": case.phi, "theta": case.theta}
+
     def input_files(self) -> list[str]:
         """The points and observation files (inputs of the workflow)."""
         return [*self.point_files.values(), *([self.observation] if self.observation else [])]

@@ -188,6 +188,7 @@ def build_viewer(
     postures: Sequence[dict[str, Any]] = (),
     points: Sequence[tuple[str, Sequence[float]]] = (),
     start: Mapping[str, Any] | None = None,
+    initial: Mapping[str, float] | None = None,
 ) -> dict[str, Any]:
     """Write the viewer page ``output`` (and three.js's licence beside it).
 
@@ -206,6 +207,8 @@ def build_viewer(
         start: the posture the page first measures movement from, ``{name, phi, theta}``
             (e.g. the posture an imaged breast was imaged in); None: from rest. The user can
             choose rest, any posture of ``postures`` or the sliders' posture in the page.
+        initial: the query the page opens at, ``{C1, phi, theta}``; None: the first FE case
+            (the first clinical case), or without FE cases prone at the middle C1.
 
     Returns:
         What the page holds: points, surface vertices and triangles, FE cases, named points,
@@ -236,8 +239,8 @@ def build_viewer(
     if start:
         data["starts"][-1]["selected"] = True
     C1s = [c for c in model.range_checks()["c1_kPa"] if c is not None]
-    first = cases[0] if cases else {"C1": float(np.median(C1s)) if C1s else 1.0, "phi": 180.0,
-                                    "theta": 0.0}
+    first = initial or (cases[0] if cases else {
+        "C1": float(np.median(C1s)) if C1s else 1.0, "phi": 180.0, "theta": 0.0})
     env = jinja2.Environment(
         loader=jinja2.FileSystemLoader(HERE), autoescape=True, keep_trailing_newline=True
     )

@@ -62,16 +62,17 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     try:
-        clinical, postures, start = [], [], None
+        clinical, postures, start, initial = [], [], None, None
         if args.config:  # checked as a run checks it
             config = _checked(args.config)
             clinical = config.section("clinical")
             postures = config.section("surrogate_study", "postures", "directions")
-            start = config.imaged.posture() if config.imaged else None
+            if config.imaged:  # movement from the image, opened at the tracked posture
+                start, initial = config.imaged.posture(), config.imaged.view_query()
         names, X = read_points(args.points) if args.points else ([], [])
         named = list(zip(names, X, strict=True))
         info = build_viewer(args.model, args.mesh, args.dataset, args.output, clinical,
-                            postures, named, start)
+                            postures, named, start, initial)
     except (ConfigError, SurrogateError, DatasetError, ViewerError, MeshInputError,
             OSError) as err:
         print(f"error: {err}", file=sys.stderr)

@@ -64,6 +64,7 @@ rule viewer:
         postures=CONFIG.section("surrogate_study", "postures", "directions"),
         # with an imaged breast, movement is first measured from the posture it was imaged in
         start=None if IMAGED is None else IMAGED.posture(),
+        initial=None if IMAGED is None else IMAGED.view_query(),
     log:
         "results/logs/viewer.log",
     threads: 1

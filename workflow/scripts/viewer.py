@@ -25,4 +25,5 @@ build_viewer(
     snakemake.params.postures,
     points,
     snakemake.params.start,
+    snakemake.params.initial,
 )
