@@ -277,6 +277,21 @@ def test_each_need_names_the_cheapest_model_and_the_cheapest_fe_model() -> None:
     assert half["models meeting it (every point / on average)"] == "3 / 4 of 4"
     only_coarse = needs_rows([cands[0], cands[1]])
     assert only_coarse[0][2] == "none" and only_coarse[0][4] == "FE coarse (500 ms)"
+    # the selected model over cases beyond the clinical ones: its worst point error at the
+    # points or between them (a tumour's), its worst case mean; the failed FE solves left out
+    from types import SimpleNamespace
+
+    from report.sections.scene import over_cases
+
+    def case(max_mm, mean_mm, between_mm=None):
+        return SimpleNamespace(errors=SimpleNamespace(max_mm=max_mm, mean_mm=mean_mm),
+                               between=between_mm and SimpleNamespace(max_mm=between_mm))
+
+    rows = [case(0.1, 0.002, 0.3), case(0.2, 0.004), SimpleNamespace(errors=None, between=None)]
+    beyond = over_cases("surrogate, selected, off the grid", rows, 1e-4)
+    assert (beyond.name, beyond.max_error_mm, beyond.mean_error_mm, beyond.fe) == (
+        "surrogate, selected, off the grid (2 cases)", 0.3, 0.004, False)
+    assert over_cases("none compared", rows[2:], 1e-4) is None
 
 
 def test_c1s_effect_is_judged_only_where_the_whole_c1_range_was_solved(tmp_path: Path) -> None:
