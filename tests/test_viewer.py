@@ -135,18 +135,23 @@ def test_moving_a_slider_changes_the_picture(viewer: Path) -> None:
 def test_the_colour_scale_reads_from_zero_to_its_top(viewer: Path) -> None:
     """The ticks are numbers from 0 to a round top at least the largest value (e.g. 100, not 1).
 
-    Over the slider's C1 range at Φ = 45°: the toy breast's soft cases move it more than 50 mm
-    there, so that the top is 100.
+    Over the slider's C1 range, from rest and from prone: the toy breast's way from prone to
+    supine or lateral, about twice its displacement from rest, lies between 50 and 100 mm at
+    the soft end, so that the top is 100 there.
     """
     tops = set()
     with open_page(viewer, ready=READY) as (page, errors, _):
-        for C1 in np.linspace(float(page.get_attribute("#c1", "min")), 5.0, 24):
-            page.evaluate(f"window.viewer.setQuery({C1:.2f}, 45, 0)")
-            largest = float(re.search(r"largest ([\d.]+) mm", page.inner_text("#max-value"))[1])
-            ticks = [float(page.inner_text(f"#tick-{i}")) for i in range(5)]
-            assert ticks[0] == 0 and ticks == sorted(ticks), ticks
-            assert largest <= ticks[-1] <= 2.5 * largest, (C1, largest, ticks)
-            tops.add(ticks[-1])
+        for start in ("rest", "prone"):
+            page.evaluate(f"window.viewer.setStart({'rest' if start == 'rest' else 0!r})")
+            for C1 in np.linspace(float(page.get_attribute("#c1", "min")), 5.0, 12):
+                for phi in (0, 45):
+                    page.evaluate(f"window.viewer.setQuery({C1:.2f}, {phi}, 0)")
+                    largest = float(re.search(r"largest ([\d.]+) mm",
+                                              page.inner_text("#max-value"))[1])
+                    ticks = [float(page.inner_text(f"#tick-{i}")) for i in range(5)]
+                    assert ticks[0] == 0 and ticks == sorted(ticks), ticks
+                    assert largest <= ticks[-1] <= 2.5 * largest, (C1, largest, ticks)
+                    tops.add(ticks[-1])
         assert 100 in tops, tops  # the top the old ticks printed as "1"
         assert not errors
 
