@@ -19,8 +19,9 @@ class Candidate:
 
     Attributes:
         name: readable name.
-        max_error_mm: the largest point error over the clinical cases.
-        mean_error_mm: the largest per-case mean point error over the clinical cases.
+        max_error_mm: the largest point error over the cases it is judged on (the clinical
+            cases, unless its name says which others).
+        mean_error_mm: the largest per-case mean point error over the same cases.
         cost_s: seconds per prediction (surrogate) or per solve (FE), one core.
         against: what the errors are measured against.
         fe: whether it is an FE model (a geometry without a trained surrogate needs one).
