@@ -141,8 +141,8 @@ def test_the_colour_scale_reads_from_zero_to_its_top(viewer: Path) -> None:
     """
     tops = set()
     with open_page(viewer, ready=READY) as (page, errors, _):
-        for start in ("rest", "prone"):
-            page.evaluate(f"window.viewer.setStart({'rest' if start == 'rest' else 0!r})")
+        for start in ("rest", "0"):  # the menu's values: rest, then the first posture, prone
+            page.evaluate(f"window.viewer.setStart('{start}')")
             for C1 in np.linspace(float(page.get_attribute("#c1", "min")), 5.0, 12):
                 for phi in (0, 45):
                     page.evaluate(f"window.viewer.setQuery({C1:.2f}, {phi}, 0)")
