@@ -79,7 +79,7 @@ def evaluate_off_grid(
     """
     named = [(f"off-grid {k}", False, summary, points, fields)
              for k, (summary, points, fields) in enumerate(cases, start=1)]
-    rows = evaluate_postures(model, named).rows
+    rows = evaluate_postures(model, named, movement=False).rows
     compared = [row.errors for row in rows if row.errors is not None]
     centroids = [row.between for row in rows if row.between is not None]
     goals = dict(GOALS_MM if goals_mm is None else goals_mm)

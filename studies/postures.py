@@ -6,14 +6,16 @@ reclined, supine tilted under ultrasound). Each posture of ``surrogate_study.pos
 direction of gravity relative to the body (:class:`studies.config.Posture`), evaluated at a
 few stiffnesses; its FE solution comes from the sweep where the sweep has it, else from an
 extra solve outside it. The table says, per posture, how far the model's worst point is from
-FE and whether the posture lies inside the directions it was trained on.
+FE and whether the posture lies inside the directions it was trained on, and, from the first
+posture (prone: the posture of the MRI), the way the breast takes to each other posture at the
+same stiffness, with the model's error in that way: where a tumour seen in the image goes.
 """
 
 from __future__ import annotations
 
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -47,6 +49,9 @@ class PostureRow(Record):
         between: the same at the cell centroids of the case's quadratic mesh, between the
             material points, where a tumour lies (:class:`studies.held_out.Centroids`);
             absent where the case's fields are not on 10-node cells.
+        movement: the model's movement from the first posture at the same C1 against FE's
+            (its ``fe_max_mm``: FE's largest movement), at the material points; absent for
+            the first posture itself, or where either FE solve failed.
     """
 
     posture: str
@@ -62,6 +67,7 @@ class PostureRow(Record):
     errors: CaseErrors | None
     extrapolation_warnings: list[str]
     between: CaseErrors | None = None
+    movement: CaseErrors | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -76,6 +82,7 @@ class PostureEvaluation(Result):
 def evaluate_postures(
     model: Surrogate,
     postures: Sequence[tuple[str, bool, str | Path, str | Path, str | Path | None]],
+    movement: bool = True,
 ) -> PostureEvaluation:
     """The model against FE in each posture.
 
@@ -84,6 +91,8 @@ def evaluate_postures(
         postures: ``(name, in_sweep, summary.json, points.h5, fields.h5)`` of each posture's
             FE case; with its ``fields.h5`` (None: not compared there) on a quadratic mesh,
             the errors are also taken at the cell centroids.
+        movement: also judge each posture's movement from the first posture (the name of the
+            first case) at the same C1 (:attr:`PostureRow.movement`).
 
     Raises:
         ValueError: if a case's material points are not the model's, or a centroid lies
@@ -92,6 +101,7 @@ def evaluate_postures(
     from fem.dataset import read_summary
 
     rows = []
+    fields: list[tuple[np.ndarray, np.ndarray] | None] = []  # each row's (model, FE), mm
     cached: _CentroidModel | None = None  # the model at the centroids, kept between cases
     for name, in_sweep, summary_path, points_path, fields_path in postures:
         summary = read_summary(summary_path)
@@ -100,8 +110,10 @@ def evaluate_postures(
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", ExtrapolationWarning)
             pred = model.predict(C1, phi, theta)
+        fields.append(None)
         if summary["status"] == "converged":
             fe, _ = fe_in_model_order(model, points_path)
+            fields[-1] = (pred, fe)
             errors = CaseErrors.between(pred, fe, summary["case"], C1, phi, theta)
             if fields_path is not None:
                 cached, between = _between(model, cached, fields_path, str(summary["case"]),
@@ -121,11 +133,29 @@ def evaluate_postures(
             extrapolation_warnings=[str(w.message) for w in caught],
             between=between,
         ))
+    if movement and rows:
+        rows = _movements(rows, fields)
     return PostureEvaluation(
         architecture=model.config.architecture,
         training_range=dict(model.training_range or {}),
         rows=rows,
     )
+
+
+def _movements(rows: list[PostureRow],
+               fields: list[tuple[np.ndarray, np.ndarray] | None]) -> list[PostureRow]:
+    """The rows with each one's movement from the first posture at its C1, where both solved."""
+    first = rows[0].posture
+    start = {row.C1: f for row, f in zip(rows, fields, strict=True)
+             if row.posture == first and f is not None}
+    out = []
+    for row, f in zip(rows, fields, strict=True):
+        if row.posture != first and f is not None and row.C1 in start:
+            (pred, fe), (pred0, fe0) = f, start[row.C1]
+            row = replace(row, movement=CaseErrors.between(
+                pred - pred0, fe - fe0, row.case, row.C1, row.phi, row.theta))
+        out.append(row)
+    return out
 
 
 @dataclass(frozen=True)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import h5py
@@ -299,6 +300,22 @@ def test_the_held_out_and_posture_errors_are_taken_between_the_points_too(
     assert with_fields.between.case == with_fields.errors.case == ds.ids[case]
     assert with_fields.between.max_mm >= 10.0 * quadratic.inside_all_between.max_mm
     assert without.between is None and without.errors == with_fields.errors
+    # from the first posture at the same C1: the model's movement against FE's
+    other = int(np.flatnonzero((ds.C1 == ds.C1[case]) & (ds.phi != ds.phi[case]))[0])
+    stiffer = int(np.flatnonzero(ds.C1 != ds.C1[case])[0])  # no first posture at its C1
+    moved = evaluate_postures(models["linear"], [
+        ("prone", True, summaries[case], points[case], None),
+        ("other", True, summaries[other], points[other], None),
+        ("other C1", True, summaries[stiffer], points[stiffer], None)]).rows
+    model = models["linear"]
+    way = ((model.predict(ds.C1[other], ds.phi[other], ds.theta[other])
+            - model.predict(ds.C1[case], ds.phi[case], ds.theta[case]))
+           - (ds.displacement[other] - ds.displacement[case]))
+    assert moved[0].movement is None
+    assert moved[1].movement.max_mm == pytest.approx(np.linalg.norm(way, axis=1).max(), rel=1e-5)
+    assert moved[1].movement.fe_max_mm == pytest.approx(np.linalg.norm(
+        ds.displacement[other] - ds.displacement[case], axis=1).max(), rel=1e-5)
+    assert moved[2].movement is None and moved[2].errors is not None
 
     from report.context import Context
     from report.sections.generalisation import held_out_part, postures_part
@@ -310,6 +327,10 @@ def test_the_held_out_and_posture_errors_are_taken_between_the_points_too(
             in held_out_part(ctx))
     page = postures_part(ctx)
     assert f"{with_fields.between.max_mm:.3g}</td>" in page and "between the points" in page
+    page = postures_part(Context(out_dir=folder, clinical=[], paths={}, clinical_fields=[],
+                                 results={"postures": replace(postures, rows=moved)}))
+    assert "FE&#x27;s largest movement from prone (mm)" in page
+    assert f"<td>other</td><td>{ds.C1[other]:g}</td><td>{moved[1].movement.fe_max_mm:.3g}" in page
 
 
 def test_the_off_grid_set_is_judged_against_its_goals_and_lists_failed_solves(

@@ -237,6 +237,20 @@ def postures_part(ctx: Context) -> str:
         "sphere of directions would buy." + BETWEEN, "caption")]
     rows = [_fe_row(row.posture, row) for row in result.rows]
     out.append(table(["posture", *FE_COLUMNS], rows, table_id="postures"))
+    moved = [r for r in result.rows if r.movement is not None]
+    if moved:
+        first = result.rows[0].posture
+        out.append(para(
+            f"From {first} (the first posture; prone is the MRI's) to each other posture at the "
+            "same C1: the way the breast takes, which a tumour seen in the image takes too. FE's "
+            "largest movement of a material point, and the surrogate's error in the movement "
+            "(its movement minus FE's, at the material points).", "caption"))
+        out.append(table(
+            ["posture", "C1 (kPa)", f"FE's largest movement from {first} (mm)",
+             "error in it: mean / p95 / max (mm)", "max / FE's largest movement (%)"],
+            [[r.posture, fmt(r.C1, "g"), fmt(r.movement.fe_max_mm, ".3g"),
+              f"{r.movement.mean_mm:.3g} / {r.movement.p95_mm:.3g} / {r.movement.max_mm:.3g}",
+              pct(r.movement.relative_max)] for r in moved], table_id="postures-movement"))
     failed = [r for r in result.rows if r.errors is None]
     if failed:
         out.append(para("FE solves that failed (no comparison): " + "; ".join(
