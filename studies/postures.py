@@ -110,10 +110,8 @@ def evaluate_postures(
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", ExtrapolationWarning)
             pred = model.predict(C1, phi, theta)
-        fields.append(None)
         if summary["status"] == "converged":
             fe, _ = fe_in_model_order(model, points_path)
-            fields[-1] = (pred, fe)
             errors = CaseErrors.between(pred, fe, summary["case"], C1, phi, theta)
             if fields_path is not None:
                 cached, between = _between(model, cached, fields_path, str(summary["case"]),
@@ -133,6 +131,7 @@ def evaluate_postures(
             extrapolation_warnings=[str(w.message) for w in caught],
             between=between,
         ))
+        fields.append(None if errors is None else (pred, fe))
     if movement and rows:
         rows = _movements(rows, fields)
     return PostureEvaluation(

@@ -23,6 +23,14 @@ function decode(encoded) {
 
 // -- the surrogate (mirrors surrogate.predict.Surrogate) -------------------------------------
 const SQRT_2_OVER_PI = Math.sqrt(2 / Math.PI);
+
+// The unit gravity direction of (Φ, θ) in degrees, the paper's Eq. 1, as
+// fem.dataset.gravity_direction: [cos Φ, sin Φ cos θ, sin Φ sin θ].
+function gravityDirection(phi, theta) {
+  const p = (phi * Math.PI) / 180;
+  const t = (theta * Math.PI) / 180;
+  return [Math.cos(p), Math.sin(p) * Math.cos(t), Math.sin(p) * Math.sin(t)];
+}
 const ACTIVATIONS = {
   tanh: Math.tanh,
   relu: (x) => (x > 0 ? x : 0),
@@ -104,14 +112,12 @@ class WebSurrogate {
   // Encoded C1, gravity direction and output gain, as Surrogate.features computes them.
   features(C1, phi, theta) {
     const e = this.model.encoding;
-    const p = (phi * Math.PI) / 180;
-    const t = (theta * Math.PI) / 180;
     let enc = C1;
     if (e.c1 === 'log') enc = Math.log(C1);
     else if (e.c1 === 'inverse') enc = 1 / C1;
     const c = (2 * (enc - e.c1_min)) / (e.c1_max - e.c1_min) - 1;
     const gain = e.output_scaling === 'compliance' ? e.c1_ref / C1 : 1;
-    return [c, Math.cos(p), Math.sin(p) * Math.cos(t), Math.sin(p) * Math.sin(t), gain];
+    return [c, ...gravityDirection(phi, theta), gain];
   }
 
   // An evaluator for the material points `indices`: the query-independent part of the first
@@ -306,8 +312,8 @@ class WebSurrogate {
     if (r.directions || r.theta_deg.length !== 1 || Math.abs(theta - r.theta_deg[0]) < 1e-6) {
       return [phi, theta];
     }
-    const [p, t, t0] = [phi, theta, r.theta_deg[0]].map((a) => (a * Math.PI) / 180);
-    const g = [Math.cos(p), Math.sin(p) * Math.cos(t), Math.sin(p) * Math.sin(t)];
+    const t0 = (r.theta_deg[0] * Math.PI) / 180;
+    const g = gravityDirection(phi, theta);
     if (Math.abs(g[2] * Math.cos(t0) - g[1] * Math.sin(t0)) > 1e-9) return [phi, theta];
     const along = g[1] * Math.cos(t0) + g[2] * Math.sin(t0);
     return [Math.round((Math.atan2(along, g[0]) * 180 * 1e6) / Math.PI) / 1e6 + 0, r.theta_deg[0]];
@@ -337,8 +343,7 @@ class WebSurrogate {
       }
     }
     if (r.directions) {
-      const [p, t] = [(phi * Math.PI) / 180, (theta * Math.PI) / 180];
-      const g = [Math.cos(p), Math.sin(p) * Math.cos(t), Math.sin(p) * Math.sin(t)];
+      const g = gravityDirection(phi, theta);
       const cos = Math.max(...r.directions.map((d) => d[0] * g[0] + d[1] * g[1] + d[2] * g[2]));
       const nearest = (Math.acos(Math.min(Math.max(cos, -1), 1)) * 180) / Math.PI;
       if (nearest > r.direction_reach_deg) {
@@ -357,13 +362,9 @@ class WebSurrogate {
     const beside = (cases) => {
       if (!cases.length) return [];
       if (r.directions) {
-        const unit = (a, b) => {
-          const [p, t] = [(a * Math.PI) / 180, (b * Math.PI) / 180];
-          return [Math.cos(p), Math.sin(p) * Math.cos(t), Math.sin(p) * Math.sin(t)];
-        };
-        const g = unit(phi, theta);
+        const g = gravityDirection(phi, theta);
         return cases.filter(([, p, t]) => {
-          const d = unit(p, t);
+          const d = gravityDirection(p, t);
           const cos = Math.min(Math.max(d[0] * g[0] + d[1] * g[1] + d[2] * g[2], -1), 1);
           return (Math.acos(cos) * 180) / Math.PI <= r.direction_spacing_deg + 1e-9;
         });
@@ -505,13 +506,9 @@ function query() {
 // the FE case at this C1 whose gravity is the query's, under any name: Φ = -180° is 180°, and
 // (Φ, θ + 180°) is (-Φ, θ)
 function matchingFeCase({ C1, phi, theta }) {
-  const unit = (p, t) => {
-    const [a, b] = [(p * Math.PI) / 180, (t * Math.PI) / 180];
-    return [Math.cos(a), Math.sin(a) * Math.cos(b), Math.sin(a) * Math.sin(b)];
-  };
-  const g = unit(phi, theta);
+  const g = gravityDirection(phi, theta);
   return feCases.find((c) => Math.abs(c.C1 - C1) < 1e-6
-    && Math.hypot(...unit(c.phi, c.theta).map((x, d) => x - g[d])) < 1e-6) || null;
+    && Math.hypot(...gravityDirection(c.phi, c.theta).map((x, d) => x - g[d])) < 1e-6) || null;
 }
 
 function update() {
@@ -545,9 +542,7 @@ function update() {
   for (let v = 0; v < nv; v += 1) colourmap(magnitude[v] / top, colours.array, 3 * v);
   positions.needsUpdate = true;
   colours.needsUpdate = true;
-  const p = (q.phi * Math.PI) / 180;
-  const t = (q.theta * Math.PI) / 180;
-  const g = new Vector3(Math.cos(p), Math.sin(p) * Math.cos(t), Math.sin(p) * Math.sin(t));
+  const g = new Vector3(...gravityDirection(q.phi, q.theta));
   gravityArrow.setDirection(g);  // drawn beside the body, centred on its anchor
   gravityArrow.position.copy(arrowAnchor).addScaledVector(g, -0.35 * radius);
   placePoints(mode, inner ? inner.evaluate(inside, q.C1, q.phi, q.theta) : null,
