@@ -297,14 +297,20 @@ def test_a_pod_model_keeps_the_epoch_of_its_lowest_validation_error_in_mm(
     """
     from surrogate.train import train_and_evaluate
 
-    # a run whose two choices lie far apart: the epoch of the lowest error in mm (early) has
-    # about three times the lowest loss (late)
-    noisy = CONFIG.replace(lr_schedule="constant", learning_rate=0.05, seed=1, max_epochs=40,
-                           patience=40)
-    result = train_and_evaluate(read_dataset(cube[0]), noisy, progress=False)
-    errors = np.array([h["validation_error_mm"] for h in result.history])
-    losses = np.array([h["validation_loss"] for h in result.history])
-    assert losses[np.argmin(errors)] > 2.0 * losses.min()  # the two choices differ widely
+    # a run whose two choices differ: at a constant, high rate the trajectory is chaotic and
+    # differs from one CPU to another (XLA's code for it), so take the first seed where the
+    # epoch of the lowest error in mm and that of the lowest loss lie apart
+    ds = read_dataset(cube[0])
+    for seed in range(1, 9):
+        noisy = CONFIG.replace(lr_schedule="constant", learning_rate=0.05, seed=seed,
+                               max_epochs=40, patience=40)
+        result = train_and_evaluate(ds, noisy, progress=False)
+        errors = np.array([h["validation_error_mm"] for h in result.history])
+        losses = np.array([h["validation_loss"] for h in result.history])
+        if errors[np.argmin(losses)] > 1.05 * errors.min():  # the loss would choose worse
+            break
+    else:
+        pytest.fail("no seed of 1-8 gives a run whose loss and error in mm choose apart")
     assert result.best_epoch == int(np.argmin(errors)) + 1
     assert result.validation_error_mm == pytest.approx(errors.min(), rel=1e-5)
     assert result.best_validation_loss == pytest.approx(losses[result.best_epoch - 1])
