@@ -624,26 +624,20 @@ function placePoints(mode, innerSurrogate, innerFrom, from, feFrom) {
     return row(point.name, point.colour, sur.map((x, d) => x - surBefore[d] - fe[d] + feBefore[d]),
       true);
   };
-  const rows = innerMarkers.map((point, i) => {
-    const origin = at(inner.X, i).map((x) => 1000 * x);
-    const sur = at(innerSurrogate, i);
-    const surBefore = at(innerFrom, i);
-    const fe = state.fe && state.fe.innerU ? at(state.fe.innerU, i) : null;
-    const feBefore = at(feFrom && feFrom.innerU, i);
+  // by the mode, where FE is known at the point (fe: null where the page has no FE there)
+  const show = (point, origin, sur, surBefore, fe, feBefore) => {
     if (mode === 'difference' && fe) return compare(point, sur, surBefore, fe, feBefore, origin);
     return mode === 'fe' && fe ? place(point, origin, fe, feBefore)
       : place(point, origin, sur, surBefore);
-  });
+  };
+  const rows = innerMarkers.map((point, i) => show(point, at(inner.X, i).map((x) => 1000 * x),
+    at(innerSurrogate, i), at(innerFrom, i),
+    state.fe && state.fe.innerU ? at(state.fe.innerU, i) : null,
+    at(feFrom && feFrom.innerU, i)));
   for (const point of state.points) {
     const v = point.vertex;
-    const origin = at(reference, v);
-    const sur = at(current, v);
-    const surBefore = at(from, v);
-    const fe = state.fe ? at(state.fe.u, v) : null;
-    const feBefore = at(feFrom && feFrom.u, v);
-    if (mode === 'difference') rows.push(compare(point, sur, surBefore, fe, feBefore, origin));
-    else if (mode === 'fe') rows.push(place(point, origin, fe, feBefore));
-    else rows.push(place(point, origin, sur, surBefore));
+    rows.push(show(point, at(reference, v), at(current, v), at(from, v),
+      state.fe ? at(state.fe.u, v) : null, at(feFrom && feFrom.u, v)));
   }
   const moving = Boolean(from);
   $('points').innerHTML = rows.join('');
