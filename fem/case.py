@@ -86,7 +86,8 @@ class CaseRunner:
         self.settings = settings
         self.mesh, self.cell_tags, self.facet_tags = read_mesh(mesh_path, self.comm)
         self.problem = GravityProblem(
-            self.mesh, self.facet_tags, settings.discretisation, settings.fixed, settings.contact
+            self.mesh, self.facet_tags, settings.discretisation, settings.fixed, settings.contact,
+            settings.self_contact,
         )
         self.solver = NewtonSolver(self.problem, settings.petsc_options, settings.solver)
         self.setup_s = time.perf_counter() - start
@@ -221,6 +222,7 @@ class CaseRunner:
             # keeps the skin off the chest below the fold, not the body off itself
             "self_overlap": self_overlap(self.mesh, u) if self.comm.size == 1 else None,
             "contact": problem.contact_status(),
+            "self_contact": problem.self_contact_status(),
             "dofs": dofs,
             "linear_path": self.solver.linear_path,
             "wall_s": {

@@ -10,6 +10,7 @@ import numpy as np
 
 from fem.contact import Contact, contact_from_mapping, resolve_obstacle
 from fem.exceptions import InvalidParameterError
+from fem.self_contact import SelfContact, self_contact_from_mapping
 from meshes.tags import Boundary
 
 STANDARD_GRAVITY = 9.81  # m/s², the paper's |g|
@@ -308,6 +309,7 @@ class SolverSettings:
         solver: linear-solver preset of :func:`fem.solver.default_parameters`
             (``direct``, ``direct-lu`` or ``iterative``).
         contact: penalty contact of the skin with a rigid obstacle (None: no contact).
+        self_contact: the skin's contact with itself (None: it may pass through itself).
     """
 
     discretisation: Discretisation = Discretisation()
@@ -318,6 +320,7 @@ class SolverSettings:
     gravity: float = STANDARD_GRAVITY
     solver: str = "direct"
     contact: Contact | None = None
+    self_contact: SelfContact | None = None
 
     def __post_init__(self) -> None:
         from fem.options import solver_options  # options imports exceptions only
@@ -329,7 +332,8 @@ class SolverSettings:
         """Build from the workflow config (sections ``material``, ``fe``, ``mesh``).
 
         ``fe.contact``, when present, turns contact on; its ``chest`` obstacle (the
-        default) is the parametric breast's of ``mesh.geometry``.
+        default) is the parametric breast's of ``mesh.geometry``. ``fe.self_contact``, when
+        present (and not null), turns the skin's self-contact on.
         """
         fe = config.get("fe", {})
         material = config.get("material", {})
@@ -343,6 +347,8 @@ class SolverSettings:
             gravity=_finite("gravity", material.get("gravity", STANDARD_GRAVITY)),
             solver=str(fe.get("solver", "direct")),
             contact=None if contact is None else contact_from_mapping(contact),
+            self_contact=None if fe.get("self_contact") is None
+            else self_contact_from_mapping(fe["self_contact"]),
         )
 
     def describe(self, defaults: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -360,4 +366,5 @@ class SolverSettings:
             "density": self.density,
             "gravity": self.gravity,
             "contact": None if self.contact is None else self.contact.as_mapping(),
+            "self_contact": None if self.self_contact is None else self.self_contact.as_mapping(),
         }

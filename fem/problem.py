@@ -2,11 +2,12 @@
 
 Unknowns: displacement u (and, for Taylor–Hood, pressure p). Total potential
 
-    Π(u, p) = ∫ [C1 (Ī1 - 3) - p (J - 1)] dX - ∫ ρ λ g · u dX  [+ Π_c(u)],
+    Π(u, p) = ∫ [C1 (Ī1 - 3) - p (J - 1)] dX - ∫ ρ λ g · u dX  [+ Π_c(u)] [+ Π_sc(u)],
 
-with λ ∈ [0, 1] the load fraction and Π_c the optional contact penalty
-(:mod:`fem.contact`). The residual is Π's first variation and the
-Jacobian its second, so the discrete tangent is symmetric (used by MUMPS LDLᵀ).
+with λ ∈ [0, 1] the load fraction, Π_c the optional contact penalty with the chest
+(:mod:`fem.contact`) and Π_sc the skin's optional self-contact penalty
+(:mod:`fem.self_contact`, assembled outside UFL by the solver). The residual is Π's first
+variation and the Jacobian its second, so the discrete tangent is symmetric (used by MUMPS LDLᵀ).
 C1 and the body force are ``fem.Constant`` objects: one compiled form serves a
 whole sweep and the load steps within a case.
 """
@@ -23,11 +24,12 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fem.contact import Contact
-from fem.exceptions import MeshError
+from fem.exceptions import InvalidParameterError, MeshError
 from fem.io import boundary_vertex_nodes, node_to_vertex_dof
 from fem.kinematics import deformation_gradient, jacobian
 from fem.material import Incompressible, NeoHookean, Penalty
 from fem.parameters import Discretisation, FixedBoundaries, Gravity, Material
+from fem.self_contact import SelfContact, SelfContactAssembler, SkinSurface
 from meshes.io import boundary_facets, geometry_nodes
 from meshes.tags import Boundary
 
@@ -98,6 +100,8 @@ class GravityProblem:
         fixed: which boundaries are clamped.
         contact: penalty contact of the skin with a rigid obstacle (:mod:`fem.contact`);
             its energy joins the potential on the skin. None: no contact.
+        self_contact: the skin's contact with itself (:mod:`fem.self_contact`; serial
+            only). None: the skin may pass through itself.
     """
 
     def __init__(
@@ -107,6 +111,7 @@ class GravityProblem:
         discretisation: Discretisation = Discretisation(),
         fixed: FixedBoundaries = FixedBoundaries(),
         contact: Contact | None = None,
+        self_contact: SelfContact | None = None,
     ) -> None:
         check_mesh(mesh, facet_tags, fixed)
         self.mesh = mesh
@@ -159,6 +164,11 @@ class GravityProblem:
         self.tangent = fem.form(tangent)
         self._preconditioner: fem.FormMetaClass | None = None
         self.bcs = self._dirichlet_bcs()
+        #: The clamped entries of the state's local array.
+        self.fixed_mask = np.zeros(self.w.x.array.size, dtype=bool)
+        for bc in self.bcs:
+            self.fixed_mask[bc.dof_indices()[0]] = True
+        self.self_contact = self._self_contact_assembler(self_contact)
         self._volume_form = fem.form(fem.Constant(mesh, scalar(1.0)) * dx)
         self._volume = self._measure_volume()
         self._volume_change = fem.form((self.J - 1) * dx)
@@ -190,6 +200,42 @@ class GravityProblem:
             self._contact_nodes = skin[zone]
             self._contact_force = fem.form(contact.pressure(x, u, self.C1) * ds(int(Boundary.SKIN)))
         return ufl.derivative(potential, self.w, self._test)
+
+    def _self_contact_assembler(self, settings: SelfContact | None) -> SelfContactAssembler | None:
+        if settings is None:
+            return None
+        if self.mesh.comm.size > 1:
+            raise InvalidParameterError(
+                "fe.self_contact is serial: its pairs join nodes that a distributed mesh holds "
+                "on different processes; run on one process or set fe.self_contact: null"
+            )
+        facets = boundary_facets(self.facet_tags, [Boundary.SKIN])
+        surface = SkinSurface.from_problem(self.W, self.mixed, self.mesh, facets)
+        return SelfContactAssembler(settings, surface)
+
+    def add_self_contact_residual(self, b: np.ndarray) -> None:
+        """Add the self-contact's residual at the current state to ``b`` (a local array)."""
+        if self.self_contact is not None:
+            self.self_contact.add_residual(b, self.w.x.array, float(self.C1.value))
+
+    def add_self_contact_tangent(self, A: PETSc.Mat) -> None:
+        """Add the self-contact's tangent at the current state to ``A``.
+
+        Call before ``A``'s final assembly; clamped rows and columns are left out.
+        """
+        if self.self_contact is not None:
+            self.self_contact.add_tangent(A, self.w.x.array, float(self.C1.value),
+                                          self.fixed_mask)
+
+    def self_contact_status(self) -> dict[str, Any] | None:
+        """The self-contact's state at the current displacement; None without self-contact.
+
+        The force (N), skin area in contact (cm²), deepest penetration (mm), largest pressure
+        (Pa), pairs and the search's cost (:meth:`SelfContactAssembler.status`).
+        """
+        if self.self_contact is None:
+            return None
+        return self.self_contact.status(self.w.x.array, float(self.C1.value))
 
     def skin_measure(self) -> ufl.Measure:
         """The boundary measure over the facet tags, at the forms' quadrature degree."""
@@ -245,11 +291,14 @@ class GravityProblem:
         """Move the mesh's geometry nodes to ``x`` (the reference configuration of the next solve).
 
         The compiled forms read the coordinates at assembly, so nothing is rebuilt; the
-        reference volume is measured again. The contact zone stays the one found at set-up.
+        reference volume is measured again, and the self-contact's skin rebuilt on the new
+        coordinates. The contact zone stays the one found at set-up.
         """
         self.mesh.geometry.x[:] = x
         self.geometry_version += 1
         self._volume = self._measure_volume()
+        if self.self_contact is not None:
+            self.self_contact = self._self_contact_assembler(self.self_contact.settings)
 
     def _measure_volume(self) -> float:
         """|Ω| of the mesh's current geometry, m³."""

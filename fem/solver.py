@@ -146,8 +146,9 @@ class NewtonSolver:
         #: The first residual of the running solve (PETSc's relative test is against it).
         self._first_norm = 0.0
         comm = problem.mesh.comm
-        self.A = fem_petsc.create_matrix(problem.tangent)
-        self.A.setOption(PETSc.Mat.Option.SYMMETRIC, problem.symmetric)
+        self.A = self._create_matrix(problem.tangent)
+        #: The tangent's own nonzeros (self-contact adds to them as pairs appear).
+        self._nonzeros = self.A.getInfo()["nz_allocated"]
         blr_above = self.options.get("blr_above_dofs")
         #: The kept factorisation is block low-rank (large problems: :data:`BLR_OPTIONS`).
         self.low_rank = bool(self.refactor_above_its) and blr_above is not None \
@@ -156,12 +157,11 @@ class NewtonSolver:
             self.options = {**BLR_OPTIONS, **self.options}
         self.P = None
         if self._fieldsplit:
-            self.P = fem_petsc.create_matrix(problem.preconditioner)
+            self.P = self._create_matrix(problem.preconditioner)
         elif self.refactor_above_its:
             # The factorised copy of the tangent. PCSetUp re-factorises only when this
             # matrix changes, so leaving it untouched keeps the factors.
-            self.P = fem_petsc.create_matrix(problem.tangent)
-            self.P.setOption(PETSc.Mat.Option.SYMMETRIC, problem.symmetric)
+            self.P = self._create_matrix(problem.tangent)
         self.b = fem_petsc.create_vector(problem.residual)
         self.x = problem.w.vector.duplicate()
         self._split, self._u_order = self._split_index_sets() if self._fieldsplit else (None, None)
@@ -187,6 +187,18 @@ class NewtonSolver:
         self.snes.setMonitor(self._monitor)
 
     # -- set-up ---------------------------------------------------------------------------
+    def _create_matrix(self, form: Any) -> PETSc.Mat:
+        """A matrix of ``form``'s sparsity; with self-contact, one that takes new entries.
+
+        Self-contact couples skin nodes that no cell shares, found only as the body deforms:
+        its entries are added where the pairs are, and the pattern grows to hold them.
+        """
+        A = fem_petsc.create_matrix(form)
+        A.setOption(PETSc.Mat.Option.SYMMETRIC, self.problem.symmetric)
+        if self.problem.self_contact is not None:
+            A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        return A
+
     @property
     def linear_path(self) -> str:
         """The linear solver this problem got, in words (recorded in every case's summary)."""
@@ -298,6 +310,9 @@ class NewtonSolver:
                 b, [self.problem.tangent], bcs=[self.problem.bcs], x0=[x], scale=-1.0
             )
         b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        if self.problem.self_contact is not None:
+            with b.localForm() as b_local:
+                self.problem.add_self_contact_residual(b_local.array)
         fem_petsc.set_bc(b, self.problem.bcs, x, -1.0)
         self.timings.residual += time.perf_counter() - start
         self.timings.residual_evaluations += 1
@@ -306,11 +321,13 @@ class NewtonSolver:
         """Assemble the tangent into A and, with a field split, the preconditioner into P."""
         A.zeroEntries()
         fem_petsc.assemble_matrix(A, self.problem.tangent, bcs=self.problem.bcs)
+        self.problem.add_self_contact_tangent(A)
         A.assemble()
         # petsc4py hands callbacks fresh wrappers, so P is never A by identity: ask the flag.
         if self._fieldsplit and P is not None:
             P.zeroEntries()
             fem_petsc.assemble_matrix(P, self.problem.preconditioner, bcs=self.problem.bcs)
+            self.problem.add_self_contact_tangent(P)
             P.assemble()
 
     def _jacobian(self, snes: PETSc.SNES, x: PETSc.Vec, A: PETSc.Mat, P: PETSc.Mat) -> None:
@@ -440,11 +457,16 @@ class NewtonSolver:
 
     def _keep_for_factorisation(self, A: PETSc.Mat) -> None:
         """Copy the fresh tangent into P, so that the next PCSetUp factorises it."""
-        if self.P.isAssembled():
-            A.copy(self.P, PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
-        else:  # the first time: MatCopy needs an assembled target, so assemble it once
+        if not self.P.isAssembled():  # the first time: MatCopy needs an assembled target
             fem_petsc.assemble_matrix(self.P, self.problem.tangent, bcs=self.problem.bcs)
             self.P.assemble()
+            if self.problem.self_contact is None:
+                return  # it is A already
+        # self-contact may have grown A's pattern since the last copy
+        same = A.getInfo()["nz_allocated"] == self.P.getInfo()["nz_allocated"]
+        structure = PETSc.Mat.Structure.SAME_NONZERO_PATTERN if same \
+            else PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN
+        A.copy(self.P, structure)
 
     # -- driver ---------------------------------------------------------------------------------
     def solve(
@@ -540,7 +562,31 @@ class NewtonSolver:
             exact_retry=True,
         )
 
+    def _drop_stale_pattern(self) -> None:
+        """Start a solve on matrices without the self-contact entries of earlier solves.
+
+        The pairs of a failed iterate (a body passed through itself) may couple nodes far
+        apart; kept in the pattern, they would cost every later factorisation fill-in.
+        """
+        if self.problem.self_contact is None or self.A.getInfo()["nz_allocated"] <= self._nonzeros:
+            return
+        stale = (self.A, self.P)
+        self.A = self._create_matrix(self.problem.tangent)
+        if self.P is not None:
+            self.P = self._create_matrix(
+                self.problem.preconditioner if self._fieldsplit else self.problem.tangent
+            )
+        self.snes.setJacobian(self._jacobian, self.A, self.P if self.P is not None else self.A)
+        self._configure_pc(self.snes.getKSP(), self.A)
+        self._reuse_first = self._lagging = False  # nothing is factorised on them yet
+        for matrix in stale:
+            if matrix is not None:
+                matrix.destroy()
+
     def _newton(self) -> SolveResult:
+        self._drop_stale_pattern()
+        if self.problem.self_contact is not None:
+            self.problem.self_contact.begin_solve()
         self.problem.w.vector.copy(self.x)
         self.snes.setConvergenceHistory(reset=True)
         self._stall = False
@@ -582,9 +628,8 @@ class NewtonSolver:
         With ``direct`` the fresh factorisation makes the Krylov solve converge in
         one or two iterations.
         """
-        A = fem_petsc.create_matrix(self.problem.tangent)
-        A.setOption(PETSc.Mat.Option.SYMMETRIC, self.problem.symmetric)
-        P = fem_petsc.create_matrix(self.problem.preconditioner) if self._fieldsplit else None
+        A = self._create_matrix(self.problem.tangent)
+        P = self._create_matrix(self.problem.preconditioner) if self._fieldsplit else None
         ksp = PETSc.KSP().create(self.problem.mesh.comm)
         # Same option prefix as the SNES's own KSP, so every linear-solver option applies.
         ksp.setOptionsPrefix(self.snes.getKSP().getOptionsPrefix())

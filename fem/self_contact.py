@@ -1,0 +1,427 @@
+"""Frictionless self-contact of the skin: the body's own surface may touch but not pass itself.
+
+Where a large, soft mound rolls over the inframammary fold, its underside comes to rest on
+the skin below the fold, and the two sides of a closing crease press together. Both are the
+same skin. Without self-contact the model lets them pass through each other (the cases
+``self_overlap`` flags), or its Newton solve stalls at the crease.
+
+The skin is a triangulation of the displacement's nodes on it (a P2 facet is split into four
+flat triangles through its vertex and edge nodes; other degrees use the facet's vertices).
+Every skin node is a slave, every triangle a master (two-pass node-to-surface). A node and a
+triangle form a pair when, in the *deformed* configuration,
+
+* the node's projection falls on the triangle, or within ``edge_taper`` (in barycentric
+  coordinates) past its edge,
+* the node lies within ``band`` of the triangle's plane,
+* their normals face each other (n_node · n_triangle ≤ −``facing``): a smooth skin never
+  contacts itself, since neighbouring facets face the same way, and
+* the triangle is not in the node's two-ring on the skin (the neighbourhood FEBio's contact
+  potential also excludes);
+
+a node's contact is shared between its candidate triangles by a partition of unity that
+fades out past their edges, so that the force is continuous as the node slides across a seam
+or off the surface's edge. The search is a k-d tree
+(scipy) over the deformed triangles' centroids, redone at every residual and tangent
+evaluation, so the pairs follow the configuration. A pair whose signed distance g is
+negative (the node behind the master's outer side) adds the penalty energy
+
+    Π_sc = Σ_pairs κ/2 w_s ω ⟨−g⟩²,      κ = stiffness · C1,
+
+with w_s the node's tributary reference area and ω the pair's share. Its gradient (the shares
+held fixed) enters the residual and its exact Hessian in g (:mod:`fem.point_triangle`,
+including the master normal's rotation) the tangent, which stays symmetric, so the solver
+keeps MUMPS's LDLᵀ; what the shares' own derivatives would add vanishes on a flat master and
+is small on a smooth one. The penetration at equilibrium is
+about (contact pressure)/κ: at the default stiffness, 1 kPa of contact pressure at C1 = 1 kPa
+lets the skin in by 0.1 mm, as the chest contact (:mod:`fem.contact`).
+
+Serial only: the pairs couple nodes that no cell shares, which a distributed mesh would hold
+on different processes.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy import sparse
+from scipy.spatial import cKDTree
+
+from fem.exceptions import InvalidParameterError
+from fem.point_triangle import barycentric, signed_distance_derivatives
+
+log = logging.getLogger(__name__)
+
+__all__ = ["SelfContact", "SelfContactState", "SkinSurface", "self_contact_from_mapping"]
+
+
+@dataclass(frozen=True, slots=True)
+class SelfContact:
+    """Settings of the skin's self-contact (``fe.self_contact``).
+
+    Attributes:
+        stiffness: penalty κ as a multiple of C1, per metre (κ = stiffness · C1, Pa/m), as
+            :class:`fem.contact.Contact`'s: the penetration scales like the sag, 1/C1.
+        offset: the distance (m) at which facing skin starts to push back: the penalty acts
+            on ⟨offset − g⟩, so the skin stays intersection-free while the contact pressure
+            is below κ · offset (at the defaults, 5 kPa at C1 = 1 kPa); the gap it leaves
+            at lighter contact is at most this.
+        band: how far (m) a node may lie behind a facing triangle and still be pushed out of
+            it; beyond it the triangle is another part of the body. Larger than any
+            penetration an iterate reaches, smaller than the tissue's thickness at the fold.
+        facing: the cosine by which a node's and a triangle's normals must face each other
+            (0.5: more than 120° apart).
+        edge_taper: over how much of a triangle's barycentric coordinate, past its edge, a
+            node's share in it fades out (so that the force is continuous across seams and
+            at the surface's edge).
+    """
+
+    stiffness: float = 1.0e4
+    offset: float = 5.0e-4
+    band: float = 0.01
+    facing: float = 0.5
+    edge_taper: float = 0.1
+
+    def __post_init__(self) -> None:
+        checks = {
+            "stiffness": (self.stiffness, 0.0, math.inf),
+            "offset": (self.offset, -1e-300, 0.01),
+            "band": (self.band, 0.0, 1.0),
+            "facing": (self.facing, -1.0, 1.0),
+            "edge_taper": (self.edge_taper, 0.0, 1.0),
+        }
+        for name, (value, low, high) in checks.items():
+            if not (isinstance(value, (int, float)) and math.isfinite(value)
+                    and low < value <= high):
+                raise InvalidParameterError(
+                    f"fe.self_contact.{name} must be a number in ({low:g}, {high:g}], got {value!r}"
+                )
+
+    def as_mapping(self) -> dict[str, float]:
+        """The ``fe.self_contact`` config entry (JSON-friendly)."""
+        return {"stiffness": self.stiffness, "offset": self.offset, "band": self.band,
+                "facing": self.facing, "edge_taper": self.edge_taper}
+
+
+def self_contact_from_mapping(values: dict[str, Any]) -> SelfContact:
+    """A :class:`SelfContact` from the ``fe.self_contact`` mapping, naming unknown keys."""
+    if not isinstance(values, dict):
+        raise InvalidParameterError(f"fe.self_contact must be a mapping, got {values!r}")
+    known = set(SelfContact.__slots__)
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise InvalidParameterError(
+            f"unknown fe.self_contact parameter(s): {', '.join(unknown)}; "
+            f"known: {', '.join(sorted(known))}"
+        )
+    try:
+        numbers = {k: float(v) for k, v in values.items()}
+    except (TypeError, ValueError):
+        raise InvalidParameterError(f"fe.self_contact values must be numbers, got {values}") \
+            from None
+    return SelfContact(**numbers)
+
+
+# Edges of the reference tetrahedron (dolfinx / basix numbering) and, per facet (opposite
+# vertex i), its vertices in order.
+_TET_EDGES = ((2, 3), (1, 3), (1, 2), (0, 3), (0, 2), (0, 1))
+_FACET_VERTICES = ((1, 2, 3), (0, 2, 3), (0, 1, 3), (0, 1, 2))
+
+
+@dataclass
+class SkinSurface:
+    """The skin as triangles of displacement nodes, and where each node's values live.
+
+    Attributes:
+        X: reference coordinates of the nodes (n, 3).
+        dofs: the state's local entries of each node's three displacement components (n, 3).
+        triangles: node indices of each triangle (t, 3), outward by the right-hand rule.
+        weights: each node's tributary reference area (n,), m².
+        excluded: for each node, the triangles it never pairs with (its two-ring), as a
+            sorted array of ``node * t + triangle`` codes.
+    """
+
+    X: np.ndarray
+    dofs: np.ndarray
+    triangles: np.ndarray
+    weights: np.ndarray
+    excluded: np.ndarray
+
+    @classmethod
+    def from_problem(cls, W: Any, mixed: bool, mesh: Any, facets: np.ndarray) -> SkinSurface:
+        """The surface of the given skin ``facets`` in the state's space ``W``."""
+        D = W.sub(0) if mixed else W
+        spaces = [D.sub(c).collapse() for c in range(3)]
+        V0 = spaces[0][0]
+        coords = V0.tabulate_dof_coordinates()
+        for Vc, _ in spaces[1:]:
+            if not np.array_equal(Vc.tabulate_dof_coordinates(), coords):
+                raise RuntimeError("the displacement's components are numbered differently")
+        to_state = np.column_stack([np.asarray(m, dtype=np.int64) for _, m in spaces])
+
+        tdim = mesh.topology.dim
+        mesh.topology.create_connectivity(tdim - 1, tdim)
+        mesh.topology.create_connectivity(tdim, tdim - 1)
+        f2c = mesh.topology.connectivity(tdim - 1, tdim)
+        c2f = mesh.topology.connectivity(tdim, tdim - 1)
+        layout = V0.dofmap.dof_layout
+        cell_dofs = V0.dofmap.list.array.reshape(-1, layout.num_dofs)
+        vertex_dof = [layout.entity_dofs(0, v)[0] for v in range(4)]
+        edge_dof = {frozenset(e): layout.entity_dofs(1, k) for k, e in enumerate(_TET_EDGES)}
+        quadratic = all(len(d) == 1 for d in edge_dof.values())
+
+        triangles = []
+        for f in np.asarray(facets, dtype=np.int64):
+            cell = f2c.links(f)[0]
+            local = int(np.flatnonzero(c2f.links(cell) == f)[0])
+            dofs = cell_dofs[cell]
+            a, b, c = _FACET_VERTICES[local]
+            # outward: away from the cell's vertex opposite the facet
+            va, vb, vc, vo = (coords[dofs[vertex_dof[i]]] for i in (a, b, c, local))
+            if np.dot(np.cross(vb - va, vc - va), vo - va) > 0:
+                b, c = c, b
+            v = [dofs[vertex_dof[i]] for i in (a, b, c)]
+            if not quadratic:
+                triangles.append(v)
+                continue
+            ab, bc, ca = (dofs[edge_dof[frozenset(e)][0]] for e in ((a, b), (b, c), (c, a)))
+            triangles += [[v[0], ab, ca], [ab, v[1], bc], [ca, bc, v[2]], [ab, bc, ca]]
+        tri = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+        nodes, tri = np.unique(tri, return_inverse=True)
+        tri = tri.reshape(-1, 3)
+        X = coords[nodes]
+        area = 0.5 * np.linalg.norm(np.cross(X[tri[:, 1]] - X[tri[:, 0]],
+                                             X[tri[:, 2]] - X[tri[:, 0]]), axis=1)
+        weights = np.bincount(tri.ravel(), np.repeat(area / 3.0, 3), minlength=len(nodes))
+        return cls(X, to_state[nodes], tri, weights, _two_ring(tri, len(nodes)))
+
+
+def _smoothstep(s: np.ndarray) -> np.ndarray:
+    """0 below 0, 1 above 1, and 3s² − 2s³ (C¹) between."""
+    s = np.clip(s, 0.0, 1.0)
+    return s * s * (3.0 - 2.0 * s)
+
+
+def _two_ring(triangles: np.ndarray, n_nodes: int) -> np.ndarray:
+    """Codes ``node * t + triangle`` of the triangles within each node's two-ring."""
+    t = len(triangles)
+    incidence = sparse.csr_matrix(
+        (np.ones(triangles.size), (triangles.ravel(), np.repeat(np.arange(t), 3))),
+        shape=(n_nodes, t),
+    )
+    ring = incidence.tocoo()  # the triangles of which the node is a corner
+    return np.unique(ring.row.astype(np.int64) * t + ring.col)
+
+
+@dataclass
+class SelfContactState:
+    """The active pairs at one configuration and what they add.
+
+    Attributes:
+        slaves, masters: node and triangle of each pair in contact (g < 0).
+        share: the pair's part of its node's contact (a partition of unity over the
+            triangles the node projects onto, fading out past their edges).
+        gap: each pair's signed distance less the offset (m, negative).
+        grad, hess: its first and second derivatives with respect to the pair's 12
+            coordinates (:func:`fem.point_triangle.signed_distance_derivatives`).
+        search_s: seconds the search and the kernel took.
+        candidates: facing node–triangle pairs the search found near each other.
+    """
+
+    slaves: np.ndarray
+    masters: np.ndarray
+    share: np.ndarray
+    gap: np.ndarray
+    grad: np.ndarray
+    hess: np.ndarray
+    search_s: float = 0.0
+    candidates: int = 0
+
+
+@dataclass
+class SelfContactAssembler:
+    """Adds the self-contact penalty to a problem's residual and tangent.
+
+    Args:
+        settings: the self-contact settings.
+        surface: the skin as triangles of displacement nodes.
+    """
+
+    settings: SelfContact
+    surface: SkinSurface
+    #: Accumulated seconds of search, kernel and assembly (the per-case cost).
+    seconds: float = 0.0
+    evaluations: int = 0
+    _last: SelfContactState | None = field(default=None, repr=False)
+    _last_x: np.ndarray | None = field(default=None, repr=False)
+    _held_codes: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64),
+                                    repr=False)
+    _held_shares: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
+
+    def positions(self, state: np.ndarray) -> np.ndarray:
+        """Deformed node positions for the state's local array."""
+        return self.surface.X + state[self.surface.dofs]
+
+    def pairs(self, state: np.ndarray) -> SelfContactState:
+        """Search the deformed skin for nodes behind a facing triangle; the active pairs."""
+        s, surf = self.settings, self.surface
+        x = self.positions(state)
+        if self._last is not None and np.array_equal(x, self._last_x):
+            return self._last  # the tangent at the residual's state
+        start = time.perf_counter()
+        tri = surf.triangles
+        corners = x[tri]  # (t, 3, 3)
+        normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        length = np.linalg.norm(normal, axis=1)
+        normal = normal / np.where(length > 0, length, 1.0)[:, None]
+        centroid = corners.mean(axis=1)
+        radius = np.linalg.norm(corners - centroid[:, None], axis=2).max()
+        weighted = np.repeat(normal * length[:, None], 3, axis=0)  # area-weighted, per corner
+        node_normal = np.column_stack([
+            np.bincount(tri.ravel(), weighted[:, k], minlength=len(x)) for k in range(3)
+        ])
+        node_normal /= np.maximum(np.linalg.norm(node_normal, axis=1), 1e-300)[:, None]
+
+        found = cKDTree(x).sparse_distance_matrix(
+            cKDTree(centroid), radius + s.band, output_type="ndarray"
+        )
+        node, triangle = found["i"].astype(np.int64), found["j"].astype(np.int64)
+        facing = -np.einsum("ij,ij->i", node_normal[node], normal[triangle])
+        keep = facing > s.facing
+        node, triangle, facing = node[keep], triangle[keep], facing[keep]
+        code = node * len(tri) + triangle
+        pos = np.searchsorted(surf.excluded, code)
+        pos = np.minimum(pos, len(surf.excluded) - 1)
+        keep = surf.excluded[pos] != code if len(surf.excluded) else np.ones(len(code), bool)
+        node, triangle, facing = node[keep], triangle[keep], facing[keep]
+        candidates = len(node)
+        xa, xb, xc = (corners[triangle, k] for k in range(3))
+        xs = x[node]
+        gap = np.einsum("ij,ij->i", normal[triangle], xs - xa)
+        beta = barycentric(xs, xa, xb, xc).min(axis=1)
+        near = (beta > -s.edge_taper) & (np.abs(gap) <= s.band)
+        node, triangle, gap, beta, facing = (a[near] for a in (node, triangle, gap, beta, facing))
+        # A node's candidates share it by a partition of unity over the triangles its
+        # projection falls on, fading out over edge_taper past a triangle's edge and as the
+        # normals turn from facing each other to the facing limit: the force is continuous
+        # as the node slides across a seam or off the edge of the surface, and as the skin
+        # turns.
+        share = _smoothstep(1.0 + beta / s.edge_taper) \
+            * _smoothstep((facing - s.facing) / (0.5 * (1.0 - s.facing)))
+        total = np.bincount(node, share, minlength=len(x))
+        share = share / np.maximum(total[node], 1.0)
+        active = gap < s.offset
+        node, triangle, share = node[active], triangle[active], self._hold(
+            node[active] * len(tri) + triangle[active], share[active]
+        )
+        g, grad, hess = signed_distance_derivatives(
+            x[node], *(x[tri[triangle, k]] for k in range(3))
+        )
+        g = g - s.offset
+        result = SelfContactState(node, triangle, share, g, grad, hess, candidates=candidates)
+        result.search_s = time.perf_counter() - start
+        self.seconds += result.search_s
+        self.evaluations += 1
+        self._last, self._last_x = result, x
+        return result
+
+    def begin_solve(self) -> None:
+        """Forget the held shares: a new Newton solve (load increment) starts."""
+        self._last = self._last_x = None
+        self._held_codes = np.zeros(0, dtype=np.int64)
+        self._held_shares = np.zeros(0)
+
+    def _hold(self, codes: np.ndarray, shares: np.ndarray) -> np.ndarray:
+        """The shares of these pairs as first seen in the running solve.
+
+        A share depends on the skin's normals around the node, whose derivatives the tangent
+        leaves out; held fixed through a Newton solve, the residual is the derivative of an
+        energy whose Hessian the tangent is, and Newton converges quadratically once the
+        pairs settle. Each load increment starts afresh, so the shares follow the load path.
+        """
+        pos = np.minimum(np.searchsorted(self._held_codes, codes), len(self._held_codes) - 1)
+        known = (self._held_codes[pos] == codes) if len(self._held_codes) else \
+            np.zeros(len(codes), dtype=bool)
+        shares = shares.copy()
+        shares[known] = self._held_shares[pos[known]]
+        if not np.all(known):
+            merged = np.concatenate([self._held_codes, codes[~known]])
+            order = np.argsort(merged, kind="stable")
+            self._held_codes = merged[order]
+            self._held_shares = np.concatenate([self._held_shares, shares[~known]])[order]
+        return shares
+
+    def _pair_dofs(self, state: SelfContactState) -> np.ndarray:
+        """The 12 state entries of each pair: slave's, then the triangle's three nodes'."""
+        surf = self.surface
+        nodes = np.column_stack([state.slaves, surf.triangles[state.masters]])  # (p, 4)
+        return surf.dofs[nodes].reshape(len(nodes), 12)
+
+    def _scale(self, state: SelfContactState, C1: float) -> np.ndarray:
+        """κ w_s for each pair."""
+        return self.settings.stiffness * C1 * self.surface.weights[state.slaves] * state.share
+
+    def add_residual(self, b: np.ndarray, state_array: np.ndarray, C1: float) -> None:
+        """Add ∂Π_sc/∂u at the state to the residual's local array ``b``."""
+        state = self.pairs(state_array)
+        if not len(state.slaves):
+            return
+        start = time.perf_counter()
+        force = (self._scale(state, C1) * state.gap)[:, None] * state.grad  # κ w g ∇g
+        b += np.bincount(self._pair_dofs(state).ravel(), force.ravel(), minlength=len(b))
+        self.seconds += time.perf_counter() - start
+
+    def add_tangent(self, A: Any, state_array: np.ndarray, C1: float, fixed: np.ndarray) -> None:
+        """Add ∂²Π_sc/∂u² at the state to the matrix ``A`` before its final assembly.
+
+        Clamped rows and columns (``fixed``: a boolean mask of the state's local entries) are
+        left out, so that they stay the identity's.
+        """
+        from petsc4py import PETSc
+
+        state = self.pairs(state_array)
+        if not len(state.slaves):
+            return
+        start = time.perf_counter()
+        scale = self._scale(state, C1)
+        blocks = scale[:, None, None] * (
+            state.grad[:, :, None] * state.grad[:, None, :] + state.gap[:, None, None] * state.hess
+        )
+        dofs = self._pair_dofs(state)
+        free = ~fixed[dofs]
+        keep = free[:, :, None] & free[:, None, :]
+        rows = np.broadcast_to(dofs[:, :, None], blocks.shape)[keep]
+        cols = np.broadcast_to(dofs[:, None, :], blocks.shape)[keep]
+        n = A.getLocalSize()[0]
+        csr = sparse.coo_matrix((blocks[keep], (rows, cols)), shape=(n, n)).tocsr()
+        csr.sum_duplicates()
+        counts = np.diff(csr.indptr)
+        touched = np.flatnonzero(counts)  # only the rows the pairs reach
+        indptr = np.concatenate([[0], np.cumsum(counts[touched])])
+        A.assemblyBegin(PETSc.Mat.AssemblyType.FLUSH)  # the diagonal was inserted before
+        A.assemblyEnd(PETSc.Mat.AssemblyType.FLUSH)
+        A.setValuesIJV(indptr.astype(PETSc.IntType), csr.indices.astype(PETSc.IntType),
+                       csr.data, addv=PETSc.InsertMode.ADD_VALUES,
+                       rowmap=touched.astype(PETSc.IntType))
+        self.seconds += time.perf_counter() - start
+
+    def status(self, state_array: np.ndarray, C1: float) -> dict[str, Any]:
+        """Force (N), skin area in contact (cm²), deepest penetration (mm), pairs, search cost."""
+        state = self.pairs(state_array)
+        pressure = -self.settings.stiffness * C1 * state.gap
+        weights = self.surface.weights[state.slaves] * state.share
+        penetration = -(state.gap + self.settings.offset)
+        return {
+            "force_N": float(np.sum(pressure * weights)),
+            "area_cm2": 1e4 * float(np.sum(weights)),
+            "max_penetration_mm": 1e3 * float(max(penetration.max(initial=0.0), 0.0)),
+            "max_pressure_Pa": float(pressure.max(initial=0.0)),
+            "pairs": int(len(state.slaves)),
+            "skin_nodes": int(len(self.surface.X)),
+            "search_s": self.seconds,
+            "evaluations": self.evaluations,
+        }

@@ -1,0 +1,244 @@
+"""Self-contact of the skin (fem.self_contact, fem.point_triangle).
+
+* the point–triangle kernel's gradient and Hessian are those of its signed distance
+  (central differences);
+* two blocks of one mesh, the upper one held only sideways, stand on each other: the
+  contact carries the upper block's whole weight (its equilibrium, to the solver's
+  tolerance) and the skin stays apart by no more than the offset;
+* a C-shaped block whose upper arm falls onto the lower one under gravity: without
+  self-contact it passes through itself; with it, it converges with no boundary vertex
+  inside another cell;
+* where nothing touches (the breast prone), self-contact changes nothing;
+* bad settings are refused by name.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import ufl
+from dolfinx import mesh as dmesh
+from mpi4py import MPI
+
+from fem.exceptions import InvalidParameterError
+from fem.loading import solve_incrementally
+from fem.overlap import self_overlap
+from fem.parameters import (
+    TISSUE_DENSITY,
+    Discretisation,
+    FixedBoundaries,
+    Gravity,
+    Loading,
+    Material,
+    SolverSettings,
+)
+from fem.point_triangle import barycentric, signed_distance, signed_distance_derivatives
+from fem.problem import GravityProblem
+from fem.self_contact import SelfContact, self_contact_from_mapping
+from fem.solver import NewtonSolver
+from meshes.io import geometry_nodes
+from meshes.tags import Boundary
+
+TIGHT = {"snes_rtol": 1e-12, "snes_atol": 1e-11, "load_atol": 0.0}
+
+
+def _split(q: np.ndarray) -> tuple[np.ndarray, ...]:
+    return q[:, 0:3], q[:, 3:6], q[:, 6:9], q[:, 9:12]
+
+
+@pytest.mark.unit
+def test_the_kernel_derivatives_are_those_of_the_signed_distance() -> None:
+    rng = np.random.default_rng(3)
+    q = rng.normal(size=(20, 12))
+    g, grad, hess = signed_distance_derivatives(*_split(q))
+    assert g == pytest.approx(signed_distance(*_split(q)), abs=1e-14)
+    h, eye = 1e-6, np.eye(12)
+    numeric = np.stack([
+        (signed_distance(*_split(q + h * eye[k])) - signed_distance(*_split(q - h * eye[k])))
+        / (2 * h) for k in range(12)
+    ], axis=1)
+    assert np.abs(grad - numeric).max() < 1e-8
+    numeric_hess = np.stack([
+        (signed_distance_derivatives(*_split(q + h * eye[k]))[1]
+         - signed_distance_derivatives(*_split(q - h * eye[k]))[1]) / (2 * h)
+        for k in range(12)
+    ], axis=2)
+    assert np.abs(hess - numeric_hess).max() < 1e-7 * np.abs(hess).max()
+    assert np.array_equal(hess, np.transpose(hess, (0, 2, 1)))
+
+
+@pytest.mark.unit
+def test_the_kernel_on_a_unit_triangle() -> None:
+    tri = [np.array([[0.0, 0.0, 0.0]]), np.array([[1.0, 0.0, 0.0]]), np.array([[0.0, 1.0, 0.0]])]
+    point = np.array([[0.25, 0.25, -0.1]])
+    assert signed_distance(point, *tri) == pytest.approx([-0.1])  # behind the +z normal
+    assert barycentric(point, *tri)[0] == pytest.approx([0.5, 0.25, 0.25])
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize(
+    ("values", "words"),
+    [
+        ({"stiffnes": 1.0}, "unknown fe.self_contact parameter(s): stiffnes"),
+        ({"stiffness": -1.0}, "fe.self_contact.stiffness"),
+        ({"band": float("nan")}, "fe.self_contact.band"),
+        ({"facing": 2.0}, "fe.self_contact.facing"),
+        ({"offset": "a"}, "must be numbers"),
+        ([1, 2], "must be a mapping"),
+    ],
+)
+def test_bad_self_contact_settings_are_refused_by_name(values: object, words: str) -> None:
+    with pytest.raises(InvalidParameterError, match=words.replace("(", r"\(").replace(")", r"\)")):
+        self_contact_from_mapping(values)  # type: ignore[arg-type]
+
+
+@pytest.mark.unit
+def test_the_config_turns_self_contact_on_and_records_it() -> None:
+    on = SolverSettings.from_config({"fe": {"self_contact": {"offset": 0.001}}})
+    assert on.self_contact == SelfContact(offset=0.001)
+    assert on.describe()["self_contact"]["offset"] == 0.001
+    for fe in ({}, {"self_contact": None}):
+        assert SolverSettings.from_config({"fe": fe}).self_contact is None
+
+
+def _mesh_of(cells: np.ndarray, x: np.ndarray, tag: dict[int, object]) -> tuple:
+    """A serial mesh of straight tetrahedra with its exterior facets tagged.
+
+    Skin, except where a ``tag`` value's predicate (of the facet's midpoint) holds.
+    """
+    used, cells = np.unique(cells, return_inverse=True)
+    domain = ufl.Mesh(ufl.VectorElement("Lagrange", "tetrahedron", 1))
+    mesh = dmesh.create_mesh(MPI.COMM_WORLD, cells.reshape(-1, 4).astype(np.int64), x[used],
+                             domain)
+    mesh.topology.create_connectivity(2, 3)
+    exterior = dmesh.exterior_facet_indices(mesh.topology)
+    values = np.full(len(exterior), int(Boundary.SKIN), dtype=np.int32)
+    for value, where in tag.items():
+        values[np.isin(exterior, dmesh.locate_entities_boundary(mesh, 2, where))] = value
+    return mesh, dmesh.meshtags(mesh, 2, exterior, values)
+
+
+def _box(side: float, n: int) -> tuple[np.ndarray, np.ndarray]:
+    box = dmesh.create_box(MPI.COMM_SELF, [np.zeros(3), np.full(3, side)], [n, n, n],
+                           dmesh.CellType.tetrahedron)
+    return geometry_nodes(box).astype(np.int64), box.geometry.x.copy()
+
+
+def stacked_blocks(side: float) -> tuple:
+    """Two cubes of one mesh touching along x = side, not sharing nodes (3 and 4 cells a side).
+
+    Gravity along +x presses the upper (x < side) on the lower; the lower's far face is the
+    rib, the upper's far face (sternal) is held in y and z only.
+    """
+    upper, xu = _box(side, 3)
+    lower, xl = _box(side, 4)
+    x = np.vstack([xu, xl + [side, 0.0, 0.0]])
+    cells = np.vstack([upper, lower + len(xu)])
+    return _mesh_of(cells, x, {
+        int(Boundary.STERNAL): lambda p: np.isclose(p[0], 0.0),
+        int(Boundary.RIB): lambda p: np.isclose(p[0], 2 * side),
+    })
+
+
+def c_block(side: float, n: int) -> tuple:
+    """A cube of n cells a side with a slot one cell wide (x from 2h to 3h, above z = 2h).
+
+    An upper arm (x < 2h, one cell shorter than the lower) on a spine (z < 2h) over the
+    lower arm, whose far face x = side is the rib. Gravity along +x closes the slot.
+    """
+    cells, x = _box(side, n)
+    h = side / n
+    c = x[cells].mean(axis=1)
+    slot = (c[:, 0] > 2 * h) & (c[:, 0] < 3 * h) & (c[:, 2] > 2 * h)
+    short = (c[:, 0] < 2 * h) & (c[:, 2] > side - h)
+    return _mesh_of(cells[~(slot | short)], x,
+                    {int(Boundary.RIB): lambda p: np.isclose(p[0], side)})
+
+
+@pytest.mark.solve
+def test_stacked_blocks_carry_the_upper_weight_by_self_contact() -> None:
+    side, C1 = 0.05, 1000.0
+    mesh, tags = stacked_blocks(side)
+    settings = SelfContact()
+    problem = GravityProblem(mesh, tags, Discretisation(),
+                             FixedBoundaries({"rib": (0, 1, 2), "sternal": (1, 2)}), None, settings)
+    solver = NewtonSolver(problem, TIGHT)
+    problem.set_case(Material(C1=C1), Gravity(phi=0.0))
+    result = solve_incrementally(problem, solver, Loading())
+    assert result.converged, result.reason
+
+    # The upper block's equilibrium in x: its weight against the contact forces on its nodes
+    # (the held face takes no x force), which the residual's contact part holds.
+    b = np.zeros_like(problem.w.x.array)
+    problem.add_self_contact_residual(b)
+    surface = problem.self_contact.surface
+    # the upper block's nodes: behind its contact face (x < side), or on it (normal +x)
+    tri = surface.triangles
+    normal = np.cross(surface.X[tri[:, 1]] - surface.X[tri[:, 0]],
+                      surface.X[tri[:, 2]] - surface.X[tri[:, 0]])
+    on_face = np.zeros(len(surface.X))
+    np.add.at(on_face, tri.ravel(), np.repeat(normal[:, 0], 3))
+    upper = (surface.X[:, 0] < side - 1e-9) | (on_face > 0)
+    weight = TISSUE_DENSITY * 9.81 * side**3
+    contact_force_x = -b[surface.dofs[upper, 0]].sum()  # the residual holds −force
+    assert contact_force_x == pytest.approx(-weight, rel=1e-8)
+
+    status = problem.self_contact_status()
+    # the pairs press along x: their summed force is the weight, to the tilt of the bulge
+    assert status["force_N"] == pytest.approx(weight, rel=2e-3)
+    assert status["area_cm2"] > 0.5 * 1e4 * side**2
+    # the pressure (about the weight over the area, ~441 Pa) stays below κ · offset: no
+    # penetration, and the gap it leaves is at most the offset
+    assert status["max_pressure_Pa"] < settings.stiffness * C1 * settings.offset
+    assert status["max_penetration_mm"] == 0.0
+    u = problem.displacement()
+    assert self_overlap(mesh, u)["overlapping_vertices"] == 0
+    solver.destroy()
+
+
+@pytest.mark.solve
+def test_a_closing_crease_converges_without_passing_through_itself() -> None:
+    side, C1 = 0.05, 500.0
+    outcomes = {}
+    for name, settings in (("free", None), ("self-contact", SelfContact())):
+        mesh, tags = c_block(side, 4)
+        problem = GravityProblem(mesh, tags, Discretisation(), FixedBoundaries(), None, settings)
+        solver = NewtonSolver(problem)
+        problem.set_case(Material(C1=C1), Gravity(phi=0.0))
+        result = solve_incrementally(problem, solver, Loading())
+        u = problem.displacement()
+        outcomes[name] = (result.converged, self_overlap(mesh, u)["overlapping_vertices"],
+                          problem.self_contact_status())
+        solver.destroy()
+    # without self-contact the upper arm swings into the lower one (where its solve stops)
+    assert outcomes["free"][1] > 5
+    converged, overlapping, status = outcomes["self-contact"]
+    assert converged and overlapping == 0
+    assert status["force_N"] > 0 and status["max_penetration_mm"] == 0.0
+
+
+@pytest.mark.solve
+def test_self_contact_changes_nothing_where_nothing_touches(coarse_mesh: Path,
+                                                             tmp_path: Path) -> None:
+    """Prone, the breast hangs away from the chest: the same solution with self-contact."""
+    import h5py
+
+    from fem.case import run_case
+    from fem.sweep import Case
+
+    case = Case(2.0, 180.0)
+    summaries = {
+        name: run_case(coarse_mesh, case, tmp_path / name,
+                       SolverSettings(petsc_options=TIGHT, self_contact=sc))
+        for name, sc in (("on", SelfContact()), ("off", None))
+    }
+    assert summaries["on"]["status"] == summaries["off"]["status"] == "converged"
+    status = summaries["on"]["self_contact"]
+    assert status["pairs"] == 0 and status["force_N"] == 0 and status["skin_nodes"] > 500
+    assert summaries["off"]["self_contact"] is None
+    assert summaries["on"]["settings"]["self_contact"] == SelfContact().as_mapping()
+    u = {name: h5py.File(tmp_path / name / "points.h5")["u"][...] for name in summaries}
+    assert np.abs(u["off"]).max() > 5e-3
+    assert np.max(np.abs(u["on"] - u["off"])) <= 1e-9 * np.abs(u["off"]).max()
