@@ -415,9 +415,10 @@ def build_dataset(
         config: the config sections to record as provenance.
         test_cases: (C1, Φ, θ) of setups the by-case split always holds out as test
             (the clinical cases: a by-case model is then judged on setups it never saw);
-            the other converged cases are partitioned by ``split``. The by-direction and
-            by-C1 splits partition whole directions and whole C1 values by the same
-            fractions (:func:`group_partition`).
+            the other converged cases are partitioned by ``split``. A converged case that
+            passes through itself (``self_overlap``) is in no split: no surrogate learns it.
+            The by-direction and by-C1 splits partition whole directions and whole C1 values
+            by the same fractions (:func:`group_partition`).
         mesh: the cases' mesh (XDMF): its tetrahedra are written as ``/points/cells``.
         fields_paths: each case's ``fields.h5``, in the same order: on a quadratic mesh, the
             fields at every node are written as ``/nodes`` (:func:`gather_nodes`).
@@ -453,8 +454,17 @@ def build_dataset(
             displacement[i] = points["u"]
 
     converged = np.array([s["status"] == "converged" for s in summaries])
+    # A converged state that passes through itself is no breast's: the splits (the data the
+    # surrogate learns from and is judged on) leave it out; /cases/self_overlap names it.
+    through = np.array([((s.get("self_overlap") or {}).get("overlapping_vertices") or 0) > 0
+                        for s in summaries])
+    if np.any(converged & through):
+        log.warning("dataset: %d converged case(s) pass through themselves and are left out of "
+                    "the splits: %s", int(np.sum(converged & through)),
+                    ", ".join(s["case"] for s, t in zip(summaries, converged & through,
+                                                         strict=True) if t))
     rng = np.random.default_rng(seed)
-    good_cases = np.flatnonzero(converged)
+    good_cases = np.flatnonzero(converged & ~through)
     samples = (good_cases[:, None] * n_points + np.arange(n_points)[None, :]).ravel()
     by_sample = {k: samples[v] for k, v in split.partition(len(samples), rng).items()}
     keys = [(float(s["C1"]), float(s["phi"]), float(s.get("theta", 0.0))) for s in summaries]

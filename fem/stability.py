@@ -12,7 +12,9 @@ negative eigenvalue per pressure unknown (when B has full rank, which the inf-su
 element gives). So the state is stable exactly when K has as many negative eigenvalues as
 there are pressure unknowns; each one more is an unstable mode of the body. For the P1
 penalty element (no pressure field) K must be positive definite. Dirichlet rows (a unit
-diagonal) and the contact penalty's curvature are positive and change nothing of this count.
+diagonal) and the chest contact penalty's curvature are positive and change nothing of this
+count; the skin's self-contact (whose curvature includes the turning of the master's normal)
+is added to the tangent as the solver adds it.
 
 :func:`tangent_inertia` counts them from the MUMPS LDLᵀ factorisation of the assembled tangent
 at the problem's current state (one assembly and factorisation, as much as one exact Newton
@@ -92,8 +94,14 @@ class InertiaCounter:
         # the form and the conditions, not the problem: the counters of tangent_inertia are
         # dropped with their problems
         self.tangent, self.bcs = problem.tangent, problem.bcs
+        #: the skin's self-contact adds to the tangent outside the form (a weak reference)
+        self._self_contact = None
+        if getattr(problem, "self_contact", None) is not None:
+            self._self_contact = weakref.WeakMethod(problem.add_self_contact_tangent)
         self.A = fem_petsc.create_matrix(problem.tangent)
         self.A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+        if self._self_contact is not None:
+            self.A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
         self.ksp = PETSc.KSP().create(problem.mesh.comm)
         self.ksp.setOperators(self.A)
         self.ksp.setType("preonly")
@@ -115,6 +123,9 @@ class InertiaCounter:
 
         self.A.zeroEntries()
         fem_petsc.assemble_matrix(self.A, self.tangent, bcs=self.bcs)
+        add_self_contact = self._self_contact() if self._self_contact is not None else None
+        if add_self_contact is not None:
+            add_self_contact(self.A)
         self.A.assemble()
         pc = self.ksp.getPC()
         pc.setUp()  # the matrix changed: a numeric factorisation (KSPSetUp runs it only once)
