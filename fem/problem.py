@@ -309,6 +309,8 @@ class GravityProblem:
         """Set C1 and the (full) gravity load of a case; the load fraction starts at 0."""
         self.C1.value = material.C1
         self.density = material.density
+        if self.self_contact is not None:
+            self.self_contact.reset_counters()
         self.gravity = gravity.vector
         self.set_load_fraction(0.0)
 

@@ -200,6 +200,18 @@ class SkinSurface:
         return cls(X, to_state[nodes], tri, weights, _two_ring(tri, len(nodes)))
 
 
+#: How much farther apart (m) than a touching pair the search's pairs may be, and how much
+#: less than ``facing`` their normals may face each other: what the kept candidate list
+#: allows the skin to move and turn before it is searched again.
+_MARGIN = 0.004
+_SLACK = 0.3
+
+
+def _largest_turn(now: np.ndarray, before: np.ndarray) -> float:
+    """The largest change |n − n₀| of unit normals (rows)."""
+    return float(np.sqrt(np.max(np.sum((now - before) ** 2, axis=1), initial=0.0)))
+
+
 def _smoothstep(s: np.ndarray) -> np.ndarray:
     """0 below 0, 1 above 1, and 3s² − 2s³ (C¹) between."""
     s = np.clip(s, 0.0, 1.0)
@@ -258,6 +270,10 @@ class SelfContactAssembler:
     evaluations: int = 0
     _last: SelfContactState | None = field(default=None, repr=False)
     _last_x: np.ndarray | None = field(default=None, repr=False)
+    _verlet: dict[str, Any] | None = field(default=None, repr=False)
+    #: Full k-d tree searches, and their seconds (part of :attr:`seconds`).
+    searches: int = 0
+    search_seconds: float = 0.0
     _held_codes: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64),
                                     repr=False)
     _held_shares: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
@@ -286,17 +302,9 @@ class SelfContactAssembler:
         ])
         node_normal /= np.maximum(np.linalg.norm(node_normal, axis=1), 1e-300)[:, None]
 
-        found = cKDTree(x).sparse_distance_matrix(
-            cKDTree(centroid), radius + s.band, output_type="ndarray"
-        )
-        node, triangle = found["i"].astype(np.int64), found["j"].astype(np.int64)
+        node, triangle = self._candidates(x, node_normal, normal, radius)
         facing = -np.einsum("ij,ij->i", node_normal[node], normal[triangle])
         keep = facing > s.facing
-        node, triangle, facing = node[keep], triangle[keep], facing[keep]
-        code = node * len(tri) + triangle
-        pos = np.searchsorted(surf.excluded, code)
-        pos = np.minimum(pos, len(surf.excluded) - 1)
-        keep = surf.excluded[pos] != code if len(surf.excluded) else np.ones(len(code), bool)
         node, triangle, facing = node[keep], triangle[keep], facing[keep]
         candidates = len(node)
         xa, xb, xc = (corners[triangle, k] for k in range(3))
@@ -328,6 +336,49 @@ class SelfContactAssembler:
         self.evaluations += 1
         self._last, self._last_x = result, x
         return result
+
+    def _candidates(self, x: np.ndarray, node_normal: np.ndarray, normal: np.ndarray,
+                    radius: float) -> tuple[np.ndarray, np.ndarray]:
+        """Node–triangle pairs that may touch: a k-d tree search, kept while it is valid.
+
+        The search (scipy's cKDTree over the triangles' centroids) takes the pairs within a
+        margin more than a touching pair can be apart, whose normals face each other to
+        within a slack, less the triangles of which the node is a corner. The list serves
+        the following evaluations (Newton's iterates, the line search's trials) while no
+        node has moved by half the margin, no normal has turned by half the slack and no
+        triangle has grown past what the search allowed for; then it is redone.
+        """
+        s, surf, cache = self.settings, self.surface, self._verlet
+        if cache is not None:
+            moved = np.sqrt(np.max(np.sum((x - cache["x"]) ** 2, axis=1), initial=0.0))
+            turned = max(_largest_turn(node_normal, cache["node_normal"]),
+                          _largest_turn(normal, cache["normal"]))
+            if moved <= 0.5 * _MARGIN and turned <= 0.5 * _SLACK \
+                    and radius <= cache["radius"]:
+                return cache["node"], cache["triangle"]
+        start = time.perf_counter()
+        allowed = 1.25 * radius
+        reach = s.band + (1.0 + 2.0 * s.edge_taper) * allowed + _MARGIN
+        found = cKDTree(x).sparse_distance_matrix(
+            cKDTree(x[surf.triangles].mean(axis=1)), reach, output_type="ndarray"
+        )
+        node, triangle = found["i"].astype(np.int64), found["j"].astype(np.int64)
+        facing = -np.einsum("ij,ij->i", node_normal[node], normal[triangle])
+        keep = facing > s.facing - _SLACK
+        node, triangle = node[keep], triangle[keep]
+        code = node * len(surf.triangles) + triangle
+        pos = np.minimum(np.searchsorted(surf.excluded, code), len(surf.excluded) - 1)
+        keep = surf.excluded[pos] != code if len(surf.excluded) else np.ones(len(code), bool)
+        self._verlet = {"x": x, "node_normal": node_normal, "normal": normal,
+                        "radius": allowed, "node": node[keep], "triangle": triangle[keep]}
+        self.searches += 1
+        self.search_seconds += time.perf_counter() - start
+        return self._verlet["node"], self._verlet["triangle"]
+
+    def reset_counters(self) -> None:
+        """Start the cost figures afresh (a new case)."""
+        self.seconds = self.search_seconds = 0.0
+        self.evaluations = self.searches = 0
 
     def begin_solve(self) -> None:
         """Forget the held shares: a new Newton solve (load increment) starts."""
@@ -410,7 +461,14 @@ class SelfContactAssembler:
         self.seconds += time.perf_counter() - start
 
     def status(self, state_array: np.ndarray, C1: float) -> dict[str, Any]:
-        """Force (N), skin area in contact (cm²), deepest penetration (mm), pairs, search cost."""
+        """The contact at the state and its cost since :meth:`reset_counters`.
+
+        ``force_N``: the pairs' normal forces summed; ``area_cm2``: the skin in contact, both
+        sides; ``max_penetration_mm``: how far the deepest node lies behind the skin it faces
+        (zero while the offset holds); ``max_pressure_Pa``; ``pairs``; ``skin_nodes``;
+        ``seconds``: all self-contact work (searches, kernel, assembly) over ``evaluations``
+        states, of which ``searches`` k-d tree searches took ``search_seconds``.
+        """
         state = self.pairs(state_array)
         pressure = -self.settings.stiffness * C1 * state.gap
         weights = self.surface.weights[state.slaves] * state.share
@@ -422,6 +480,8 @@ class SelfContactAssembler:
             "max_pressure_Pa": float(pressure.max(initial=0.0)),
             "pairs": int(len(state.slaves)),
             "skin_nodes": int(len(self.surface.X)),
-            "search_s": self.seconds,
+            "seconds": self.seconds,
             "evaluations": self.evaluations,
+            "searches": self.searches,
+            "search_seconds": self.search_seconds,
         }
