@@ -102,3 +102,14 @@ def test_two_processes_give_the_serial_contact(coarse_mesh: Path, tmp_path: Path
     u_serial = read_points(tmp_path / "serial" / "points.h5")["u"]
     u_mpi = read_points(tmp_path / "mpi" / "points.h5")["u"]
     assert np.max(np.abs(u_serial - u_mpi)) <= 1e-7 * np.abs(u_serial).max()
+
+
+@pytest.mark.skipif(MPIRUN is None, reason="mpirun is not installed")
+def test_self_contact_under_mpi_is_refused_by_name(coarse_mesh: Path, tmp_path: Path) -> None:
+    """Self-contact is serial: under mpirun the solve stops before any work, saying so."""
+    (tmp_path / "config.yaml").write_text(json.dumps({"fe": {"self_contact": {}}}))
+    run = _mpirun(2, str(coarse_mesh), "--c1", "1.0", "--phi", "180", "--config",
+                  str(tmp_path / "config.yaml"), "--out", str(tmp_path / "mpi"))
+    assert run.returncode == 2, run.stdout[-2000:] + run.stderr[-2000:]
+    assert "fe.self_contact is serial" in run.stderr
+    assert not (tmp_path / "mpi").exists()

@@ -36,7 +36,7 @@ from fem.parameters import (
 )
 from fem.point_triangle import barycentric, signed_distance, signed_distance_derivatives
 from fem.problem import GravityProblem
-from fem.self_contact import SelfContact, self_contact_from_mapping
+from fem.self_contact import SelfContact, SelfContactAssembler, self_contact_from_mapping
 from fem.solver import NewtonSolver
 from meshes.io import geometry_nodes
 from meshes.tags import Boundary
@@ -211,6 +211,14 @@ def test_a_closing_crease_converges_without_passing_through_itself() -> None:
         u = problem.displacement()
         outcomes[name] = (result.converged, self_overlap(mesh, u)["overlapping_vertices"],
                           problem.self_contact_status())
+        if settings is not None:
+            # the kept candidate list missed no pair: a fresh search finds the same ones
+            kept = problem.self_contact.pairs(problem.w.x.array)
+            fresh = SelfContactAssembler(settings, problem.self_contact.surface)
+            found = fresh.pairs(problem.w.x.array)
+            assert fresh.searches == 1 and len(kept.slaves) > 0
+            pairs = [sorted(zip(p.slaves, p.masters, strict=True)) for p in (kept, found)]
+            assert pairs[0] == pairs[1]
         solver.destroy()
     # without self-contact the upper arm swings into the lower one (where its solve stops)
     assert outcomes["free"][1] > 5
