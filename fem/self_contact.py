@@ -307,11 +307,11 @@ class SelfContactAssembler:
         keep = facing > s.facing
         node, triangle, facing = node[keep], triangle[keep], facing[keep]
         candidates = len(node)
-        xa, xb, xc = (corners[triangle, k] for k in range(3))
-        xs = x[node]
-        gap = np.einsum("ij,ij->i", normal[triangle], xs - xa)
-        beta = barycentric(xs, xa, xb, xc).min(axis=1)
-        near = (beta > -s.edge_taper) & (np.abs(gap) <= s.band)
+        gap = np.einsum("ij,ij->i", normal[triangle], x[node] - corners[triangle, 0])
+        near = np.abs(gap) <= s.band  # the cheap test first
+        node, triangle, gap, facing = node[near], triangle[near], gap[near], facing[near]
+        beta = barycentric(x[node], *(corners[triangle, k] for k in range(3))).min(axis=1)
+        near = beta > -s.edge_taper
         node, triangle, gap, beta, facing = (a[near] for a in (node, triangle, gap, beta, facing))
         # A node's candidates share it by a partition of unity over the triangles its
         # projection falls on, fading out over edge_taper past a triangle's edge and as the
