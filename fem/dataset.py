@@ -29,6 +29,8 @@ Layout (units in attributes; M cases, N material points)::
                                           of its cells (the body through itself); -1: not measured
     /cases/contact_force_N (M,) float64   contact force on the skin, N (fe.contact); NaN when
                                           solved without contact
+    /cases/self_contact_force_N (M,) float64  the skin's contact force with itself, N
+                                          (fe.self_contact); NaN when solved without it
     /cases/load_steps, newton_iterations  (M,) int64
     /cases/wall_s        (M,)   float64   solve wall time
     /cases/cpu_s         (M,)   float64   solve CPU time of the case's process
@@ -522,6 +524,10 @@ def build_dataset(
         "contact_force_N": np.array(
             [(s.get("contact") or {}).get("force_N", np.nan) for s in summaries], dtype=float
         ),
+        "self_contact_force_N": np.array(
+            [(s.get("self_contact") or {}).get("force_N", np.nan) for s in summaries],
+            dtype=float,
+        ),
         "load_steps": column("load_steps", 0).astype(np.int64),
         "newton_iterations": iterations,
         "wall_s": wall,
@@ -544,6 +550,7 @@ def build_dataset(
         "max_disp_mm": "mm",
         "load_fraction": "1",
         "contact_force_N": "N",
+        "self_contact_force_N": "N",
     }
     kind = np.where(reference["fixed"], BOUNDARY, DOMAIN).astype(np.int8)
     if mesh is not None:

@@ -76,7 +76,7 @@ def test_dataset_schema_and_contents(tmp_path: Path) -> None:
         tmp_path,
         {
             3: {"status": "failed"},
-            1: {"contact": contact},
+            1: {"contact": contact, "self_contact": {"force_N": 0.31, "area_cm2": 6.7}},
             2: {"self_overlap": {"overlapping_vertices": 13}},
             4: {"self_overlap": None, "cpu_s": {"solve": 0.5},
                 "clock": {"process_start": 1.7e9, "finished": 1.7e9 + 12.5},
@@ -113,6 +113,9 @@ def test_dataset_schema_and_contents(tmp_path: Path) -> None:
         force = h5["cases/contact_force_N"]
         assert force.attrs["units"] == "N"
         assert force[1] == 0.25 and np.isnan(np.delete(force[...], 1)).all()
+        itself = h5["cases/self_contact_force_N"]
+        assert itself.attrs["units"] == "N"
+        assert itself[1] == 0.31 and np.isnan(np.delete(itself[...], 1)).all()
         assert np.sum(h5["points/kind"][...] == BOUNDARY) == 5
         prov = json.loads(h5.attrs["provenance"])
         assert prov["config"] == {"sweep": {"phi_deg": [0]}} and "packages" in prov
@@ -147,6 +150,14 @@ def test_report_says_whether_the_sweep_had_contact() -> None:
     with_contact = _sweep_contact_and_overlap({**columns, "contact_force_N": force}, failed)
     assert "Solved with contact of the skin with the chest: 1 case ends in contact" in with_contact
     assert "the largest force 0.48 N (C1 = 0.9 kPa at Φ = -120°)" in with_contact
+    assert "self-contact" not in with_contact  # an older dataset has no such column
+    itself = _sweep_contact_and_overlap(
+        {**columns, "self_contact_force_N": np.array([np.nan, 0.31, 0.0])}, failed)
+    assert ("Solved with self-contact of the skin: 1 case ends with the skin resting on itself, "
+            "the largest force 0.31 N (C1 = 0.9 kPa at Φ = -120°)") in itself
+    off = _sweep_contact_and_overlap({**columns, "self_contact_force_N": np.full(3, np.nan)},
+                                     failed)
+    assert "solved without self-contact" in off
 
 
 def test_mismatched_point_count_names_the_case(tmp_path: Path) -> None:

@@ -165,6 +165,17 @@ def sweep_contact_and_overlap(columns: dict[str, np.ndarray], failed: np.ndarray
                        f"({case(touching[np.argmax(force[touching])])})" if len(touching) else "")
             out.append("Solved with contact of the skin with the chest: "
                        f"{_cases_end(len(touching))} in contact{largest}.")
+    if "self_contact_force_N" in columns:
+        force = np.asarray(columns["self_contact_force_N"], dtype=float)
+        if np.isnan(force).all():
+            out.append("The sweep was solved without self-contact (fe.self_contact): nothing "
+                       "keeps the skin from passing through itself at the fold.")
+        else:
+            touching = np.flatnonzero(np.nan_to_num(force) > 0)
+            largest = (f", the largest force {force[touching].max():.2g} N "
+                       f"({case(touching[np.argmax(force[touching])])})" if len(touching) else "")
+            out.append("Solved with self-contact of the skin: "
+                       f"{_cases_end(len(touching))} with the skin resting on itself{largest}.")
     if "self_overlap" in columns:
         overlap = np.asarray(columns["self_overlap"])
         through = np.flatnonzero(overlap > 0)
