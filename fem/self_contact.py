@@ -5,8 +5,8 @@ the skin below the fold, and the two sides of a closing crease press together. B
 same skin. Without self-contact the model lets them pass through each other (the cases
 ``self_overlap`` flags), or its Newton solve stalls at the crease.
 
-The skin is a triangulation of the displacement's nodes on it (a P2 facet is split into four
-flat triangles through its vertex and edge nodes; other degrees use the facet's vertices).
+The skin is a triangulation of the displacement's nodes on it: a facet of degree k is split
+into k² flat triangles through its nodes (four for P2).
 Every skin node is a slave, every triangle a master (two-pass node-to-surface). A node and a
 triangle form a pair when, in the *deformed* configuration,
 
@@ -15,8 +15,8 @@ triangle form a pair when, in the *deformed* configuration,
 * the node lies within ``band`` of the triangle's plane,
 * their normals face each other (n_node · n_triangle ≤ −``facing``): a smooth skin never
   contacts itself, since neighbouring facets face the same way, and
-* the triangle is not in the node's two-ring on the skin (the neighbourhood FEBio's contact
-  potential also excludes);
+* the node is not a corner of the triangle (the rest of a smooth neighbourhood is left out by
+  the facing test; FEBio's contact potential excludes neighbours likewise);
 
 a node's contact is shared between its candidate triangles by a partition of unity that
 fades out past their edges, so that the force is continuous as the node slides across a seam
@@ -126,9 +126,8 @@ def self_contact_from_mapping(values: dict[str, Any]) -> SelfContact:
     return SelfContact(**numbers)
 
 
-# Edges of the reference tetrahedron (dolfinx / basix numbering) and, per facet (opposite
+# Per facet of the reference tetrahedron (dolfinx / basix numbering: facet i is opposite
 # vertex i), its vertices in order.
-_TET_EDGES = ((2, 3), (1, 3), (1, 2), (0, 3), (0, 2), (0, 1))
 _FACET_VERTICES = ((1, 2, 3), (0, 2, 3), (0, 1, 3), (0, 1, 2))
 
 
@@ -141,8 +140,8 @@ class SkinSurface:
         dofs: the state's local entries of each node's three displacement components (n, 3).
         triangles: node indices of each triangle (t, 3), outward by the right-hand rule.
         weights: each node's tributary reference area (n,), m².
-        excluded: for each node, the triangles it never pairs with (its two-ring), as a
-            sorted array of ``node * t + triangle`` codes.
+        excluded: for each node, the triangles it never pairs with (those of which it is a
+            corner), as a sorted array of ``node * t + triangle`` codes.
     """
 
     X: np.ndarray
@@ -171,8 +170,9 @@ class SkinSurface:
         layout = V0.dofmap.dof_layout
         cell_dofs = V0.dofmap.list.array.reshape(-1, layout.num_dofs)
         vertex_dof = [layout.entity_dofs(0, v)[0] for v in range(4)]
-        edge_dof = {frozenset(e): layout.entity_dofs(1, k) for k, e in enumerate(_TET_EDGES)}
-        quadratic = all(len(d) == 1 for d in edge_dof.values())
+        closure = [np.asarray(layout.entity_closure_dofs(2, i)) for i in range(4)]
+        degree = int(round((np.sqrt(8 * len(closure[0]) + 1) - 3) / 2))  # (k+1)(k+2)/2 nodes
+        lattice = _lattice_triangles(degree)
 
         triangles = []
         for f in np.asarray(facets, dtype=np.int64):
@@ -183,21 +183,26 @@ class SkinSurface:
             # outward: away from the cell's vertex opposite the facet
             va, vb, vc, vo = (coords[dofs[vertex_dof[i]]] for i in (a, b, c, local))
             if np.dot(np.cross(vb - va, vc - va), vo - va) > 0:
-                b, c = c, b
-            v = [dofs[vertex_dof[i]] for i in (a, b, c)]
-            if not quadratic:
-                triangles.append(v)
-                continue
-            ab, bc, ca = (dofs[edge_dof[frozenset(e)][0]] for e in ((a, b), (b, c), (c, a)))
-            triangles += [[v[0], ab, ca], [ab, v[1], bc], [ca, bc, v[2]], [ab, bc, ca]]
-        tri = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+                b, c, vb, vc = c, b, vc, vb
+            # the facet's nodes on their lattice: (k λ_b, k λ_c) in the straight triangle
+            nodes = dofs[closure[local]]
+            lam = barycentric(coords[nodes], *(np.broadcast_to(v, (len(nodes), 3))
+                                               for v in (va, vb, vc)))
+            ij = np.rint(degree * lam[:, 1:]).astype(np.int64)
+            index = np.full((degree + 1, degree + 1), -1, dtype=np.int64)
+            index[ij[:, 0], ij[:, 1]] = nodes
+            if np.any(index[lattice[..., 0], lattice[..., 1]] < 0):
+                raise RuntimeError(f"skin facet {f}: its nodes do not form a degree-{degree} "
+                                   "lattice")
+            triangles.append(index[lattice[..., 0], lattice[..., 1]])
+        tri = np.concatenate(triangles).reshape(-1, 3)
         nodes, tri = np.unique(tri, return_inverse=True)
         tri = tri.reshape(-1, 3)
         X = coords[nodes]
         area = 0.5 * np.linalg.norm(np.cross(X[tri[:, 1]] - X[tri[:, 0]],
                                              X[tri[:, 2]] - X[tri[:, 0]]), axis=1)
         weights = np.bincount(tri.ravel(), np.repeat(area / 3.0, 3), minlength=len(nodes))
-        return cls(X, to_state[nodes], tri, weights, _two_ring(tri, len(nodes)))
+        return cls(X, to_state[nodes], tri, weights, _own_triangles(tri, len(nodes)))
 
 
 #: How much farther apart (m) than a touching pair the search's pairs may be, and how much
@@ -218,8 +223,23 @@ def _smoothstep(s: np.ndarray) -> np.ndarray:
     return s * s * (3.0 - 2.0 * s)
 
 
-def _two_ring(triangles: np.ndarray, n_nodes: int) -> np.ndarray:
-    """Codes ``node * t + triangle`` of the triangles within each node's two-ring."""
+def _lattice_triangles(k: int) -> np.ndarray:
+    """The k² triangles of a triangle's degree-k lattice, as (i, j) corners (k², 3, 2).
+
+    Node (i, j) sits at barycentric coordinates (1 − (i + j)/k, i/k, j/k); every triangle
+    turns as the facet (a, b, c) does.
+    """
+    out = []
+    for i in range(k):
+        for j in range(k - i):
+            out.append([(i, j), (i + 1, j), (i, j + 1)])
+            if i + j <= k - 2:
+                out.append([(i + 1, j), (i + 1, j + 1), (i, j + 1)])
+    return np.asarray(out, dtype=np.int64)
+
+
+def _own_triangles(triangles: np.ndarray, n_nodes: int) -> np.ndarray:
+    """Codes ``node * t + triangle`` of the triangles of which each node is a corner."""
     t = len(triangles)
     incidence = sparse.csr_matrix(
         (np.ones(triangles.size), (triangles.ravel(), np.repeat(np.arange(t), 3))),

@@ -126,14 +126,14 @@ def _box(side: float, n: int) -> tuple[np.ndarray, np.ndarray]:
     return geometry_nodes(box).astype(np.int64), box.geometry.x.copy()
 
 
-def stacked_blocks(side: float) -> tuple:
-    """Two cubes of one mesh touching along x = side, not sharing nodes (3 and 4 cells a side).
+def stacked_blocks(side: float, n: int = 3) -> tuple:
+    """Two cubes of one mesh touching along x = side, not sharing nodes (n and n + 1 cells).
 
     Gravity along +x presses the upper (x < side) on the lower; the lower's far face is the
     rib, the upper's far face (sternal) is held in y and z only.
     """
-    upper, xu = _box(side, 3)
-    lower, xl = _box(side, 4)
+    upper, xu = _box(side, n)
+    lower, xl = _box(side, n + 1)
     x = np.vstack([xu, xl + [side, 0.0, 0.0]])
     cells = np.vstack([upper, lower + len(xu)])
     return _mesh_of(cells, x, {
@@ -158,11 +158,19 @@ def c_block(side: float, n: int) -> tuple:
 
 
 @pytest.mark.solve
-def test_stacked_blocks_carry_the_upper_weight_by_self_contact() -> None:
+@pytest.mark.parametrize(
+    "discretisation",
+    [Discretisation(), Discretisation(element="p1-penalty", degree=1), Discretisation(degree=3)],
+    ids=["P2-P1", "P1-penalty", "P3-P2"],
+)
+def test_stacked_blocks_carry_the_upper_weight_by_self_contact(
+    discretisation: Discretisation,
+) -> None:
+    """Every element's skin is triangulated through all its nodes (k² triangles a facet)."""
     side, C1 = 0.05, 1000.0
-    mesh, tags = stacked_blocks(side)
+    mesh, tags = stacked_blocks(side, 1 if discretisation.degree == 3 else 3)
     settings = SelfContact()
-    problem = GravityProblem(mesh, tags, Discretisation(),
+    problem = GravityProblem(mesh, tags, discretisation,
                              FixedBoundaries({"rib": (0, 1, 2), "sternal": (1, 2)}), None, settings)
     solver = NewtonSolver(problem, TIGHT)
     problem.set_case(Material(C1=C1), Gravity(phi=0.0))
