@@ -254,7 +254,7 @@ class SelfContactState:
     """The active pairs at one configuration and what they add.
 
     Attributes:
-        slaves, masters: node and triangle of each pair in contact (g < 0).
+        slaves, masters: node and triangle of each pair in contact (g below the offset).
         share: the pair's part of its node's contact (a partition of unity over the
             triangles the node projects onto, fading out past their edges).
         gap: each pair's signed distance less the offset (m, negative).

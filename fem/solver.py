@@ -187,6 +187,15 @@ class NewtonSolver:
         self.snes.setMonitor(self._monitor)
 
     # -- set-up ---------------------------------------------------------------------------
+    @property
+    def _self_contact(self) -> Any:
+        """The problem's self-contact assembler (:mod:`fem.self_contact`), if it has one.
+
+        Read at each use: moving the problem's geometry rebuilds it. A problem of another
+        kind (the solver takes any with forms, conditions and a state) has none.
+        """
+        return getattr(self.problem, "self_contact", None)
+
     def _create_matrix(self, form: Any) -> PETSc.Mat:
         """A matrix of ``form``'s sparsity; with self-contact, one that takes new entries.
 
@@ -195,7 +204,7 @@ class NewtonSolver:
         """
         A = fem_petsc.create_matrix(form)
         A.setOption(PETSc.Mat.Option.SYMMETRIC, self.problem.symmetric)
-        if self.problem.self_contact is not None:
+        if self._self_contact is not None:
             A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
         return A
 
@@ -310,7 +319,7 @@ class NewtonSolver:
                 b, [self.problem.tangent], bcs=[self.problem.bcs], x0=[x], scale=-1.0
             )
         b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        if self.problem.self_contact is not None:
+        if self._self_contact is not None:
             with b.localForm() as b_local:
                 self.problem.add_self_contact_residual(b_local.array)
         fem_petsc.set_bc(b, self.problem.bcs, x, -1.0)
@@ -321,13 +330,15 @@ class NewtonSolver:
         """Assemble the tangent into A and, with a field split, the preconditioner into P."""
         A.zeroEntries()
         fem_petsc.assemble_matrix(A, self.problem.tangent, bcs=self.problem.bcs)
-        self.problem.add_self_contact_tangent(A)
+        if self._self_contact is not None:
+            self.problem.add_self_contact_tangent(A)
         A.assemble()
         # petsc4py hands callbacks fresh wrappers, so P is never A by identity: ask the flag.
         if self._fieldsplit and P is not None:
             P.zeroEntries()
             fem_petsc.assemble_matrix(P, self.problem.preconditioner, bcs=self.problem.bcs)
-            self.problem.add_self_contact_tangent(P)
+            if self._self_contact is not None:
+                self.problem.add_self_contact_tangent(P)
             P.assemble()
 
     def _jacobian(self, snes: PETSc.SNES, x: PETSc.Vec, A: PETSc.Mat, P: PETSc.Mat) -> None:
@@ -460,7 +471,7 @@ class NewtonSolver:
         if not self.P.isAssembled():  # the first time: MatCopy needs an assembled target
             fem_petsc.assemble_matrix(self.P, self.problem.tangent, bcs=self.problem.bcs)
             self.P.assemble()
-            if self.problem.self_contact is None:
+            if self._self_contact is None:
                 return  # it is A already
         # self-contact may have grown A's pattern since the last copy
         same = A.getInfo()["nz_allocated"] == self.P.getInfo()["nz_allocated"]
@@ -568,7 +579,7 @@ class NewtonSolver:
         The pairs of a failed iterate (a body passed through itself) may couple nodes far
         apart; kept in the pattern, they would cost every later factorisation fill-in.
         """
-        if self.problem.self_contact is None or self.A.getInfo()["nz_allocated"] <= self._nonzeros:
+        if self._self_contact is None or self.A.getInfo()["nz_allocated"] <= self._nonzeros:
             return
         stale = (self.A, self.P)
         self.A = self._create_matrix(self.problem.tangent)
@@ -585,8 +596,8 @@ class NewtonSolver:
 
     def _newton(self) -> SolveResult:
         self._drop_stale_pattern()
-        if self.problem.self_contact is not None:
-            self.problem.self_contact.begin_solve()
+        if self._self_contact is not None:
+            self._self_contact.begin_solve()
         self.problem.w.vector.copy(self.x)
         self.snes.setConvergenceHistory(reset=True)
         self._stall = False
