@@ -149,33 +149,31 @@ def _cases_end(n: int) -> str:
 
 
 def sweep_contact_and_overlap(columns: dict[str, np.ndarray], failed: np.ndarray) -> str:
-    """Which cases end in contact with the chest, and which pass through themselves."""
+    """Which cases end in contact with the chest or with themselves, which pass through."""
     def case(i: int) -> str:
         return f"C1 = {columns['C1'][i]:g} kPa at Φ = {columns['phi'][i]:g}°"
 
     out = []
-    if "contact_force_N" in columns:
-        force = np.asarray(columns["contact_force_N"], dtype=float)
+    # (column, the sentence without it, what the sweep was solved with, how a case ends)
+    kinds = (
+        ("contact_force_N", "The sweep was solved without contact (fe.contact): nothing keeps "
+         "the skin out of the chest below the fold.",
+         "contact of the skin with the chest", "in contact"),
+        ("self_contact_force_N", "The sweep was solved without self-contact "
+         "(fe.self_contact): nothing keeps the skin from passing through itself at the fold.",
+         "self-contact of the skin", "with the skin resting on itself"),
+    )
+    for column, without, solved_with, ending in kinds:
+        if column not in columns:
+            continue  # an older dataset
+        force = np.asarray(columns[column], dtype=float)
         if np.isnan(force).all():
-            out.append("The sweep was solved without contact (fe.contact): nothing "
-                       "keeps the skin out of the chest below the fold.")
-        else:
-            touching = np.flatnonzero(np.nan_to_num(force) > 0)
-            largest = (f", the largest force {force[touching].max():.2g} N "
-                       f"({case(touching[np.argmax(force[touching])])})" if len(touching) else "")
-            out.append("Solved with contact of the skin with the chest: "
-                       f"{_cases_end(len(touching))} in contact{largest}.")
-    if "self_contact_force_N" in columns:
-        force = np.asarray(columns["self_contact_force_N"], dtype=float)
-        if np.isnan(force).all():
-            out.append("The sweep was solved without self-contact (fe.self_contact): nothing "
-                       "keeps the skin from passing through itself at the fold.")
-        else:
-            touching = np.flatnonzero(np.nan_to_num(force) > 0)
-            largest = (f", the largest force {force[touching].max():.2g} N "
-                       f"({case(touching[np.argmax(force[touching])])})" if len(touching) else "")
-            out.append("Solved with self-contact of the skin: "
-                       f"{_cases_end(len(touching))} with the skin resting on itself{largest}.")
+            out.append(without)
+            continue
+        touching = np.flatnonzero(np.nan_to_num(force) > 0)
+        largest = (f", the largest force {force[touching].max():.2g} N "
+                   f"({case(touching[np.argmax(force[touching])])})" if len(touching) else "")
+        out.append(f"Solved with {solved_with}: {_cases_end(len(touching))} {ending}{largest}.")
     if "self_overlap" in columns:
         overlap = np.asarray(columns["self_overlap"])
         through = np.flatnonzero(overlap > 0)
