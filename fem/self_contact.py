@@ -19,21 +19,22 @@ triangle form a pair when, in the *deformed* configuration,
   the facing test; FEBio's contact potential excludes neighbours likewise);
 
 a node's contact is shared between its candidate triangles by a partition of unity that
-fades out past their edges, so that the force is continuous as the node slides across a seam
-or off the surface's edge. The search is a k-d tree
-(scipy) over the deformed triangles' centroids, redone at every residual and tangent
-evaluation, so the pairs follow the configuration. A pair whose signed distance g is
-negative (the node behind the master's outer side) adds the penalty energy
+fades out past their edges and as their normals turn away from facing, so that the force is
+continuous as the node slides across a seam or off the surface's edge. The pairs are looked
+for on the deformed skin at every residual evaluation, among candidates from a k-d tree
+(scipy) over the triangles' centroids that serve until the skin has moved or turned by more
+than they allow for. A pair whose signed distance g from the triangle's plane is below
+``offset`` (the node near, or behind, the master's outer side) adds the penalty energy
 
-    Π_sc = Σ_pairs κ/2 w_s ω ⟨−g⟩²,      κ = stiffness · C1,
+    Π_sc = Σ_pairs κ/2 w_s ω ⟨offset − g⟩²,      κ = stiffness · C1,
 
 with w_s the node's tributary reference area and ω the pair's share. Its gradient (the shares
 held fixed) enters the residual and its exact Hessian in g (:mod:`fem.point_triangle`,
 including the master normal's rotation) the tangent, which stays symmetric, so the solver
 keeps MUMPS's LDLᵀ; what the shares' own derivatives would add vanishes on a flat master and
-is small on a smooth one. The penetration at equilibrium is
-about (contact pressure)/κ: at the default stiffness, 1 kPa of contact pressure at C1 = 1 kPa
-lets the skin in by 0.1 mm, as the chest contact (:mod:`fem.contact`).
+is small on a smooth one. At equilibrium facing skin stands (contact pressure)/κ closer than
+``offset``: at the defaults it never passes itself below 5 kPa of contact pressure at
+C1 = 1 kPa (κ as the chest contact's, :mod:`fem.contact`).
 
 Serial only: the pairs couple nodes that no cell shares, which a distributed mesh would hold
 on different processes.
@@ -89,16 +90,19 @@ class SelfContact:
     def __post_init__(self) -> None:
         checks = {
             "stiffness": (self.stiffness, 0.0, math.inf),
-            "offset": (self.offset, -1e-300, 0.01),
+            "offset": (self.offset, 0.0, 0.01),
             "band": (self.band, 0.0, 1.0),
             "facing": (self.facing, -1.0, 1.0),
             "edge_taper": (self.edge_taper, 0.0, 1.0),
         }
         for name, (value, low, high) in checks.items():
+            closed = name == "offset"  # no offset is allowed: contact at touching
             if not (isinstance(value, (int, float)) and math.isfinite(value)
-                    and low < value <= high):
+                    and (low <= value if closed else low < value) and value <= high):
+                bracket = "[" if closed else "("
                 raise InvalidParameterError(
-                    f"fe.self_contact.{name} must be a number in ({low:g}, {high:g}], got {value!r}"
+                    f"fe.self_contact.{name} must be a number in {bracket}{low:g}, {high:g}], "
+                    f"got {value!r}"
                 )
 
     def as_mapping(self) -> dict[str, float]:

@@ -86,6 +86,7 @@ def test_the_kernel_on_a_unit_triangle() -> None:
         ({"band": float("nan")}, "fe.self_contact.band"),
         ({"facing": 2.0}, "fe.self_contact.facing"),
         ({"offset": "a"}, "must be numbers"),
+        ({"offset": -0.001}, "fe.self_contact.offset must be a number in [0, 0.01]"),
         ([1, 2], "must be a mapping"),
     ],
 )
@@ -99,6 +100,8 @@ def test_the_config_turns_self_contact_on_and_records_it() -> None:
     on = SolverSettings.from_config({"fe": {"self_contact": {"offset": 0.001}}})
     assert on.self_contact == SelfContact(offset=0.001)
     assert on.describe()["self_contact"]["offset"] == 0.001
+    assert SolverSettings.from_config({"fe": {"self_contact": {"offset": 0}}}).self_contact \
+        == SelfContact(offset=0.0)  # contact at touching
     for fe in ({}, {"self_contact": None}):
         assert SolverSettings.from_config({"fe": fe}).self_contact is None
 
