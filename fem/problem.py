@@ -29,7 +29,8 @@ from fem.io import boundary_vertex_nodes, node_to_vertex_dof
 from fem.kinematics import deformation_gradient, jacobian
 from fem.material import Incompressible, NeoHookean, Penalty
 from fem.parameters import Discretisation, FixedBoundaries, Gravity, Material
-from fem.self_contact import SelfContact, SelfContactAssembler, SkinSurface
+from fem.self_contact import SelfContact, SelfContactAssembler
+from fem.skin_surface import SkinSurface
 from meshes.io import boundary_facets, geometry_nodes
 from meshes.tags import Boundary
 
