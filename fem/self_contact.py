@@ -54,7 +54,7 @@ from scipy.spatial import cKDTree
 
 from fem.exceptions import InvalidParameterError
 from fem.point_triangle import barycentric, signed_distance_derivatives
-from fem.skin_surface import SkinSurface
+from fem.skin_surface import SkinSurface, triangle_radii
 
 log = logging.getLogger(__name__)
 
@@ -137,6 +137,8 @@ def self_contact_from_mapping(values: dict[str, Any]) -> SelfContact:
 #: allows the skin to move and turn before it is searched again.
 _MARGIN = 0.004
 _SLACK = 0.3
+#: A skin triangle stretched past this many times its reference size takes no part.
+_STRETCH = 2.0
 
 
 def _largest_turn(now: np.ndarray, before: np.ndarray) -> float:
@@ -199,6 +201,19 @@ class SelfContactAssembler:
                                     repr=False)
     _held_shares: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
 
+    def __post_init__(self) -> None:
+        self._radii = self.surface.radii
+        # triangles in classes of reference size, up to 1.5, 3 and more times the median, so
+        # that the many small triangles of the fold are searched with their own short reach
+        median = float(np.median(self._radii)) if len(self._radii) else 0.0
+        bounds = [0.0, 1.5 * median, 3.0 * median, np.inf]
+        self._size_classes = []
+        for low, high in zip(bounds[:-1], bounds[1:], strict=True):
+            members = np.flatnonzero((self._radii > low if low else self._radii >= 0)
+                                     & (self._radii <= high))
+            if len(members):
+                self._size_classes.append((members, float(self._radii[members].max())))
+
     def positions(self, state: np.ndarray) -> np.ndarray:
         """Deformed node positions for the state's local array."""
         return self.surface.X + state[self.surface.dofs]
@@ -215,17 +230,18 @@ class SelfContactAssembler:
         normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
         length = np.linalg.norm(normal, axis=1)
         normal = normal / np.where(length > 0, length, 1.0)[:, None]
-        centroid = corners.mean(axis=1)
-        radius = np.linalg.norm(corners - centroid[:, None], axis=2).max()
+        # a triangle stretched past _STRETCH times its reference size belongs to an iterate
+        # no breast takes: it takes no part, and the search's reach stays the reference's
+        usable = triangle_radii(corners) <= _STRETCH * self._radii
         weighted = np.repeat(normal * length[:, None], 3, axis=0)  # area-weighted, per corner
         node_normal = np.column_stack([
             np.bincount(tri.ravel(), weighted[:, k], minlength=len(x)) for k in range(3)
         ])
         node_normal /= np.maximum(np.linalg.norm(node_normal, axis=1), 1e-300)[:, None]
 
-        node, triangle = self._candidates(x, node_normal, normal, radius)
+        node, triangle = self._candidates(x, node_normal, normal)
         facing = -np.einsum("ij,ij->i", node_normal[node], normal[triangle])
-        keep = facing > s.facing
+        keep = (facing > s.facing) & usable[triangle]
         node, triangle, facing = node[keep], triangle[keep], facing[keep]
         candidates = len(node)
         gap = np.einsum("ij,ij->i", normal[triangle], x[node] - corners[triangle, 0])
@@ -258,32 +274,37 @@ class SelfContactAssembler:
         self._last, self._last_x = result, x
         return result
 
-    def _candidates(self, x: np.ndarray, node_normal: np.ndarray, normal: np.ndarray,
-                    radius: float) -> tuple[np.ndarray, np.ndarray]:
+    def _candidates(self, x: np.ndarray, node_normal: np.ndarray,
+                    normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Node–triangle pairs that may touch: a k-d tree search, kept while it is valid.
 
         The search (scipy's cKDTree over the triangles' centroids) takes the pairs within a
         margin more than a touching pair can be apart, whose normals face each other to
         within a slack, less the triangles of which the node is a corner. The list serves
         the following evaluations (Newton's iterates, the line search's trials) while no
-        node has moved by half the margin, no normal has turned by half the slack and no
-        triangle has grown past what the search allowed for; then it is redone.
+        node has moved by half the margin and no normal has turned by half the slack; then
+        it is redone. Its reach is fixed by the reference triangles' size (a triangle
+        stretched past :data:`_STRETCH` times it takes no part), so that no iterate, however
+        crumpled, makes the list grow past what the reference skin's density gives.
         """
         s, surf, cache = self.settings, self.surface, self._verlet
         if cache is not None:
             moved = np.sqrt(np.max(np.sum((x - cache["x"]) ** 2, axis=1), initial=0.0))
             turned = max(_largest_turn(node_normal, cache["node_normal"]),
                           _largest_turn(normal, cache["normal"]))
-            if moved <= 0.5 * _MARGIN and turned <= 0.5 * _SLACK \
-                    and radius <= cache["radius"]:
+            if moved <= 0.5 * _MARGIN and turned <= 0.5 * _SLACK:
                 return cache["node"], cache["triangle"]
         start = time.perf_counter()
-        allowed = 1.25 * radius
-        reach = s.band + (1.0 + 2.0 * s.edge_taper) * allowed + _MARGIN
-        found = cKDTree(x).sparse_distance_matrix(
-            cKDTree(x[surf.triangles].mean(axis=1)), reach, output_type="ndarray"
-        )
-        node, triangle = found["i"].astype(np.int64), found["j"].astype(np.int64)
+        nodes = cKDTree(x)
+        centroids = x[surf.triangles].mean(axis=1)
+        node, triangle = [], []
+        for members, size in self._size_classes:  # each class of triangles with its own reach
+            reach = s.band + (1.0 + 2.0 * s.edge_taper) * _STRETCH * size + _MARGIN
+            found = nodes.sparse_distance_matrix(cKDTree(centroids[members]), reach,
+                                                 output_type="ndarray")
+            node.append(found["i"].astype(np.int64))
+            triangle.append(members[found["j"]])
+        node, triangle = np.concatenate(node), np.concatenate(triangle)
         facing = -np.einsum("ij,ij->i", node_normal[node], normal[triangle])
         keep = facing > s.facing - _SLACK
         node, triangle = node[keep], triangle[keep]
@@ -291,7 +312,7 @@ class SelfContactAssembler:
         pos = np.minimum(np.searchsorted(surf.excluded, code), len(surf.excluded) - 1)
         keep = surf.excluded[pos] != code if len(surf.excluded) else np.ones(len(code), bool)
         self._verlet = {"x": x, "node_normal": node_normal, "normal": normal,
-                        "radius": allowed, "node": node[keep], "triangle": triangle[keep]}
+                        "node": node[keep], "triangle": triangle[keep]}
         self.searches += 1
         self.search_seconds += time.perf_counter() - start
         return self._verlet["node"], self._verlet["triangle"]

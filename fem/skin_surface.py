@@ -41,6 +41,11 @@ class SkinSurface:
     weights: np.ndarray
     excluded: np.ndarray
 
+    @property
+    def radii(self) -> np.ndarray:
+        """Each triangle's reference size: its corners' largest distance from its centroid."""
+        return triangle_radii(self.X[self.triangles])
+
     @classmethod
     def from_problem(cls, W: Any, mixed: bool, mesh: Any, facets: np.ndarray) -> SkinSurface:
         """The surface of the given skin ``facets`` in the state's space ``W``."""
@@ -94,6 +99,11 @@ class SkinSurface:
                                              X[tri[:, 2]] - X[tri[:, 0]]), axis=1)
         weights = np.bincount(tri.ravel(), np.repeat(area / 3.0, 3), minlength=len(nodes))
         return cls(X, to_state[nodes], tri, weights, _own_triangles(tri, len(nodes)))
+
+
+def triangle_radii(corners: np.ndarray) -> np.ndarray:
+    """The largest distance of each triangle's corners (t, 3, 3) from its centroid."""
+    return np.linalg.norm(corners - corners.mean(axis=1)[:, None], axis=2).max(axis=1)
 
 
 def _lattice_triangles(k: int) -> np.ndarray:
