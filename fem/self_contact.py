@@ -206,11 +206,10 @@ class SelfContactAssembler:
         # triangles in classes of reference size, up to 1.5, 3 and more times the median, so
         # that the many small triangles of the fold are searched with their own short reach
         median = float(np.median(self._radii)) if len(self._radii) else 0.0
-        bounds = [0.0, 1.5 * median, 3.0 * median, np.inf]
+        size_class = np.searchsorted([1.5 * median, 3.0 * median], self._radii)
         self._size_classes = []
-        for low, high in zip(bounds[:-1], bounds[1:], strict=True):
-            members = np.flatnonzero((self._radii > low if low else self._radii >= 0)
-                                     & (self._radii <= high))
+        for k in range(3):
+            members = np.flatnonzero(size_class == k)
             if len(members):
                 self._size_classes.append((members, float(self._radii[members].max())))
 
