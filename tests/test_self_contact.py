@@ -2,9 +2,9 @@
 
 * the point–triangle kernel's gradient and Hessian are those of its signed distance
   (central differences);
-* two blocks of one mesh, the upper one held only sideways, stand on each other: the
-  contact carries the upper block's whole weight (its equilibrium, to the solver's
-  tolerance) and the skin stays apart by no more than the offset;
+* two blocks of one mesh, the upper one held only sideways, stand on each other (P2/P1,
+  P1-penalty and P3/P2): the contact carries the upper block's whole weight (its
+  equilibrium, to the solver's tolerance) and the skin stays apart by no more than the offset;
 * a C-shaped block whose upper arm falls onto the lower one under gravity: without
   self-contact it passes through itself; with it, it converges with no boundary vertex
   inside another cell;
