@@ -163,8 +163,6 @@ class SelfContactState:
         gap: each pair's signed distance less the offset (m, negative).
         grad, hess: its first and second derivatives with respect to the pair's 12
             coordinates (:func:`fem.point_triangle.signed_distance_derivatives`).
-        search_s: seconds the search and the kernel took.
-        candidates: facing node–triangle pairs the search found near each other.
     """
 
     slaves: np.ndarray
@@ -173,8 +171,6 @@ class SelfContactState:
     gap: np.ndarray
     grad: np.ndarray
     hess: np.ndarray
-    search_s: float = 0.0
-    candidates: int = 0
 
 
 @dataclass
@@ -242,7 +238,6 @@ class SelfContactAssembler:
         facing = -np.einsum("ij,ij->i", node_normal[node], normal[triangle])
         keep = (facing > s.facing) & usable[triangle]
         node, triangle, facing = node[keep], triangle[keep], facing[keep]
-        candidates = len(node)
         gap = np.einsum("ij,ij->i", normal[triangle], x[node] - corners[triangle, 0])
         near = np.abs(gap) <= s.band  # the cheap test first
         node, triangle, gap, facing = node[near], triangle[near], gap[near], facing[near]
@@ -266,9 +261,8 @@ class SelfContactAssembler:
             x[node], *(x[tri[triangle, k]] for k in range(3))
         )
         g = g - s.offset
-        result = SelfContactState(node, triangle, share, g, grad, hess, candidates=candidates)
-        result.search_s = time.perf_counter() - start
-        self.seconds += result.search_s
+        result = SelfContactState(node, triangle, share, g, grad, hess)
+        self.seconds += time.perf_counter() - start
         self.evaluations += 1
         self._last, self._last_x = result, x
         return result

@@ -155,13 +155,7 @@ class NewtonSolver:
             and self.A.getSize()[0] > blr_above
         if self.low_rank:  # the config's own values of these options win
             self.options = {**BLR_OPTIONS, **self.options}
-        self.P = None
-        if self._fieldsplit:
-            self.P = self._create_matrix(problem.preconditioner)
-        elif self.refactor_above_its:
-            # The factorised copy of the tangent. PCSetUp re-factorises only when this
-            # matrix changes, so leaving it untouched keeps the factors.
-            self.P = self._create_matrix(problem.tangent)
+        self.P = self._preconditioning_matrix()
         self.b = fem_petsc.create_vector(problem.residual)
         self.x = problem.w.vector.duplicate()
         self._split, self._u_order = self._split_index_sets() if self._fieldsplit else (None, None)
@@ -207,6 +201,19 @@ class NewtonSolver:
         if self._self_contact is not None:
             A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
         return A
+
+    def _preconditioning_matrix(self) -> PETSc.Mat | None:
+        """The matrix the preconditioner is built from, where it is not the tangent A.
+
+        With a field split, the preconditioner's form; with a kept factorisation, the
+        factorised copy of the tangent (PCSetUp re-factorises only when this matrix changes,
+        so leaving it untouched keeps the factors); else None.
+        """
+        if self._fieldsplit:
+            return self._create_matrix(self.problem.preconditioner)
+        if self.refactor_above_its:
+            return self._create_matrix(self.problem.tangent)
+        return None
 
     @property
     def linear_path(self) -> str:
@@ -474,7 +481,8 @@ class NewtonSolver:
             if self._self_contact is None:
                 return  # it is A already
         # self-contact may have grown A's pattern since the last copy
-        same = A.getInfo()["nz_allocated"] == self.P.getInfo()["nz_allocated"]
+        same = self._self_contact is None \
+            or A.getInfo()["nz_allocated"] == self.P.getInfo()["nz_allocated"]
         structure = PETSc.Mat.Structure.SAME_NONZERO_PATTERN if same \
             else PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN
         A.copy(self.P, structure)
@@ -583,10 +591,7 @@ class NewtonSolver:
             return
         stale = (self.A, self.P)
         self.A = self._create_matrix(self.problem.tangent)
-        if self.P is not None:
-            self.P = self._create_matrix(
-                self.problem.preconditioner if self._fieldsplit else self.problem.tangent
-            )
+        self.P = self._preconditioning_matrix()
         self.snes.setJacobian(self._jacobian, self.A, self.P if self.P is not None else self.A)
         self._configure_pc(self.snes.getKSP(), self.A)
         self._reuse_first = self._lagging = False  # nothing is factorised on them yet
