@@ -19,13 +19,13 @@ from meshes.io import geometry_nodes
 
 log = logging.getLogger(__name__)
 
-__all__ = ["self_overlap"]
+__all__ = ["geometry_displacement", "self_overlap"]
 
 _INSIDE = 1e-9
 """Smallest barycentric coordinate of a point strictly inside a cell (not on its faces)."""
 
 
-def _geometry_displacement(mesh: Any, displacement: Any) -> np.ndarray:
+def geometry_displacement(mesh: Any, displacement: Any) -> np.ndarray:
     """``displacement`` at the mesh's geometry nodes, shape (nodes, 3).
 
     The field is interpolated into the Lagrange space of the coordinate element, whose
@@ -84,7 +84,7 @@ def self_overlap(mesh: Any, displacement: Any) -> dict[str, Any]:
     cell_vertices = geometry_nodes(mesh)[:, : tdim + 1]  # a cell's vertices are its first nodes
 
     x0 = mesh.geometry.x.copy()
-    x = x0 + _geometry_displacement(mesh, displacement)
+    x = x0 + geometry_displacement(mesh, displacement)
     points = np.ascontiguousarray(x[boundary])
     try:  # the bounding boxes of the deformed cells
         mesh.geometry.x[:] = x

@@ -400,19 +400,23 @@ class SelfContactAssembler:
 
         ``force_N``: the pairs' normal forces summed; ``area_cm2``: the skin in contact, both
         sides; ``max_penetration_mm``: how far the deepest node lies behind the skin it faces
-        (zero while the offset holds); ``max_pressure_Pa``; ``pairs``; ``skin_nodes``;
-        ``seconds``: all self-contact work (searches, kernel, assembly) over ``evaluations``
-        states, of which ``searches`` k-d tree searches took ``search_seconds``.
+        (zero while the offset holds); ``max_pressure_Pa`` and ``max_pressure_at_m``, the
+        reference position of the node that carries it (None without contact); ``pairs``;
+        ``skin_nodes``; ``seconds``: all self-contact work (searches, kernel, assembly) over
+        ``evaluations`` states, of which ``searches`` k-d tree searches took ``search_seconds``.
         """
         state = self.pairs(state_array)
         pressure = -self.settings.stiffness * C1 * state.gap
         weights = self.surface.weights[state.slaves] * state.share
         penetration = -(state.gap + self.settings.offset)
+        peak = self.surface.X[state.slaves[np.argmax(pressure)]].tolist() if len(pressure) \
+            else None
         return {
             "force_N": float(np.sum(pressure * weights)),
             "area_cm2": 1e4 * float(np.sum(weights)),
             "max_penetration_mm": 1e3 * float(max(penetration.max(initial=0.0), 0.0)),
             "max_pressure_Pa": float(pressure.max(initial=0.0)),
+            "max_pressure_at_m": peak,
             "pairs": int(len(state.slaves)),
             "skin_nodes": int(len(self.surface.X)),
             "seconds": self.seconds,
