@@ -21,6 +21,7 @@ import argparse
 import json
 import logging
 import sys
+from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -48,43 +49,53 @@ def parse_case(text: str) -> Case:
         raise argparse.ArgumentTypeError(f"{text!r}: {err}") from None
 
 
-def solve(runner: CaseRunner, case: Case) -> tuple[dict[str, Any], np.ndarray]:
-    """One case's summary record and its displacement at the mesh's vertices (m)."""
-    result, timings = runner.solve(case)
-    summary = runner.summary(case, result, timings, measure_unit=False)
-    _, values = gather_vertex_values(runner.mesh, runner.problem.displacement())
-    return summary, values
+SETTINGS = ("self-contact", "none")
+"""The two settings every case is solved with, in this order."""
+
+
+def solve_pairs(
+    mesh: Path | str, settings: SolverSettings, cases: list[Case]
+) -> Iterator[tuple[str, Case, CaseRunner, dict[str, Any]]]:
+    """Each case solved with self-contact (the settings' own, else the defaults) and without.
+
+    Yields ``(setting, case, runner, summary)`` right after each solve, while the runner's
+    problem holds the state; one runner per setting, so forms are compiled once for each.
+    """
+    with_contact = settings if settings.self_contact else replace(settings,
+                                                                 self_contact=SelfContact())
+    for name, current in zip(SETTINGS, (with_contact, replace(settings, self_contact=None)),
+                             strict=True):
+        with CaseRunner(mesh, current) as runner:
+            for case in cases:
+                result, timings = runner.solve(case)
+                yield name, case, runner, runner.summary(case, result, timings,
+                                                         measure_unit=False)
 
 
 def compare(mesh: Path, settings: SolverSettings, cases: list[Case]) -> list[dict[str, Any]]:
     """Each case with and without self-contact: a row per case and setting."""
-    with_contact = settings if settings.self_contact else replace(settings,
-                                                                 self_contact=SelfContact())
     rows: list[dict[str, Any]] = []
     fields: dict[tuple[str, str], np.ndarray] = {}
-    for name, current in (("self-contact", with_contact),
-                          ("none", replace(settings, self_contact=None))):
-        with CaseRunner(mesh, current) as runner:
-            for case in cases:
-                summary, u = solve(runner, case)
-                fields[(case.id, name)] = u
-                sc = summary["self_contact"] or {}
-                rows.append({
-                    "case": case.id, "setting": name, "status": summary["status"],
-                    "load_fraction": summary["load_fraction"],
-                    "wall_s": summary["wall_s"]["solve"],
-                    "newton_iterations": summary["total_newton_iterations"],
-                    "rejected_steps": summary["rejected_steps"],
-                    "max_disp_mm": summary["max_disp_mm"],
-                    "self_overlap": (summary["self_overlap"] or {}).get("overlapping_vertices"),
-                    "self_contact_force_N": sc.get("force_N"),
-                    "self_contact_area_cm2": sc.get("area_cm2"),
-                    "self_contact_penetration_mm": sc.get("max_penetration_mm"),
-                    "self_contact_s": sc.get("seconds"),
-                })
+    for name, case, runner, summary in solve_pairs(mesh, settings, cases):
+        _, fields[(case.id, name)] = gather_vertex_values(runner.mesh,
+                                                          runner.problem.displacement())
+        sc = summary["self_contact"] or {}
+        rows.append({
+            "case": case.id, "setting": name, "status": summary["status"],
+            "load_fraction": summary["load_fraction"],
+            "wall_s": summary["wall_s"]["solve"],
+            "newton_iterations": summary["total_newton_iterations"],
+            "rejected_steps": summary["rejected_steps"],
+            "max_disp_mm": summary["max_disp_mm"],
+            "self_overlap": (summary["self_overlap"] or {}).get("overlapping_vertices"),
+            "self_contact_force_N": sc.get("force_N"),
+            "self_contact_area_cm2": sc.get("area_cm2"),
+            "self_contact_penetration_mm": sc.get("max_penetration_mm"),
+            "self_contact_s": sc.get("seconds"),
+        })
     for case in cases:
         on, off = (next(r for r in rows if r["case"] == case.id and r["setting"] == s)
-                   for s in ("self-contact", "none"))
+                   for s in SETTINGS)
         if on["status"] == off["status"] == "converged":
             diff = np.abs(fields[(case.id, "self-contact")] - fields[(case.id, "none")]).max()
             on["max_difference_mm"] = 1e3 * float(diff)

@@ -262,3 +262,85 @@ def test_self_contact_changes_nothing_where_nothing_touches(coarse_mesh: Path,
     u = {name: h5py.File(tmp_path / name / "points.h5")["u"][...] for name in summaries}
     assert np.abs(u["off"]).max() > 5e-3
     assert np.max(np.abs(u["on"] - u["off"])) <= 1e-9 * np.abs(u["off"]).max()
+
+
+def _crossings(segments: np.ndarray) -> int:
+    """Pairs of 2D segments that cross at a point inside both (sharing no end)."""
+    a, b = segments[:, 0], segments[:, 1]
+    d = b - a
+
+    def cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+
+    denom = cross(d[:, None], d[None, :])
+    ab = a[None, :] - a[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = cross(ab, d[None, :]) / denom
+        t = cross(ab, d[:, None]) / denom
+    inside = (s > 1e-6) & (s < 1 - 1e-6) & (t > 1e-6) & (t < 1 - 1e-6) & (np.abs(denom) > 0)
+    return int(np.triu(inside, 1).sum())
+
+
+@pytest.mark.unit
+def test_the_fold_section_cuts_the_boundary_where_each_state_moves_it() -> None:
+    from studies.fold_section import boundary_triangles, section_segments
+
+    box = dmesh.create_box(MPI.COMM_SELF, [np.zeros(3), np.ones(3)], [3, 3, 3],
+                           dmesh.CellType.tetrahedron)
+    X, tri = box.geometry.x, boundary_triangles(box)
+    cut = section_segments(X, np.zeros_like(X), tri, 0.5)
+    # the plane y = 0.5 cuts the cube's boundary in the square's perimeter, 4 long
+    assert np.allclose(cut[:, :, 1], 0.5)
+    assert np.linalg.norm(cut[:, 1] - cut[:, 0], axis=1).sum() == pytest.approx(4.0)
+    on_edge = np.isclose(cut[:, :, [0, 2]], 0.0) | np.isclose(cut[:, :, [0, 2]], 1.0)
+    assert on_edge.any(axis=2).all()
+    # a material cut: the same points, carried by a shear x += z
+    shear = np.column_stack([X[:, 2], np.zeros(len(X)), np.zeros(len(X))])
+    moved = section_segments(X, shear, tri, 0.5)
+    assert np.allclose(moved[..., 0], cut[..., 0] + cut[..., 2])
+    assert _crossings(cut[:, :, [0, 2]]) == 0
+
+
+@pytest.mark.unit
+def test_the_fold_section_takes_the_named_cases_then_the_largest_forces() -> None:
+    from fem.sweep import Case
+    from studies.fold_section import choose_cases
+
+    columns = {"C1": np.array([1.0, 0.8, 0.8, 1.2]), "phi": np.array([0.0, -90.0, -75.0, 0.0]),
+               "theta": np.zeros(4), "converged": np.array([True, True, False, True]),
+               "self_contact_force_N": np.array([0.0, 0.3, 0.9, 0.1])}
+    named = [Case(0.8, -90.0)]
+    # the failed case's force does not count; the named one is not taken twice
+    assert choose_cases(columns, named, 2) == [Case(0.8, -90.0), Case(1.2, 0.0)]
+    assert choose_cases(columns, [], 1) == [Case(0.8, -90.0)]
+    assert choose_cases({k: v for k, v in columns.items() if k != "self_contact_force_N"},
+                        named, 3) == named
+
+
+@pytest.mark.solve
+def test_the_fold_section_shows_the_crease_crossing_itself_only_without_self_contact(
+    tmp_path: Path,
+) -> None:
+    from fem.sweep import Case
+    from meshes.io import write_tagged_mesh
+    from studies.figures.fe import plot_fold_section
+    from studies.fold_section import FoldSections, fold_sections
+
+    mesh, facets = c_block(0.05, 4)
+    cells = dmesh.meshtags(mesh, 3, np.arange(mesh.topology.index_map(3).size_local,
+                                              dtype=np.int32),
+                           np.ones(mesh.topology.index_map(3).size_local, dtype=np.int32))
+    write_tagged_mesh(mesh, cells, facets, tmp_path / "c.xdmf")
+    result = fold_sections(tmp_path / "c.xdmf", SolverSettings(), [Case(0.5, 0.0)])
+    result.write(tmp_path / "fold.json")
+    (case,) = FoldSections.read(tmp_path / "fold.json").cases
+    states = {s.setting: s for s in case.states}
+    assert states["self-contact"].status == "converged"
+    assert states["self-contact"].self_overlap == 0 and states["none"].self_overlap > 5
+    assert states["self-contact"].self_contact_force_N > 0
+    # the slot's faces cross each other in the cut without self-contact, never with it
+    assert _crossings(np.asarray(states["none"].segments_mm)) > 0
+    assert _crossings(np.asarray(states["self-contact"].segments_mm)) == 0
+    assert _crossings(np.asarray(case.reference_mm)) == 0
+    plot_fold_section([case.to_json()], tmp_path / "fold.png")
+    assert (tmp_path / "fold.png").stat().st_size > 10_000

@@ -394,7 +394,54 @@ def plot_c1_effect(
     save_figure(fig, path)
 
 
+def plot_fold_section(cases: Sequence[Mapping[str, Any]], path: str | Path,
+                      zoom_mm: float = 35.0) -> None:
+    """The fold's cross-section per case: reference, without and with self-contact.
+
+    ``cases`` are :class:`studies.fold_section.FoldCase` records as mappings. One row per
+    case: the whole cut, and a window of ``zoom_mm`` either side of the focus (the node of the
+    largest self-contact pressure where self-contact moves it).
+    """
+    from matplotlib.collections import LineCollection
+
+    styles = {"reference": ("0.65", 0.8, "reference (unloaded)"),
+              "none": ("tab:red", 1.3, "without self-contact"),
+              "self-contact": ("tab:blue", 1.3, "with self-contact")}
+    fig, axes = plt.subplots(len(cases), 3, figsize=(13, 4.4 * len(cases)), squeeze=False,
+                             layout="constrained", width_ratios=[1, 1, 0.62])
+    for (*row, key), case in zip(axes, cases, strict=True):
+        layers = [("reference", case["reference_mm"], "")]
+        for state in sorted(case["states"], key=lambda s: s["setting"] != "none"):
+            outcome = "" if state["status"] == "converged" else \
+                f", failed at λ = {state['load_fraction']:.3f}"
+            overlap = state.get("self_overlap")
+            crossing = f",\n{overlap} boundary vertices inside other cells" if overlap else ""
+            layers.append((state["setting"], state["segments_mm"],
+                           f":\nmax |u| {state['max_disp_mm']:.1f} mm{outcome}{crossing}"))
+        focus = np.asarray(case["focus_mm"], dtype=float)
+        for ax in row:
+            for name, segments, note in layers:
+                colour, width, label = styles[name]
+                if len(segments):
+                    ax.add_collection(LineCollection(np.asarray(segments),
+                                                     colors=colour, linewidths=width,
+                                                     label=label + note))
+            ax.set_aspect("equal")
+            ax.autoscale_view()
+            ax.set_xlabel("x, anterior → posterior (mm)")  # a sagittal view, superior up
+            ax.set_ylabel("z, inferior → superior (mm)")
+            ax.grid(True, alpha=0.3)
+        row[1].set_xlim(focus[0] - zoom_mm, focus[0] + zoom_mm)
+        row[1].set_ylim(focus[1] - zoom_mm, focus[1] + zoom_mm)
+        row[0].set_title(f"the cut at y = {case['plane_y_mm']:.1f} mm (reference)")
+        row[1].set_title(f"the fold, ±{zoom_mm:g} mm")
+        key.axis("off")  # the row's legend: what each line is, its max |u| and outcome
+        key.legend(*row[0].get_legend_handles_labels(), loc="center left", fontsize=8,
+                   title=f"C1 = {case['C1']:g} kPa, Φ = {case['phi']:g}°, θ = {case['theta']:g}°")
+    save_figure(fig, path)
+
+
 __all__ = [
-    "direction_axis", "plot_c1_effect", "plot_speed_accuracy", "plot_stability_maps",
-    "plot_sweep_map",
+    "direction_axis", "plot_c1_effect", "plot_fold_section", "plot_speed_accuracy",
+    "plot_stability_maps", "plot_sweep_map",
 ]
