@@ -18,6 +18,7 @@ from studies.corpus import CorpusTable
 from studies.failure_edge import SweepEdges
 from studies.fe_benchmark import ClinicalBenchmark
 from studies.fe_speed_accuracy import SpeedAccuracy
+from studies.fold_section import FoldSections
 from studies.held_out import HeldOutEvaluation
 from studies.mesh_quality import MeshQuality
 from studies.off_grid import OffGridEvaluation
@@ -41,7 +42,7 @@ INPUT_NAMES = (
     "extrapolation", "benchmark", "clinical_fields", "fe_clinical", "fe_speed_accuracy",
     "fe_stability", "corpus", "reference_roundtrip", "reference_record", "tracking", "stiffness",
     "viewer", "held_out", "postures", "off_grid", "fe_failure_edges", "fe_stability_audit",
-    "warning_coverage",
+    "fe_fold_section", "warning_coverage",
 )
 
 
@@ -61,6 +62,7 @@ RESULT_TYPES: dict[str, Callable[[Path], Any]] = {
     "fe_stability": StabilityMap.read,
     "fe_failure_edges": SweepEdges.read,
     "fe_stability_audit": StabilityAudit.read,
+    "fe_fold_section": FoldSections.read,
     "corpus": CorpusTable.read,
     "reference_roundtrip": RoundTripTable.read,
     "reference_record": ReferenceRecord.read,

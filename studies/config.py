@@ -237,6 +237,34 @@ class StabilityAuditConfig:
 
 
 @dataclass(frozen=True, slots=True)
+class FoldSectionConfig:
+    """The fold cut with and without self-contact (``fe_study.fold_section``).
+
+    See :mod:`studies.fold_section`.
+
+    Attributes:
+        cases: the named cases, each (C1 kPa, Φ deg, θ deg).
+        largest: how many of the sweep's cases with the largest self-contact force to add.
+    """
+
+    cases: tuple[tuple[float, float, float], ...]
+    largest: int
+
+    def __post_init__(self) -> None:
+        if self.largest < 0:
+            raise ValueError(f"largest must be 0 or more, got {self.largest}")
+        for case in self.cases:
+            if len(case) != 3 or not np.all(np.isfinite(case)) or case[0] <= 0:
+                raise ValueError(f"a case is [C1 > 0, Φ] or [C1, Φ, θ], finite; got {case}")
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, Any]) -> FoldSectionConfig:
+        """From the validated section (θ defaults to 0)."""
+        return cls(tuple((float(c[0]), float(c[1]), float(c[2]) if len(c) > 2 else 0.0)
+                         for c in values["cases"]), int(values["largest"]))
+
+
+@dataclass(frozen=True, slots=True)
 class FEStudyConfig:
     """The FE study (``fe_study``): what is compared with what.
 
@@ -248,6 +276,7 @@ class FEStudyConfig:
         stability_mesh: the mesh sizes of the stability maps.
         failure_edges: how the sweep's failed cases are traced.
         stability_audit: which of the sweep's converged cases are judged for stability.
+        fold_section: which cases are cut at the fold with and without self-contact.
         default_variant: the variant the workflow's own mesh and ``fe`` settings amount to.
         base_config: the ``fe``, ``material`` and ``mesh`` sections that the reference and the
             variants depend on, without the default's discretisation and solver preset, which
@@ -261,6 +290,7 @@ class FEStudyConfig:
     stability_mesh: MeshSpec
     failure_edges: FailureEdgesConfig
     stability_audit: StabilityAuditConfig
+    fold_section: FoldSectionConfig
     default_variant: Variant
     base_config: dict[str, Any]
 
@@ -282,11 +312,14 @@ class FEStudyConfig:
                                                edges["resolution_deg"])
         with _section("fe_study.stability_audit"):
             audit = StabilityAuditConfig(study["stability_audit"]["softest"])
+        with _section("fe_study.fold_section"):
+            fold = FoldSectionConfig.from_mapping(study["fold_section"])
         with _section("mesh.size"):
             default = default_variant(sections["mesh"], sections["fe"])
         speed_accuracy = study["speed_accuracy"]
         return cls(reference, variants, speed_accuracy["target"], speed_accuracy["max_dofs"],
-                   stability_mesh, failure_edges, audit, default, Variant.base_config(sections))
+                   stability_mesh, failure_edges, audit, fold, default,
+                   Variant.base_config(sections))
 
 
 @dataclass(frozen=True, slots=True)

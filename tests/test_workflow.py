@@ -557,6 +557,16 @@ def test_fe_study_rules_run_end_to_end(small_run: Path) -> None:
     assert all(c.stable is not None and c.moved_mm < 1e-3 for c in audit.cases), audit.cases
     assert "Are the sweep&#x27;s converged states stable?" in page
     assert 'id="stability-audit"' in page
+    # the named prone case cut at the fold both ways: nothing touches, the same state
+    from studies.fold_section import FoldSections
+
+    (fold,) = FoldSections.read(study / "fold_section.json").cases
+    assert fold.case == "c1=2.00_phi=180.0_theta=0.0"
+    on, off = sorted(fold.states, key=lambda s: s.setting != "self-contact")
+    assert on.status == off.status == "converged" and on.self_contact_force_N == 0
+    assert on.max_disp_mm == pytest.approx(off.max_disp_mm, rel=1e-6)
+    assert np.allclose(on.segments_mm, off.segments_mm, atol=1e-3)
+    assert 'id="fold-section"' in page and (small_run / "results/report/fold_section.png").is_file()
 
 
 @pytest.mark.parametrize(

@@ -13,6 +13,7 @@ from report.common import PAPER_C1_RANGE
 from report.context import Context
 from report.html import fmt, h3, missing, para, pct, table
 from report.sections.extrapolation import extrapolation_section
+from report.sections.fold import fold_section_section
 from studies.figures import fe as fem_plots
 
 
@@ -74,6 +75,8 @@ def stability_section(ctx: Context) -> str:
     out.append(_sweep_stability(ctx))
     out.append(h3("Where the sweep's failures begin"))
     out.append(failure_edges_section(ctx.results.get("fe_failure_edges")))
+    out.append(h3("The fold with and without self-contact"))
+    out.append(fold_section_section(ctx))
     out.append(h3("Are the sweep's converged states stable?"))
     out.append(stability_audit_section(ctx.results.get("fe_stability_audit")))
     out.append(h3("Surrogate outside its training data"))

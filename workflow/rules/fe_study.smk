@@ -182,3 +182,29 @@ rule fe_stability_audit:
         ENV
     script:
         "../scripts/fe_stability_audit.py"
+
+
+# The fold with and without the skin's self-contact (studies.fold_section): the named cases and
+# the sweep's largest self-contact forces, each solved both ways and cut at the fold, for the
+# report's picture. It reads the sweep's dataset, so it is not part of `snakemake fe_study`.
+rule fe_fold_section:
+    input:
+        mesh=MESH,
+        dataset=DATASET,
+    output:
+        FE_FOLD_SECTION_JSON,
+    params:
+        config=CONFIG.sections_of("fe", "material", "mesh"),
+        cases=CONFIG.fe_study.fold_section.cases,
+        largest=CONFIG.fe_study.fold_section.largest,
+    log:
+        "results/logs/fe_study/fold_section.log",
+    benchmark:
+        "results/benchmarks/fe_study/fold_section.tsv"
+    threads: 1
+    resources:
+        mem_mb=4000,
+    conda:
+        ENV
+    script:
+        "../scripts/fe_fold_section.py"
