@@ -11,12 +11,20 @@ coordinates in its cell are then found by Newton's method on the cell's map.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from surrogate.exceptions import OutsideMeshError
 
-CANDIDATES = 24
-"""Cells whose centroids are nearest a point, among which the one that holds it is sought."""
+CANDIDATES = 8
+"""Cells whose centroids are nearest a point, among which the one that holds it is sought
+when the nearest does not; eight times as many each time none of them does
+(:func:`_cells_holding`)."""
+BLOCK = 65_536
+"""Points searched at once: bounds the search's memory to a few tens of megabytes a block."""
+INSIDE = 1e-9
+"""How far below zero a barycentric coordinate may fall for its cell still to hold a point."""
 OUTSIDE_M = 1e-3
 """How far outside the mesh (m) a point may lie and still be answered, on its nearest cell's
 face: a point on the curved skin lies up to a fraction of a millimetre outside the straight-sided
@@ -71,28 +79,28 @@ def locate(X: np.ndarray, cells: np.ndarray, points: np.ndarray) -> tuple[np.nda
 
 def _cells_holding(X: np.ndarray, cells: np.ndarray, points: np.ndarray
                    ) -> tuple[np.ndarray, np.ndarray]:
-    """Each point's cell (M,) and its barycentric coordinates there (M, 4): see :func:`locate`."""
+    """Each point's cell (M,) and its barycentric coordinates there (M, 4): see :func:`locate`.
+
+    A search that cannot miss: a cell that holds a point has its centroid within the mesh's
+    largest centroid-to-corner distance (its reach) of it, so each point's candidates, nearest
+    centroid first, are widened (1, then :data:`CANDIDATES`, then eight times as many each
+    round) until one holds the point or every centroid within the reach (and
+    :data:`OUTSIDE_M` beyond it) has been tried; the latter points lie outside the mesh, and
+    the cell they are nearest inside is kept for the gap. Each cell's affine map is inverted
+    once; points go in blocks of :data:`BLOCK`, so memory stays bounded for any number.
+    """
     from scipy.spatial import cKDTree
 
     X, points = np.asarray(X, dtype=float), np.asarray(points, dtype=float)
-    corners = X[cells]  # (C, 4, 3)
-    k = min(CANDIDATES, len(cells))
-    _, near = cKDTree(corners.mean(axis=1)).query(points, k=k)
-    near = near.reshape(len(points), k)
-    T = corners[near]  # (M, k, 4, 3)
-    edges = np.swapaxes(T[:, :, 1:, :] - T[:, :, :1, :], -1, -2)  # columns v_j - v_0
-    rhs = (points[:, None, :] - T[:, :, 0, :])[..., None]
-    size = np.abs(edges).max(axis=(-2, -1))
-    flat = np.abs(np.linalg.det(edges)) <= 1e-12 * size**3  # no volume: holds no point
-    edges[flat] = np.eye(3)
-    lam = np.linalg.solve(edges, rhs)[..., 0]  # (M, k, 3)
-    bary = np.concatenate([1.0 - lam.sum(-1, keepdims=True), lam], axis=-1)
-    score = np.where(flat, -np.inf, bary.min(-1))
-    best = np.argmax(score, axis=1)
-    pick = np.arange(len(points))
-    weights = np.clip(bary[pick, best], 0.0, None)
+    cells_map = _CellMaps(X[cells])
+    tree = cKDTree(cells_map.centroids)
+    which = np.zeros(len(points), dtype=np.int64)
+    bary = np.zeros((len(points), 4))
+    for start in range(0, len(points), BLOCK):
+        block = slice(start, start + BLOCK)
+        which[block], bary[block] = cells_map.search(tree, points[block])
+    weights = np.clip(bary, 0.0, None)
     weights /= weights.sum(axis=1, keepdims=True)
-    which = near[pick, best]
     rows = cells[which]
     gap = np.linalg.norm(np.einsum("mj,mjd->md", weights, X[rows]) - points, axis=1)
     outside = gap > OUTSIDE_M
@@ -103,6 +111,62 @@ def _cells_holding(X: np.ndarray, cells: np.ndarray, points: np.ndarray
             f"{int(np.argmax(gap))}): fields are known inside the body only",
             {int(i): float(gap[i]) for i in np.flatnonzero(outside)}, OUTSIDE_M)
     return which, weights
+
+
+class _CellMaps:
+    """The tetrahedra's affine maps, inverted once: barycentric coordinates by a product."""
+
+    def __init__(self, corners: np.ndarray) -> None:
+        self.origin = corners[:, 0]
+        self.centroids = corners.mean(axis=1)
+        self.reach = float(np.linalg.norm(corners - self.centroids[:, None], axis=-1).max()) \
+            + OUTSIDE_M
+        e = corners[:, 1:] - corners[:, :1]  # rows v_j - v_0
+        # the inverse of the matrix whose columns are the edges, by cross products (no LAPACK
+        # call per cell): its rows are (e2 × e3, e3 × e1, e1 × e2) / det
+        rows = np.stack([np.cross(e[:, 1], e[:, 2]), np.cross(e[:, 2], e[:, 0]),
+                         np.cross(e[:, 0], e[:, 1])], axis=1)
+        det = np.einsum("cj,cj->c", e[:, 0], rows[:, 0])
+        self.flat = np.abs(det) <= 1e-12 * np.abs(e).max(axis=(1, 2))**3  # no volume
+        self.inverse = rows / np.where(self.flat, 1.0, det)[:, None, None]
+
+    def coordinates(self, cell: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Barycentric coordinates of ``points`` (..., 3) in ``cell`` (...), and their least.
+
+        The least is -inf in a cell without volume.
+        """
+        lam = np.einsum("...ij,...j->...i", self.inverse[cell], points - self.origin[cell])
+        coords = np.concatenate([1.0 - lam.sum(-1, keepdims=True), lam], axis=-1)
+        return coords, np.where(self.flat[cell], -np.inf, coords.min(-1))
+
+    def search(self, tree: Any, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`_cells_holding` for one block of points: each one's cell and coordinates."""
+        n_cells = len(self.origin)
+        which = np.zeros(len(points), dtype=np.int64)
+        bary = np.full((len(points), 4), -np.inf)
+        todo = np.arange(len(points))
+        k = 1
+        while len(todo):
+            _, near = tree.query(points[todo], k=k, distance_upper_bound=self.reach)
+            near = near.reshape(len(todo), k)
+            valid = near < n_cells  # beyond the reach: no such neighbour
+            coords, score = self.coordinates(np.where(valid, near, 0), points[todo, None, :])
+            score[~valid] = -np.inf
+            best = np.argmax(score, axis=1)
+            pick = np.arange(len(todo))
+            better = score[pick, best] > bary[todo].min(axis=1)
+            which[todo[better]] = near[pick, best][better]
+            bary[todo[better]] = coords[pick, best][better]
+            # done: held by a cell, or every centroid within the reach tried (the k-th beyond)
+            held = score[pick, best] >= -INSIDE
+            exhausted = ~valid[:, -1] | (k == n_cells)
+            todo = todo[~(held | exhausted)]
+            k = min(CANDIDATES if k == 1 else 8 * k, n_cells)
+        lost = ~np.isfinite(bary[:, 0])  # far outside: no centroid within the reach
+        if lost.any():
+            which[lost] = tree.query(points[lost])[1]
+            bary[lost] = self.coordinates(which[lost], points[lost])[0]
+        return which, bary
 
 
 def edge_order(X: np.ndarray, cells: np.ndarray) -> np.ndarray:

@@ -425,3 +425,38 @@ def test_a_held_out_block_without_cases_the_by_sample_model_trained_on(
     page = held_out_part(Context(out_dir=folder, clinical=[], paths={}, clinical_fields=[],
                                  results={"held_out": back}))
     assert page.count("held out model") == 1 and page.count("by sample model") == 1
+
+
+def test_a_point_inside_a_cell_is_found_however_far_its_centroid_lies() -> None:
+    """Near a big cell's corner, dozens of small cells' centroids are nearer than its own."""
+    from scipy.spatial import Delaunay
+
+    from surrogate.interpolation import locate
+
+    axis = np.linspace(0.0, SIZE, 3)
+    coarse = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1).reshape(-1, 3)
+    fine = np.stack(np.meshgrid(*[np.linspace(0.01, 0.03, 7)] * 3, indexing="ij"),
+                    axis=-1).reshape(-1, 3)
+    X = np.vstack([coarse, fine])
+    cells = Delaunay(X).simplices
+    cells = cells[np.abs(np.linalg.det(X[cells[:, 1:]] - X[cells[:, :1]])) > 1e-12 * SIZE**3]
+    # four points near each corner of every cell, inside it
+    weights = np.full((4, 4), 0.01) + np.eye(4) * 0.96
+    points = np.einsum("aj,cjd->cad", weights, X[cells]).reshape(-1, 3)
+    own = np.repeat(np.arange(len(cells)), 4)
+    centroids = X[cells].mean(axis=1)
+    rank = (np.linalg.norm(centroids[None] - points[:, None], axis=2)
+            < np.linalg.norm(centroids[own] - points, axis=1)[:, None]).sum(axis=1)
+    assert rank.max() > 24  # beyond the fixed candidate count that missed them
+    rows, w = locate(X, cells, points)
+    assert np.all(w >= 0)
+    np.testing.assert_allclose(interpolate(X, rows, w), points, atol=1e-12)
+    # blocks of any size give the same cells
+    import surrogate.interpolation as interpolation
+
+    block = interpolation.BLOCK
+    try:
+        interpolation.BLOCK = 7
+        np.testing.assert_allclose(interpolate(X, *locate(X, cells, points)), points, atol=1e-12)
+    finally:
+        interpolation.BLOCK = block
