@@ -333,9 +333,11 @@ class Surrogate:
         every node of a quadratic mesh, linear between the vertices otherwise): a tumour's
         material position, found from the imaged shape (:func:`fem.tracking.to_reference`), is
         predicted directly.
-        Every point goes through the domain network (points strictly inside the body, not on
-        the clamped chest wall); an exact-Dirichlet model's factor is evaluated at them with the
-        model's own length scale. Each query of the returned model costs in proportion to M.
+        A point on the chest wall's clamped face (where the mesh has the cells to tell) is
+        answered as the model answers its boundary nodes (exactly zero for an exact-Dirichlet
+        or ``pod`` model, as FE has it), every other point by the domain network; an
+        exact-Dirichlet model's factor is evaluated at them with the model's own length scale.
+        Each query of the returned model costs in proportion to M.
 
         Raises:
             ValueError: if ``points`` is not a finite (M, 3) array; for a ``pod`` model, also
@@ -369,12 +371,17 @@ class Surrogate:
                     "this pod model answers at its material points only: its dataset has no "
                     "mesh cells to interpolate its modes in (rebuild the dataset with its mesh, "
                     "snakemake --forcerun aggregate, and train again)")
-        elif c.cells is not None:  # the networks answer anywhere; only the body is trained
+        boundary = np.zeros(len(points), dtype=bool)
+        if c.config.structure != "pod" and c.cells is not None:
+            # the networks answer anywhere, but only the body is trained: a point outside is
+            # refused, and one on the chest wall's clamped face (a combination of boundary
+            # corners alone) is answered as the model answers its own boundary nodes
             from surrogate.interpolation import locate
 
-            locate(self.X, c.cells, points)
+            rows, weights = locate(self.X, c.cells, points)
+            boundary = np.where(self.boundary[rows], 0.0, weights).sum(axis=1) <= 1e-9
         return Surrogate(replace(
-            c, X=points, boundary=np.zeros(len(points), dtype=bool),
+            c, X=points, boundary=boundary,
             point_factor=None if factor is None else factor.astype(np.float32),
             node_index=None, basis=basis, cells=None, nodes=None,
         ))
