@@ -23,10 +23,13 @@ def read_points(path: Path) -> tuple[list[str], np.ndarray]:
 
     Raises:
         MeshInputError: naming the file and the row for a missing header, a short row or a
-            coordinate that is not a finite number.
+            coordinate that is not a finite number, and the file for one that is not text.
     """
-    with path.open(newline="") as f:
-        rows = list(csv.reader(f))
+    try:  # "utf-8-sig": a spreadsheet's "CSV UTF-8" starts with a byte-order mark
+        with path.open(newline="", encoding="utf-8-sig") as f:
+            rows = list(csv.reader(f))
+    except (UnicodeDecodeError, csv.Error) as err:
+        raise MeshInputError(f"{path}: not a text CSV of name,x,y,z ({err})") from None
     if not rows or [c.strip().lower() for c in rows[0]] != HEADER:
         raise MeshInputError(f"{path}: the first row must be the header {','.join(HEADER)}")
     names, points = [], []
@@ -54,8 +57,8 @@ def write_points(path: Path, names: list[str], points: np.ndarray) -> None:
     with path.open("w", newline="") as f:
         writer = csv.writer(f)
         writer.writerow(HEADER)
-        for name, p in zip(names, points, strict=True):
-            writer.writerow([name, *(repr(float(v)) for v in p)])
+        writer.writerows([name, *map(repr, p)] for name, p in zip(names, points.tolist(),
+                                                                   strict=True))
 
 
 def moved_table(names: list[str], X: np.ndarray, u_mm: np.ndarray) -> str:

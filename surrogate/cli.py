@@ -11,7 +11,8 @@ Examples::
 ``.npy`` (the (N, 3) array in mm) or ``.xdmf`` (on the mesh of ``--mesh``, for ParaView).
 With ``--points`` (a ``name,x,y,z`` CSV of material points, in the model's reference frame, m:
 the project's frame) it predicts at those points instead, prints each one's displacement and
-position, and writes their positions in that posture with ``-o`` as a ``name,x,y,z`` CSV, which
+position (up to :data:`PRINTED_POINTS` of them; for more, the summary of the whole field), and
+writes their positions in that posture with ``-o`` as a ``name,x,y,z`` CSV, which
 ``python -m meshes.frame --to file`` carries into an imported file's frame. With
 ``--from-phi`` (and ``--from-theta``) it also gives each point's movement from that posture to
 this one at the same C1 (a tumour seen prone, at supine: ``--phi 0 --from-phi 180``): printed
@@ -42,6 +43,10 @@ from fem.dataset import DatasetError
 from meshes.points import moved_table, movement_table, read_points, write_points
 from surrogate.config import SurrogateConfig
 from surrogate.exceptions import ExtrapolationWarning, OutsideMeshError, SurrogateError
+
+PRINTED_POINTS = 50
+"""Up to this many named points are printed one per line; more get the whole field's summary
+(their table goes to ``--output``)."""
 
 
 def predict(args: argparse.Namespace) -> int:
@@ -103,13 +108,11 @@ def predict(args: argparse.Namespace) -> int:
         print(f"error: {err}", file=sys.stderr)
         return 2
     norms = np.linalg.norm(u, axis=1)
-    if args.points:
+    if args.points and len(names) <= PRINTED_POINTS:
         print(moved_table(names, model.X, u))
         if u_since is not None:
             print(f"\nmoved from Φ = {since[0]:g}°, θ = {since[1]:g}° (at the same C1):")
             print(movement_table(names, u - u_since))
-        if output is not None:
-            write_points(output, names, model.X + 1e-3 * u)
     else:
         print(f"{u.shape[0]} points: max |u| = {norms.max():.3f} mm, "
               f"mean |u| = {norms.mean():.3f} mm")
@@ -117,6 +120,11 @@ def predict(args: argparse.Namespace) -> int:
             way = np.linalg.norm(u - u_since, axis=1)
             print(f"moved from Φ = {since[0]:g}°, θ = {since[1]:g}° (at the same C1): max |Δx| "
                   f"= {way.max():.3f} mm, mean |Δx| = {way.mean():.3f} mm")
+        if args.points and output is None:
+            print(f"(more than {PRINTED_POINTS} points: --output FILE.csv writes each one's "
+                  "position in that posture)")
+    if args.points and output is not None:
+        write_points(output, names, model.X + 1e-3 * u)
     if output is not None and output.suffix == ".npy":
         np.save(output, u)
     if output is not None:

@@ -233,9 +233,21 @@ def locate_quadratic(
     pairs = edge_order(X, cells)
     which, bary = _cells_holding(X, cells[:, :4], points)
     rows = cells[which]
-    nodes = X[rows]  # (M, 10, 3)
-    straight = bary
-    xi = bary[:, 1:].copy()
+    weights = np.empty((len(points), 10))
+    for start in range(0, len(points), BLOCK):
+        block = slice(start, start + BLOCK)
+        weights[block] = _curved_weights(X[rows[block]], bary[block], points[block], pairs)
+    return rows, weights
+
+
+def _curved_weights(nodes: np.ndarray, straight: np.ndarray, points: np.ndarray,
+                    pairs: np.ndarray) -> np.ndarray:
+    """:func:`locate_quadratic`'s shape functions for one block: Newton on each cell's map.
+
+    ``nodes`` (m, 10, 3) are each point's cell, ``straight`` its coordinates in the straight
+    cell of the corners.
+    """
+    xi = straight[:, 1:].copy()
     with np.errstate(all="ignore"):
         for _ in range(NEWTON_STEPS):
             bary = np.concatenate([1.0 - xi.sum(1, keepdims=True), xi], axis=1)
@@ -248,7 +260,7 @@ def locate_quadratic(
     # the straight cell's coordinates
     lost = ~np.isfinite(gap).all(axis=1) | (np.linalg.norm(gap, axis=1) > 1e-3 * OUTSIDE_M)
     bary[lost] = straight[lost]
-    return rows, quadratic_weights(bary, pairs)
+    return quadratic_weights(bary, pairs)
 
 
 def locate_in(X: np.ndarray, cells: np.ndarray, points: np.ndarray
@@ -267,5 +279,13 @@ def locate_in(X: np.ndarray, cells: np.ndarray, points: np.ndarray
 
 
 def interpolate(field: np.ndarray, rows: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """A field at the nodes (N, ...) at the located points (M, ...)."""
-    return np.einsum("mj,mj...->m...", weights, field[rows])
+    """A field at the nodes (N, ...) at the located points (M, ...), in the field's type.
+
+    Points go in blocks of :data:`BLOCK`: the gathered nodes of all of them at once would
+    take (M, nodes a cell, ...) values.
+    """
+    out = np.empty((len(rows), *field.shape[1:]), dtype=np.result_type(field, np.float32))
+    for start in range(0, len(rows), BLOCK):
+        block = slice(start, start + BLOCK)
+        out[block] = np.einsum("mj,mj...->m...", weights[block], field[rows[block]])
+    return out

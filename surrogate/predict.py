@@ -122,7 +122,8 @@ class Surrogate:
         def modes_of(_, idx, gain):
             # a pod model's modes at the points, gain included, as fields_of lays them out
             modes = self.basis[idx] * (gain * u_scale)[:, None, None]
-            return {"fields": jnp.asarray(modes.reshape(-1, config.modes).astype(np.float32))}
+            return {"fields": jnp.asarray(modes.reshape(-1, config.modes).astype(np.float32,
+                                                                                copy=False))}
 
         separable = weighs_fields(config)
         prepare = {"separable": fields_of, "pod": modes_of}.get(config.structure, split_first)
@@ -363,9 +364,10 @@ class Surrogate:
 
             if c.nodes is not None:
                 where = locate_quadratic(c.nodes.X, c.nodes.cells, points)
-                basis = interpolate(c.nodes.basis, *where).astype(np.float32)
+                basis = interpolate(c.nodes.basis, *where).astype(np.float32, copy=False)
             elif c.cells is not None:
-                basis = interpolate(c.basis, *locate(self.X, c.cells, points)).astype(np.float32)
+                basis = interpolate(c.basis, *locate(self.X, c.cells, points)).astype(
+                    np.float32, copy=False)
             else:
                 raise ValueError(
                     "this pod model answers at its material points only: its dataset has no "

@@ -146,7 +146,7 @@ def test_the_command_line_predicts_at_named_points(
     name, nothing written.
     """
     from meshes.points import read_points
-    from surrogate.cli import main
+    from surrogate.cli import PRINTED_POINTS, main
     from surrogate.predict import Surrogate
 
     ds, _, folder = trained
@@ -184,6 +184,26 @@ def test_the_command_line_predicts_at_named_points(
                  "-o", str(tmp_path / "u.npy")]) == 2
     assert "must end in .csv (with --points)" in capsys.readouterr().err
     assert not out.exists() and not (tmp_path / "u.npy").exists()
+    # a spreadsheet's "CSV UTF-8" (a byte-order mark first) reads; a binary file is named
+    points.write_bytes(b"\xef\xbb\xbfname,x,y,z\n" + "".join(
+        f"t{i},{x!r},{y!r},{z!r}\n" for i, (x, y, z) in enumerate(centroids)).encode())
+    assert main(["predict", str(folder), *query, "--points", str(points)]) == 0
+    assert "t1" in capsys.readouterr().out
+    points.write_bytes(bytes(range(256)))
+    assert main(["predict", str(folder), *query, "--points", str(points)]) == 2
+    assert f"{points}: not a text CSV of name,x,y,z" in capsys.readouterr().err
+    # many points: the summary printed, every point written
+    many = ds.X[ds.cells].mean(axis=1)
+    points.write_text("name,x,y,z\n" + "".join(
+        f"c{i},{x!r},{y!r},{z!r}\n" for i, (x, y, z) in enumerate(many)))
+    assert len(many) > PRINTED_POINTS
+    assert main(["predict", str(folder), *query, "--points", str(points), "-o", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert len(said.splitlines()) == 2 and said.startswith(f"{len(many)} points: max |u| = ")
+    names, moved = read_points(out)
+    u = Surrogate.load(folder).at(many).predict(2.0, 60.0)
+    assert len(names) == len(many)
+    np.testing.assert_allclose(moved, many + 1e-3 * u, rtol=0, atol=1e-12)
 
 
 def test_a_point_network_is_refused_outside_the_body_too(cube: tuple[Path, Path],
