@@ -108,7 +108,22 @@ def schema_errors(config: Mapping[str, Any], schema: dict[str, Any]) -> list[str
     errors.sort(key=lambda e: [str(p) for p in e.absolute_path])
     return [f"{'.'.join(map(str, e.absolute_path)) or '<top level>'}: {e.message}"
             + (STANDS_ALONE if e.validator == "required" and not e.absolute_path else "")
-            for e in errors]
+            for e in errors] + sorted(_non_finite(config))
+
+
+def _non_finite(value: Any, where: tuple[str, ...] = ()) -> Iterator[str]:
+    """``'dotted.key: nan is not a finite number'`` for every NaN or infinity in ``value``.
+
+    The schema's bounds do not hold them off: a comparison with NaN is never false.
+    """
+    if isinstance(value, Mapping):
+        for key, item in value.items():
+            yield from _non_finite(item, (*where, str(key)))
+    elif isinstance(value, list | tuple):
+        for index, item in enumerate(value):
+            yield from _non_finite(item, (*where, str(index)))
+    elif isinstance(value, float) and not np.isfinite(value):
+        yield f"{'.'.join(where) or '<top level>'}: {value} is not a finite number"
 
 
 def _with_defaults(validator_class: type) -> type:

@@ -643,3 +643,29 @@ def test_the_model_used_downstream_is_refitted_unless_told_not_to() -> None:
     raw["surrogate_study"]["refit"] = "yes"
     with pytest.raises(ConfigError, match="refit"):
         WorkflowConfig.from_mapping(raw)
+
+
+@pytest.mark.parametrize("where", [("dataset", "split", "train"),
+                                   ("surrogate_study", "prediction_budget_ms"),
+                                   ("fe_study", "failure_edges", "step_deg")])
+@pytest.mark.parametrize("value", [math.nan, math.inf])
+def test_a_number_that_is_not_finite_is_refused_by_its_key(where: tuple[str, ...],
+                                                           value: float) -> None:
+    """NaN passes every bound of the schema (a comparison with it is never false)."""
+    raw = read("tests/config.yaml")
+    section = raw
+    for key in where[:-1]:
+        section = section.setdefault(key, {})
+    section[where[-1]] = value
+    with pytest.raises(ConfigError, match=re.escape(f"{'.'.join(where)}: {value} is not a "
+                                                    "finite number")):
+        WorkflowConfig.from_mapping(raw)
+
+
+def test_the_fold_section_names_its_cases() -> None:
+    raw = read("config.yaml")
+    fold = WorkflowConfig.from_mapping(raw).fe_study.fold_section
+    assert fold.cases == ((0.8, -90.0, 0.0),) and fold.largest == 1
+    raw["fe_study"]["fold_section"] = {"cases": [[0.0, 10.0]]}
+    with pytest.raises(ConfigError, match=r"fe_study\.fold_section.*C1 > 0"):
+        WorkflowConfig.from_mapping(raw)
