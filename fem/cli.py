@@ -19,6 +19,7 @@ from pathlib import Path
 
 from mpi4py import MPI
 
+from fem.arguments import angle_deg, c1_kpa, output_folder
 from fem.case import run_case
 from fem.configfile import read_config_file
 from fem.exceptions import FEError
@@ -31,10 +32,11 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit status (0 also for a case that did not converge)."""
     parser = argparse.ArgumentParser(prog="python -m fem.cli", description=__doc__.splitlines()[0])
     parser.add_argument("mesh", type=Path, help="mesh XDMF with facet tags")
-    parser.add_argument("--c1", type=float, required=True, help="C1 in kPa")
-    parser.add_argument("--phi", type=float, required=True, help="gravity elevation Φ in degrees")
-    parser.add_argument("--theta", type=float, default=0.0, help="gravity azimuth θ in degrees")
-    parser.add_argument("--out", type=Path, required=True, help="case folder to write")
+    parser.add_argument("--c1", type=c1_kpa, required=True, help="C1 in kPa")
+    parser.add_argument("--phi", type=angle_deg, required=True,
+                        help="gravity elevation Φ in degrees")
+    parser.add_argument("--theta", type=angle_deg, default=0.0, help="gravity azimuth θ in degrees")
+    parser.add_argument("--out", type=output_folder, required=True, help="case folder to write")
     parser.add_argument(
         "--config", type=Path, help="workflow config (sections fe, material, mesh.fixed)"
     )

@@ -277,6 +277,7 @@ def main(argv: list[str] | None = None) -> int:
     import json
     import sys
 
+    from fem.arguments import angle_deg, c1_kpa, output_folder, positive
     from fem.configfile import read_config_file
     from fem.exceptions import FEError
     from fem.parameters import SolverSettings
@@ -286,12 +287,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m fem.reference",
                                      description="the unloaded reference of a loaded shape")
     parser.add_argument("observed", type=Path, help="the loaded shape: a mesh XDMF with tags")
-    parser.add_argument("--c1", type=float, required=True, help="C1 in kPa")
-    parser.add_argument("--phi", type=float, required=True, help="the observation's Φ (deg)")
-    parser.add_argument("--theta", type=float, default=0.0, help="the observation's θ (deg)")
-    parser.add_argument("--out", type=Path, required=True, help="folder to write")
+    parser.add_argument("--c1", type=c1_kpa, required=True, help="C1 in kPa")
+    parser.add_argument("--phi", type=angle_deg, required=True, help="the observation's Φ (deg)")
+    parser.add_argument("--theta", type=angle_deg, default=0.0, help="the observation's θ (deg)")
+    parser.add_argument("--out", type=output_folder, required=True, help="folder to write")
     parser.add_argument("--config", type=Path, help="config (sections fe, material, mesh)")
-    parser.add_argument("--tolerance-mm", type=float, default=1e-2,
+    parser.add_argument("--tolerance-mm", type=positive, default=1e-2,
                         help="largest node misfit accepted, mm")
     parser.add_argument("--method", choices=METHODS, default="inverse",
                         help="the inverse-motion solve checked by forward solves (default), or "

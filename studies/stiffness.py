@@ -209,6 +209,7 @@ def estimate_file(observation: Path, reference: Path, model_folder: Path, phi: f
 
 def main(argv: list[str] | None = None) -> int:
     """The estimate from a points file, or the benchmark."""
+    from fem.arguments import angle_deg, c1_kpa, output_folder
     from fem.configfile import read_config_file
     from fem.exceptions import FEError
     from fem.parameters import SolverSettings
@@ -226,12 +227,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--reference", type=Path, help="the reference mesh (XDMF)")
     parser.add_argument("--model", type=Path, required=True,
                         help="a surrogate trained on the sweep from the reference")
-    parser.add_argument("--phi", type=float, default=0.0, help="the observation's Φ (deg)")
-    parser.add_argument("--theta", type=float, default=0.0, help="the observation's θ (deg)")
+    parser.add_argument("--phi", type=angle_deg, default=0.0, help="the observation's Φ (deg)")
+    parser.add_argument("--theta", type=angle_deg, default=0.0, help="the observation's θ (deg)")
     parser.add_argument("--config", type=Path, help="config: solver settings and mesh.file")
-    parser.add_argument("--out", type=Path, help="folder to write")
+    parser.add_argument("--out", type=output_folder, help="folder to write")
     parser.add_argument("--no-fe", action="store_true", help="the surrogate's estimate alone")
-    parser.add_argument("--c1", type=float, nargs="+", default=[1.5, 3.5],
+    parser.add_argument("--c1", type=c1_kpa, nargs="+", default=[1.5, 3.5],
                         help="benchmark: the true C1 values (kPa)")
     parser.add_argument("--noise-mm", type=float, default=0.5, help="benchmark: noise (mm)")
     parser.add_argument("--seed", type=int, default=0, help="benchmark: the noise's seed")

@@ -259,6 +259,7 @@ def track_file(points_csv: Path, imaged: Path, reference: Path, model_folder: Pa
 
 def main(argv: list[str] | None = None) -> int:
     """Track the points by both paths, write the CSV (and a JSON beside it), print a summary."""
+    from fem.arguments import angle_deg, c1_kpa, output_file
     from fem.configfile import read_config_file
     from fem.exceptions import FEError
     from fem.parameters import SolverSettings
@@ -273,11 +274,11 @@ def main(argv: list[str] | None = None) -> int:
                         help="its reference (python -m fem.reference)")
     parser.add_argument("--model", type=Path, required=True,
                         help="a surrogate trained on the sweep from the reference")
-    parser.add_argument("--c1", type=float, required=True, help="C1 in kPa")
-    parser.add_argument("--phi", type=float, required=True, help="target posture's Φ (deg)")
-    parser.add_argument("--theta", type=float, default=0.0, help="target posture's θ (deg)")
+    parser.add_argument("--c1", type=c1_kpa, required=True, help="C1 in kPa")
+    parser.add_argument("--phi", type=angle_deg, required=True, help="target posture's Φ (deg)")
+    parser.add_argument("--theta", type=angle_deg, default=0.0, help="target posture's θ (deg)")
     parser.add_argument("--config", type=Path, help="config: solver settings and mesh.file")
-    parser.add_argument("--out", type=Path, required=True, help="CSV to write")
+    parser.add_argument("--out", type=output_file, required=True, help="CSV to write")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="%(message)s")
     try:

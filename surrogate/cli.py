@@ -38,6 +38,7 @@ from typing import Any
 
 import numpy as np
 
+from fem.arguments import angle_deg, c1_kpa
 from fem.configfile import read_config_file
 from fem.dataset import DatasetError
 from meshes.points import moved_table, movement_table, read_points, write_points
@@ -186,19 +187,19 @@ def parser() -> argparse.ArgumentParser:
     sub = top.add_subparsers(dest="command", required=True)
     p = sub.add_parser("predict", help="predict the displacement of one setup")
     p.add_argument("model", help="model folder (or its model.json)")
-    p.add_argument("--c1", type=float, required=True, help="C1 in kPa")
-    p.add_argument("--phi", type=float, required=True, help="gravity elevation angle, degrees")
-    p.add_argument("--theta", type=float, default=0.0, help="gravity azimuth angle, degrees")
+    p.add_argument("--c1", type=c1_kpa, required=True, help="C1 in kPa")
+    p.add_argument("--phi", type=angle_deg, required=True, help="gravity elevation angle, degrees")
+    p.add_argument("--theta", type=angle_deg, default=0.0, help="gravity azimuth angle, degrees")
     p.add_argument("-o", "--output",
                    help="write the displacement: .npy (array, mm) or .xdmf (on the mesh)")
     p.add_argument("--mesh", default="results/mesh/mesh.xdmf", help="mesh for an .xdmf output")
     p.add_argument("--points", metavar="CSV",
                    help="predict at these material points instead (name,x,y,z in the model's "
                         "reference frame, m); -o then writes their positions as a CSV")
-    p.add_argument("--from-phi", type=float, metavar="PHI",
+    p.add_argument("--from-phi", type=angle_deg, metavar="PHI",
                    help="also give the movement from the posture at this Φ (degrees) to the "
                         "one asked, at the same C1: per named point, or the field's (.xdmf)")
-    p.add_argument("--from-theta", type=float, metavar="THETA",
+    p.add_argument("--from-theta", type=angle_deg, metavar="THETA",
                    help="θ of the --from-phi posture, degrees (default 0)")
     p.add_argument("--strict", action="store_true",
                    help="refuse a setup the model warns at (no FE solution backs it): exit "

@@ -669,3 +669,45 @@ def test_the_fold_section_names_its_cases() -> None:
     raw["fe_study"]["fold_section"] = {"cases": [[0.0, 10.0]]}
     with pytest.raises(ConfigError, match=r"fe_study\.fold_section.*C1 > 0"):
         WorkflowConfig.from_mapping(raw)
+
+
+def test_the_command_line_bounds_are_the_configs() -> None:
+    from fem.arguments import ANGLE_DEG
+
+    angle = SCHEMA["definitions"]["angle"]
+    assert (angle["minimum"], angle["maximum"]) == ANGLE_DEG
+
+
+@pytest.mark.parametrize(("command", "args", "words"), [
+    ("fem.cli", ["m.xdmf", "--c1", "1", "--phi", "1e300", "--out", "o"],
+     "argument --phi: 1e300 is not an angle from -180 to 360 degrees"),
+    ("fem.cli", ["m.xdmf", "--c1", "nan", "--phi", "0", "--out", "o"],
+     "argument --c1: 'nan' is not a finite number"),
+    ("fem.cli", ["m.xdmf", "--c1", "1", "--phi", "0", "--out", "{file}"],
+     "argument --out: {file} is a file, not a folder to write into"),
+    ("fem.reference", ["m.xdmf", "--c1", "1", "--phi", "0", "--out", "o", "--tolerance-mm", "0"],
+     "argument --tolerance-mm: 0 is not above zero"),
+    ("fem.reference", ["m.xdmf", "--c1", "-1", "--phi", "0", "--out", "o"],
+     "argument --c1: C1 = -1 kPa is not above 0 and at most 1000 kPa"),
+    ("surrogate.cli", ["predict", "m", "--c1", "1", "--phi", "0", "--from-phi", "inf"],
+     "argument --from-phi: 'inf' is not a finite number"),
+    ("studies.stiffness", ["obs.xdmf", "--model", "m", "--phi", "1000"],
+     "argument --phi: 1000 is not an angle from -180 to 360 degrees"),
+    ("studies.tracking", ["p.csv", "--imaged", "i", "--reference", "r", "--model", "m",
+                          "--c1", "1", "--phi", "0", "--out", "{folder}"],
+     "argument --out: {folder} is a folder, not a file to write"),
+])
+def test_the_commands_refuse_a_bad_value_before_any_work(
+    command: str, args: list[str], words: str, tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    import importlib
+
+    file = tmp_path / "a_file"
+    file.write_text("")
+    names = {"file": str(file), "folder": str(tmp_path)}
+    main = importlib.import_module(command).main
+    with pytest.raises(SystemExit) as stop:
+        main([a.format(**names) for a in args])
+    assert stop.value.code == 2
+    assert words.format(**names) in capsys.readouterr().err

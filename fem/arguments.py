@@ -1,0 +1,78 @@
+"""The command line's inputs, checked in one place: angles, stiffness, tolerances, outputs.
+
+Every entry point takes these through argparse's ``type=``, so a bad value stops it before any
+work with ``error: argument --phi: ...`` and exit status 2, in the same words everywhere; the
+bounds are those of the config's schema (``workflow/schemas/config.schema.yaml``:
+``definitions.angle`` and the C1 values), so the command line and the config refuse the same
+values.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+ANGLE_DEG = (-180.0, 360.0)
+"""The range of Φ and θ (degrees), as the config's ``definitions.angle``."""
+C1_KPA = (0.0, 1000.0)
+"""C1 (kPa): above the first, at most the second, as the config's C1 values."""
+
+
+def _number(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+    return value
+
+
+def angle_deg(text: str) -> float:
+    """An angle in degrees, from -180 to 360."""
+    value = _number(text)
+    lo, hi = ANGLE_DEG
+    if not lo <= value <= hi:
+        raise argparse.ArgumentTypeError(f"{text} is not an angle from {lo:g} to {hi:g} degrees")
+    return value
+
+
+def c1_kpa(text: str) -> float:
+    """A stiffness C1 in kPa, above 0 and at most 1000."""
+    value = _number(text)
+    lo, hi = C1_KPA
+    if not lo < value <= hi:
+        raise argparse.ArgumentTypeError(f"C1 = {text} kPa is not above {lo:g} and at most "
+                                         f"{hi:g} kPa")
+    return value
+
+
+def positive(text: str) -> float:
+    """A finite number above zero (a tolerance, a length)."""
+    value = _number(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"{text} is not above zero")
+    return value
+
+
+def output_folder(text: str) -> Path:
+    """A folder to write into: absent (it is made) or a folder, not a file."""
+    path = Path(text)
+    if path.exists() and not path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text} is a file, not a folder to write into")
+    return path
+
+
+def output_file(text: str) -> Path:
+    """A file to write: in a folder that exists, and not itself a folder."""
+    path = Path(text)
+    if path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text} is a folder, not a file to write")
+    if not path.parent.is_dir():
+        raise argparse.ArgumentTypeError(f"the folder of {text} does not exist")
+    return path
+
+
+__all__ = ["ANGLE_DEG", "C1_KPA", "angle_deg", "c1_kpa", "output_file", "output_folder",
+           "positive"]
