@@ -25,6 +25,7 @@ state on a fold has one. The matrix and the factorisation are kept with the prob
 
 from __future__ import annotations
 
+import itertools
 import weakref
 from dataclasses import dataclass
 from typing import Any
@@ -72,6 +73,12 @@ class Inertia:
                 "stable": self.stable}
 
 
+MUMPS_INERTIA_OPTIONS = {"mat_mumps_icntl_24": 1, "mat_mumps_icntl_13": 1}
+"""Null-pivot detection (PETSc's inertia needs it) and, in parallel, the root front on one
+process."""
+_prefix_counter = itertools.count()
+
+
 class InertiaCounter:
     """Counts the inertia of one problem's tangent, state after state, on one factorisation.
 
@@ -105,6 +112,14 @@ class InertiaCounter:
         self.ksp = PETSc.KSP().create(problem.mesh.comm)
         self.ksp.setOperators(self.A)
         self.ksp.setType("preonly")
+        # MUMPS's settings in PETSc's database under this counter's own prefix, not on the
+        # factor alone: where self-contact adds entries to the tangent, PETSc factorises anew
+        # in a new factor matrix, which reads them from there
+        self._prefix = f"inertia{next(_prefix_counter)}_"
+        self.ksp.setOptionsPrefix(self._prefix)
+        opts = PETSc.Options()
+        for key, value in MUMPS_INERTIA_OPTIONS.items():
+            opts[f"{self._prefix}{key}"] = value
         pc = self.ksp.getPC()
         pc.setType("cholesky")
         pc.setFactorSolverType("mumps")
@@ -134,9 +149,12 @@ class InertiaCounter:
         return Inertia(negative, zero, positive, self.pressure_dofs)
 
     def destroy(self) -> None:
-        """Free the matrix and the factorisation."""
+        """Free the matrix, the factorisation and the options."""
         self.ksp.destroy()
         self.A.destroy()
+        opts = PETSc.Options()
+        for key in MUMPS_INERTIA_OPTIONS:
+            opts.delValue(f"{self._prefix}{key}")
 
 
 #: One counter per live problem (dropped with it).

@@ -344,3 +344,22 @@ def test_the_fold_section_shows_the_crease_crossing_itself_only_without_self_con
     assert _crossings(np.asarray(case.reference_mm)) == 0
     plot_fold_section([case.to_json()], tmp_path / "fold.png")
     assert (tmp_path / "fold.png").stat().st_size > 10_000
+
+
+@pytest.mark.solve
+def test_the_inertia_is_counted_when_the_contact_adds_entries_to_the_tangent() -> None:
+    """Counted open (no pair), then closed: PETSc factorises the grown pattern anew."""
+    from fem.stability import tangent_inertia
+
+    mesh, tags = c_block(0.05, 4)
+    problem = GravityProblem(mesh, tags, Discretisation(), FixedBoundaries(), None,
+                             SelfContact())
+    solver = NewtonSolver(problem)
+    problem.set_case(Material(C1=500.0), Gravity(phi=0.0))
+    apart = tangent_inertia(problem)
+    assert problem.self_contact_status()["pairs"] == 0 and apart.stable
+    assert solve_incrementally(problem, solver, Loading()).converged
+    assert problem.self_contact_status()["pairs"] > 0
+    touching = tangent_inertia(problem)
+    assert touching.stable and touching.pressure_dofs == apart.pressure_dofs
+    solver.destroy()
