@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import json
 import os
+import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -212,10 +214,25 @@ def load_checkpoint(folder: str | Path) -> Checkpoint:
         folder = folder.parent
     try:
         meta = json.loads((folder / MODEL_JSON).read_text())
-        with np.load(folder / PARAMS_NPZ, allow_pickle=False) as npz:
-            arrays = {k: npz[k] for k in npz.files}
     except (OSError, json.JSONDecodeError, ValueError) as err:
         raise ModelFileError(f"cannot read a surrogate model from {folder}: {err}") from None
+    version = meta.get("format_version") if isinstance(meta, dict) else None
+    if not isinstance(version, int) or isinstance(version, bool) \
+            or not 1 <= version <= FORMAT_VERSION:
+        raise ModelFileError(f"{folder / MODEL_JSON}: format_version {version!r} is not one this "
+                             f"code reads (1 to {FORMAT_VERSION}): a model of other code")
+    try:
+        with np.load(folder / PARAMS_NPZ, allow_pickle=False) as npz:
+            arrays = {k: npz[k] for k in npz.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as err:
+        raise ModelFileError(f"{folder / PARAMS_NPZ} is not a whole NumPy archive of the "
+                             f"model's weights ({type(err).__name__}: {err}): truncated or "
+                             "damaged; save the model again") from None
+    damaged = sorted(k for k, a in arrays.items()
+                     if np.issubdtype(a.dtype, np.floating) and not np.all(np.isfinite(a)))
+    if damaged:
+        raise ModelFileError(f"{folder / PARAMS_NPZ}: {', '.join(damaged)} hold values that are "
+                             "not finite numbers")
     try:
         config = SurrogateConfig.from_mapping(meta["config"])
         points = {k: arrays.pop(k) for k in list(arrays) if k.startswith(("points_", "mesh_"))}

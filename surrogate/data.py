@@ -11,6 +11,7 @@ by one scalar scale, so the loss's L2 norm stays isotropic.
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, fields
 from typing import Any, NamedTuple
 
@@ -85,8 +86,27 @@ class Normalisation:
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> Normalisation:
-        """Inverse of :meth:`as_dict`."""
-        return cls(**{**values, "x_mean": tuple(values["x_mean"])})
+        """Inverse of :meth:`as_dict`.
+
+        Raises:
+            ValueError: naming a value that is not a finite number, or a scale that is not
+                positive (a model card edited or damaged: it would answer NaN).
+        """
+        norm = cls(**{**values, "x_mean": tuple(values["x_mean"])})
+        numbers = {"x_std": norm.x_std, "c1_min": norm.c1_min, "c1_max": norm.c1_max,
+                   "u_scale": norm.u_scale, "c1_ref": norm.c1_ref,
+                   **{f"x_mean[{i}]": v for i, v in enumerate(norm.x_mean)}}
+        for name, value in numbers.items():
+            if isinstance(value, bool) or not isinstance(value, int | float) \
+                    or not math.isfinite(value):
+                raise ValueError(f"normalisation.{name} is {value!r}, not a finite number")
+        for name in ("x_std", "u_scale", "c1_ref"):
+            if numbers[name] <= 0:
+                raise ValueError(f"normalisation.{name} is {numbers[name]!r}, not positive")
+        if norm.c1_max <= norm.c1_min:
+            raise ValueError(f"normalisation.c1_max ({norm.c1_max}) is not above c1_min "
+                             f"({norm.c1_min})")
+        return norm
 
     def points(self, X: np.ndarray) -> np.ndarray:
         """Standardised coordinates (N, 3)."""

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import json
+import math
 import re
 import warnings
 from pathlib import Path
+from typing import Any
 
 import h5py
 import numpy as np
@@ -248,6 +250,41 @@ def test_a_pod_model_file_without_its_modes_is_refused(trained, tmp_path: Path) 
     np.savez(tmp_path / PARAMS_NPZ, **arrays)
     with pytest.raises(ModelFileError, match="a pod model needs its modes"):
         load_checkpoint(tmp_path)
+
+
+@pytest.mark.parametrize(("spoil", "words"), [
+    (lambda f: (f / "params.npz").write_bytes((f / "params.npz").read_bytes()[:5000]),
+     "params.npz is not a whole NumPy archive"),
+    (lambda f: _card(f, lambda m: m["normalisation"].update(x_std=math.nan)),
+     "normalisation.x_std is nan, not a finite number"),
+    (lambda f: _card(f, lambda m: m["normalisation"].update(u_scale=0.0)),
+     "normalisation.u_scale is 0.0, not positive"),
+    (lambda f: _card(f, lambda m: m.update(format_version=999)),
+     "format_version 999 is not one this code reads (1 to 2)"),
+], ids=["truncated", "nan-scale", "zero-scale", "future-format"])
+def test_a_damaged_model_folder_is_refused_by_what_is_wrong(
+    trained, tmp_path: Path, spoil: Any, words: str, capsys: pytest.CaptureFixture[str],
+) -> None:
+    """Refused on loading, by ``predict`` too (status 2), never answered with NaN."""
+    import shutil
+
+    from surrogate.checkpoint import load_checkpoint
+    from surrogate.cli import main
+
+    _, _, folder = trained
+    copy = tmp_path / "model"
+    shutil.copytree(folder, copy)
+    spoil(copy)
+    with pytest.raises(ModelFileError, match=re.escape(words)):
+        load_checkpoint(copy)
+    assert main(["predict", str(copy), "--c1", "2", "--phi", "60"]) == 2
+    assert words in capsys.readouterr().err
+
+
+def _card(folder: Path, edit: Any) -> None:
+    card = json.loads((folder / "model.json").read_text())
+    edit(card)
+    (folder / "model.json").write_text(json.dumps(card))
 
 
 def test_pod_settings_that_do_not_apply_are_refused(cube: tuple[Path, Path]) -> None:
