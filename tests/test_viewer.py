@@ -324,6 +324,14 @@ def test_a_page_for_any_model_from_the_command_line(
     assert ("the named points: 1 of 1 points lie outside the mesh by more than 1 mm: far ("
             in capsys.readouterr().err)
     assert not missing.exists()
+    # a page named like a folder: refused before any work, nothing left beside it
+    folder = tmp_path / "a_folder.html"
+    folder.mkdir()
+    with pytest.raises(SystemExit) as stop:
+        main([str(model_dir), "-o", str(folder), "--mesh", str(mesh)])
+    assert stop.value.code == 2
+    assert f"{folder} is a folder, not a file to write" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.endswith(".tmp")) == []
     with pytest.raises(ViewerError, match="not the model's"):
         fe_cases(results / "dataset" / "dataset.h5", np.arange(3), material_points=model.X + 0.01)
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import shutil
 import subprocess
 from collections.abc import Mapping, Sequence
@@ -261,9 +262,12 @@ def build_viewer(
     )
     output = Path(output)
     output.parent.mkdir(parents=True, exist_ok=True)
-    tmp = output.with_suffix(".tmp")
-    tmp.write_text(page, encoding="utf-8")
-    tmp.replace(output)
+    tmp = output.with_name(f".{output.name}.{os.getpid()}.tmp")  # no name a user may have
+    try:
+        tmp.write_text(page, encoding="utf-8")
+        tmp.replace(output)
+    finally:
+        tmp.unlink(missing_ok=True)
     shutil.copyfile(THREE_LICENSE, output.parent / "THREE-LICENSE.txt")
     info = {"points": len(model.X), "surface_vertices": int(len(vertices)),
             "triangles": len(triangles),

@@ -21,6 +21,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from fem.arguments import output_file
 from fem.dataset import DatasetError
 from meshes.exceptions import MeshInputError
 from meshes.points import read_points
@@ -47,7 +48,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m report.viewer",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("model", type=Path, help="the surrogate's model folder")
-    parser.add_argument("-o", "--output", type=Path, required=True, help="the page to write")
+    parser.add_argument("-o", "--output", type=output_file, required=True,
+                        help="the page to write")
     parser.add_argument("--mesh", type=Path, default=Path("results/mesh/mesh.xdmf"),
                         help="the mesh the model was trained on")
     parser.add_argument("--dataset", type=Path,
@@ -57,10 +59,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--points", type=Path, metavar="CSV",
                         help="named material points inside the body (name,x,y,z, m) to draw")
     args = parser.parse_args(argv)
-    if not args.output.parent.is_dir():
-        print(f"error: --output {args.output}: the folder {args.output.parent} does not exist",
-              file=sys.stderr)
-        return 2
     try:
         clinical, postures, start, initial = [], [], None, None
         if args.config:  # checked as a run checks it
