@@ -453,6 +453,12 @@ def build_dataset(
         if summary["status"] == "converged":
             if not np.all(np.isfinite(points["u"])):
                 raise DatasetError(f"case {case}: converged but its displacement has NaN/inf")
+            # no tissue moves farther than the body is large: such a field is no solution
+            size = float(np.linalg.norm(np.ptp(points["X"], axis=0)))
+            farthest = float(np.linalg.norm(points["u"], axis=1).max())
+            if farthest > size:
+                raise DatasetError(f"case {case}: {path} moves a point {farthest:.3g} m, farther "
+                                   f"than the body's own size ({size:.3g} m): not a solution")
             displacement[i] = points["u"]
 
     converged = np.array([s["status"] == "converged" for s in summaries])

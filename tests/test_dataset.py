@@ -168,6 +168,17 @@ def test_mismatched_point_count_names_the_case(tmp_path: Path) -> None:
     assert not (tmp_path / "ds.h5").exists()
 
 
+def test_a_converged_field_larger_than_the_body_is_refused(tmp_path: Path) -> None:
+    summaries, points = _cases(tmp_path)
+    with h5py.File(points[3], "a") as h5:
+        h5["u"][7] = [1e30, 0.0, 0.0]
+    match = ("case c1=4.00_phi=90.0_theta=0.0: .*points.h5 moves a point 1e\\+30 m, farther "
+             "than the body's own size")
+    with pytest.raises(DatasetError, match=match):
+        build_dataset(summaries, points, tmp_path / "ds.h5")
+    assert not (tmp_path / "ds.h5").exists()
+
+
 def test_truncated_case_file_names_the_case(tmp_path: Path) -> None:
     summaries, points = _cases(tmp_path)
     data = points[1].read_bytes()
