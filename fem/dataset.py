@@ -295,7 +295,8 @@ def read_case(summary_path: str | Path, points_path: str | Path) -> tuple[dict, 
         raise DatasetError(
             f"{summary_path}: the summary is of case {summary['case']!r} (C1 = {summary['C1']} "
             f"kPa, phi = {summary['phi']} deg, theta = {summary['theta']} deg), not of its folder "
-            f"{expected.id!r}; solve the case again (snakemake --forcerun solve -- {summary_path})"
+            f"{expected.id!r}; solve the case again (whichever job solved it, alone or in its "
+            f"direction's chain: snakemake {summary_path} --forcerun {summary_path})"
         )
     points = read_points(points_path)
     if points["case"] is not None and points["case"] != expected.id:

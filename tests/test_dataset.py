@@ -280,8 +280,11 @@ def test_a_summary_of_another_case_than_its_folder_is_refused(tmp_path: Path) ->
                        "'c1=2.00_phi=30.0_theta=0.0'"):
         build_dataset(summaries, points, tmp_path / "ds.h5")
     summaries[1].write_text(json.dumps({**summary, "phi": 45.0}))
-    with pytest.raises(DatasetError, match="not of its folder 'c1=2.00_phi=30.0_theta=0.0'"):
+    with pytest.raises(DatasetError, match="not of its folder 'c1=2.00_phi=30.0_theta=0.0'") \
+            as refused:
         build_dataset(summaries, points, tmp_path / "ds.h5")
+    # a remedy that reruns whichever job made the file, a chain's as well as a case's
+    assert f"snakemake {summaries[1]} --forcerun {summaries[1]}" in str(refused.value)
 
 
 def test_a_folder_holding_another_cases_files_is_refused(tmp_path: Path) -> None:
