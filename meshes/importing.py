@@ -292,9 +292,8 @@ def prepare_input(
     info["rules"] = {b.label: r.describe() for b, r in spec.surfaces.items()}
     x, tets, facets = into_project_frame(x, tets, facets, spec.orientation)
     info["orientation"] = spec.orientation.describe()
-    if spec.orientation.declared:
-        check_chest_wall_posterior(x, facets[Boundary.RIB], spec.orientation,
-                                   f"the input {spec.path}")
+    check_chest_wall_posterior(x, facets[Boundary.RIB], spec.orientation,
+                               f"the input {spec.path}")
     return x, tets, facets, info
 
 

@@ -114,10 +114,11 @@ class Orientation:
 def check_chest_wall_posterior(
     x: np.ndarray, rib_facets: np.ndarray, orientation: Orientation, what: str
 ) -> float:
-    """Refuse a declared orientation that puts the chest wall anterior of the breast.
+    """Refuse an orientation, declared or not, that puts the chest wall anterior of the breast.
 
     In the project's frame the chest wall is posterior (+x) of the tissue it holds: the rib
-    facets' centroid must lie at a larger x than the body's.
+    facets' centroid must lie at a larger x than the body's. A file without an orientation is
+    taken to be in that frame, and is checked the same way.
 
     Returns:
         How far posterior of the body's centroid the chest wall lies, m.
@@ -129,9 +130,15 @@ def check_chest_wall_posterior(
     body_x = float(x[:, 0].mean())
     if rib_x > body_x:
         return rib_x - body_x
+    frame = (f"with mesh.file.orientation axes {orientation.axes}, side {orientation.side}"
+             if orientation.declared else
+             "taken to be in the project's frame (x anterior to posterior: no "
+             "mesh.file.orientation axes)")
+    remedy = ("check the axes code (where each file axis points) and the side"
+              if orientation.declared else
+              "declare the file's axes and the breast's side (mesh.file.orientation)")
     raise GeometryError(
-        f"{what}: with mesh.file.orientation axes {orientation.axes}, side {orientation.side}, "
-        f"the chest wall (the rib facets) lies {1e3 * (body_x - rib_x):.3g} mm anterior of the "
-        "breast's centroid, where it belongs posterior of it: check the axes code (where each file "
-        "axis points) and the side"
+        f"{what}: {frame}, the chest wall (the rib facets) lies "
+        f"{1e3 * (body_x - rib_x):.3g} mm anterior of the breast's centroid, where it belongs "
+        f"posterior of it: {remedy}"
     )

@@ -117,6 +117,22 @@ def test_an_orientation_that_puts_the_chest_wall_anterior_is_refused(tmp_path: P
                             tmp_path / "m.xdmf")
 
 
+@pytest.mark.unit
+def test_a_file_without_orientation_whose_chest_wall_is_anterior_is_refused(
+    tmp_path: Path,
+) -> None:
+    """Taken to be in the project's frame, the box's x = 0 face as the rib is anterior."""
+    project, _, _ = _in_lps_mm(tmp_path)
+    front = {"plane": {"point": [0.0, 0.0, 0.0], "normal": [-1.0, 0.0, 0.0]}, "distance": 0.001}
+    for orientation in (None, {"axes": "project"}):
+        with pytest.raises(GeometryError, match=r"taken to be in the project's frame .* chest "
+                           r"wall .* mm anterior of the breast's centroid.*declare the file's "
+                           r"axes"):
+            write_imported_mesh(_spec(project, "m", front, orientation), SIZE,
+                                tmp_path / "m.xdmf")
+    assert not (tmp_path / "m.xdmf").exists()
+
+
 @pytest.mark.solve
 def test_the_displacement_is_the_same_in_either_frame(tmp_path: Path) -> None:
     """Prone at C1 = 1 kPa on the box and on its LPS-mm left-breast twin agree at every vertex.
