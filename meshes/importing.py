@@ -118,6 +118,13 @@ class ImportSpec:
             Boundary.from_label(name): BoundaryRule.from_mapping(rule, units)
             for name, rule in (values.get("surfaces") or {}).items()
         }
+        posterior = sorted(b.label for b, r in surfaces.items() if r.posterior is not None)
+        if posterior and values.get("orientation") is None:
+            raise GeometryError(
+                f"mesh.file.surfaces.{posterior[0]}: a posterior rule needs to know where the "
+                "patient's posterior is in the file: give mesh.file.orientation (axes and side, "
+                "e.g. {axes: LPS, side: left}, or {axes: project} for a file already in the "
+                "project's frame); without it the file's +x would be taken as posterior")
         return cls(
             path=str(values["path"]),
             units=units,

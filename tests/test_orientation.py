@@ -174,14 +174,17 @@ def test_the_posterior_rule_finds_the_chest_wall_in_either_frame(tmp_path: Path)
     """
     project, _, lps = _in_lps_mm(tmp_path)
     rule_m = {"posterior": {"angle": 30.0, "band": 0.001}}
-    direct = write_imported_mesh(_spec(project, "m", rule_m), SIZE, tmp_path / "a.xdmf")
+    direct = write_imported_mesh(_spec(project, "m", rule_m, {"axes": "project"}), SIZE,
+                                 tmp_path / "a.xdmf")
     declared = _spec(lps, "mm", POSTERIOR_RULE, {"axes": "LPS", "side": "left"})
     mapped = write_imported_mesh(declared, SIZE, tmp_path / "b.xdmf")
     for report in (direct, mapped):
         assert report["area_m2"]["rib"] == pytest.approx(BOX[1] * BOX[2], rel=1e-9)
-    # without the orientation, posterior is the file's +x: the box's left face, 5 x 15 cm
-    undeclared = write_imported_mesh(_spec(lps, "mm", POSTERIOR_RULE), SIZE, tmp_path / "c.xdmf")
-    assert undeclared["area_m2"]["rib"] == pytest.approx(BOX[0] * BOX[2], rel=1e-9)
+    # without the orientation, posterior would be the file's +x (the box's left face): refused
+    with pytest.raises(GeometryError, match=r"mesh.file.surfaces.rib: a posterior rule needs to "
+                       r"know where the patient's posterior is in the file: give "
+                       r"mesh.file.orientation"):
+        _spec(lps, "mm", POSTERIOR_RULE)
 
 
 @pytest.mark.unit
