@@ -170,23 +170,44 @@ def read_mesh(xdmf_path: str | Path, comm: Any = None) -> tuple[Any, Any, Any]:
         ``(mesh, cell_tags, facet_tags)``.
 
     Raises:
-        MeshInputError: if the file does not exist or holds no facet tags.
+        MeshInputError: if the file does not exist, is not such an XDMF mesh (a surface file,
+            a case's fields), holds no cell or facet tags, or has a node whose coordinates
+            are not finite numbers (named by its index in the file).
     """
     from dolfinx.io import XDMFFile
     from mpi4py import MPI
 
     path = Path(xdmf_path)
-    if not path.is_file() or not path.with_suffix(".h5").is_file():
-        raise MeshInputError(f"mesh file {path} (with its .h5) does not exist")
+    if not path.is_file():
+        raise MeshInputError(f"mesh file {path} does not exist")
+    if path.suffix != ".xdmf":
+        raise MeshInputError(
+            f"{path} is not a mesh of this project (an .xdmf with its .h5, as the workflow's "
+            "mesh rule writes it); a surface or volume file of another tool is imported by the "
+            "mesh rule (mesh.source: file)")
+    if not path.with_suffix(".h5").is_file():
+        raise MeshInputError(f"mesh file {path} has no {path.with_suffix('.h5').name} beside it")
     comm = MPI.COMM_WORLD if comm is None else comm
     with XDMFFile(comm, str(path), "r") as xdmf:
-        mesh = xdmf.read_mesh(name=MESH_NAME)
-        cell_tags = xdmf.read_meshtags(mesh, name=CELL_TAGS_NAME)
+        try:
+            mesh = xdmf.read_mesh(name=MESH_NAME)
+            cell_tags = xdmf.read_meshtags(mesh, name=CELL_TAGS_NAME)
+        except RuntimeError as err:
+            raise MeshInputError(
+                f"{path} holds no mesh named {MESH_NAME!r} with its cell tags, as the workflow's "
+                "mesh rule writes it (a case's fields.xdmf is not a mesh: give the mesh it was "
+                "solved on)") from err
         mesh.topology.create_connectivity(2, 3)
         try:
             facet_tags = xdmf.read_meshtags(mesh, name=FACET_TAGS_NAME)
         except RuntimeError as err:
             raise MeshInputError(f"{path} has no facet tags named {FACET_TAGS_NAME!r}") from err
+    bad = ~np.isfinite(mesh.geometry.x).all(axis=1)
+    if comm.allreduce(int(bad.any())):
+        index = np.asarray(mesh.geometry.input_global_indices)[bad]
+        raise MeshInputError(f"{path}: node {int(index[0]) if len(index) else '?'} (of "
+                             f"{comm.allreduce(int(bad.sum()))} with coordinates that are not "
+                             "finite numbers) has no place: the mesh file is damaged")
     return mesh, cell_tags, facet_tags
 
 

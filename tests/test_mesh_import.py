@@ -530,3 +530,37 @@ def test_a_rib_rule_that_clamps_a_sliver_is_refused(tmp_path: Path) -> None:
     base = {"plane": {"point": [0, 0, 0], "normal": [0, 0, 1]}, "distance": 0.001}
     with pytest.raises(SurfaceRuleError, match=r"selects 1.0\d* % of the boundary's area.*widen"):
         write_imported_mesh(spec(stl, rib=base), SIZE, tmp_path / "m.xdmf")
+
+
+def test_a_file_that_is_not_a_project_mesh_is_named_when_read(tmp_path: Path) -> None:
+    """An STL, a case's fields.xdmf and a mesh with a NaN node: each refused by what it is."""
+    import h5py
+    from dolfinx import mesh as dmesh
+    from dolfinx.io import XDMFFile
+    from mpi4py import MPI
+
+    from meshes.io import read_mesh, write_tagged_mesh
+
+    box = dmesh.create_unit_cube(MPI.COMM_WORLD, 2, 2, 2)
+    n = box.topology.index_map(3).size_local
+    box.topology.create_connectivity(2, 3)
+    facets = dmesh.exterior_facet_indices(box.topology)
+    write_tagged_mesh(box, dmesh.meshtags(box, 3, np.arange(n, dtype=np.int32),
+                                          np.ones(n, dtype=np.int32)),
+                      dmesh.meshtags(box, 2, facets, np.full(len(facets), 2, dtype=np.int32)),
+                      tmp_path / "mesh.xdmf")
+    assert read_mesh(tmp_path / "mesh.xdmf")[0].topology.index_map(3).size_local == n
+    stl = tmp_path / "breast.stl"
+    stl.write_text("solid s\nendsolid s\n")
+    with pytest.raises(MeshInputError, match="breast.stl is not a mesh of this project .* "
+                       "imported by the mesh rule"):
+        read_mesh(stl)
+    with XDMFFile(MPI.COMM_WORLD, str(tmp_path / "fields.xdmf"), "w") as xdmf:
+        xdmf.write_mesh(box)  # a mesh under dolfinx's own name, no tags: a case's fields file
+    with pytest.raises(MeshInputError, match="fields.xdmf holds no mesh named 'mesh' .*a "
+                       "case's fields.xdmf is not a mesh"):
+        read_mesh(tmp_path / "fields.xdmf")
+    with h5py.File(tmp_path / "mesh.h5", "a") as h5:
+        h5["Mesh/mesh/geometry"][4, 1] = np.nan
+    with pytest.raises(MeshInputError, match="mesh.xdmf: node 4 .* not finite numbers"):
+        read_mesh(tmp_path / "mesh.xdmf")
