@@ -65,6 +65,8 @@ test: setup lint
 # a second run there is refused, and the Snakemake locks a killed run left are cleared, so
 # finished cases are kept and interrupted ones are redone without --unlock.
 reproduce: setup
+	@if [ -e "$(WORKDIR)" ] && [ ! -d "$(WORKDIR)" ]; then \
+		echo "error: WORKDIR=$(WORKDIR) is a file, not a folder to work in" >&2; exit 2; fi
 	$(PY) -m studies.config $(abspath $(CONFIG))
 	$(SNAKEMAKE) -j$(JOBS) $(SNAKEMAKE_ARGS) $(PRESET_ARGS)
 
