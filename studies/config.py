@@ -212,6 +212,26 @@ def default_variant(mesh: Mapping[str, Any], fe: Mapping[str, Any]) -> Variant:
     return Variant(MeshSpec.from_mapping(size), element, fe["solver"], disc["quadrature_degree"])
 
 
+def check_sweep_splits(cases: tuple[Case, ...], clinical: tuple[Case, ...],
+                       split: SplitFractions) -> None:
+    """Refuse a sweep too small for the dataset's by-case split to fill its parts.
+
+    The clinical cases always go to the test part; of the other cases the split needs one to
+    train on, one to validate on and (with a test fraction) one more to test on.
+
+    Raises:
+        ValueError: naming how many cases there are, and the smallest sweep that works.
+    """
+    free = len(set(cases) - set(clinical))
+    needed = 3 if split.test > 0 else 2
+    if free < needed:
+        raise ValueError(
+            f"{len(cases)} cases, {len(cases) - free} of them clinical (held out as test): the "
+            f"dataset's by-case split needs at least {needed} other cases (train, validation"
+            f"{', test' if split.test > 0 else ''}); give the sweep at least "
+            f"{needed + len(cases) - free} cases")
+
+
 @dataclass(frozen=True, slots=True)
 class FailureEdgesConfig:
     """The sweep's failed cases traced (``fe_study.failure_edges``, :mod:`studies.failure_edge`).
@@ -607,7 +627,9 @@ class WorkflowConfig:
         with _section("clinical"):
             clinical = tuple(clinical_cases(sections["clinical"]))
         with _section("dataset.split"):  # checked here, not after every solve at aggregation
-            SplitFractions(**sections["dataset"].get("split", {}))
+            split = SplitFractions(**sections["dataset"].get("split", {}))
+        with _section("sweep"):
+            check_sweep_splits(cases, clinical, split)
         fe_study = FEStudyConfig.from_sections(sections)
         with _section("surrogate"):
             surrogate = SurrogateConfig.from_mapping(sections["surrogate"])

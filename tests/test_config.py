@@ -711,3 +711,13 @@ def test_the_commands_refuse_a_bad_value_before_any_work(
         main([a.format(**names) for a in args])
     assert stop.value.code == 2
     assert words.format(**names) in capsys.readouterr().err
+
+
+def test_a_sweep_too_small_for_the_splits_is_refused_naming_the_smallest_that_works() -> None:
+    raw = read("tests/config.yaml")
+    raw["sweep"] = {"C1_kPa": [1.0, 5.0], "phi_deg": [0.0, 180.0], "chains": False}
+    with pytest.raises(ConfigError, match=r"sweep.*4 cases, 2 of them clinical .* needs at least "
+                       r"3 other cases .* give the sweep at least 5 cases"):
+        WorkflowConfig.from_mapping(raw)
+    raw["sweep"]["phi_deg"] = [0.0, 90.0, 180.0]
+    assert len(WorkflowConfig.from_mapping(raw).cases) == 6
