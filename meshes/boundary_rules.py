@@ -61,7 +61,7 @@ class BoundaryRule:
             if not (0 < angle <= 90 and math.isfinite(band) and band > 0):
                 raise GeometryError(
                     "a posterior rule needs an angle in (0, 90] degrees and a positive band, "
-                    f"got angle {angle!r}, band {band!r}"
+                    f"got angle {angle!r}°, band {1e3 * band:g} mm"
                 )
         if not (math.isfinite(self.distance) and self.distance > 0):
             raise GeometryError(
@@ -119,7 +119,9 @@ class BoundaryRule:
             return f"group {self.group!r}"
         if self.plane is not None:
             point, normal = self.plane
-            return f"within {1e3 * self.distance:g} mm of the plane through {point} normal {normal}"
+            through = ", ".join(f"{1e3 * v:g}" for v in point)
+            return (f"within {1e3 * self.distance:g} mm of the plane through ({through}) mm, "
+                    f"normal {tuple(float(v) for v in normal)}")
         if self.posterior is not None:
             angle, band = self.posterior
             return (f"facing posterior within {angle:g}° and within {1e3 * band:g} mm of the most "
