@@ -372,17 +372,19 @@ def preview_rules(
     volume = read_volume(spec, size)
     selected = volume.select(spec)
     summary = selection_summary(volume.x, volume.faces, selected)
-    try:
+    x, _, facets = into_project_frame(
+        volume.x, volume.tets, name_facets(volume.faces, selected), spec.orientation
+    )
+    try:  # the run's checks of the selection and of the frame, in its order
         check_selection(volume.x, volume.faces, selected, spec.surfaces)
+        check_chest_wall_posterior(x, facets[Boundary.RIB], spec.orientation,
+                                   f"the input {spec.path}")
         problem = None
-    except SurfaceRuleError as err:
+    except (SurfaceRuleError, GeometryError) as err:
         problem = str(err)
     if png_path is not None:
         from meshes.plot import plot_boundaries
 
-        x, _, facets = into_project_frame(
-            volume.x, volume.tets, name_facets(volume.faces, selected), spec.orientation
-        )
         plot_boundaries(x, facets, png_path, title=f"rules on {Path(spec.path).name}")
     return summary, problem
 

@@ -5,7 +5,8 @@
 Reads the config's ``mesh`` section (``source: file``), reads and checks the file, and prints,
 for each rule, the facets it selects, their area and their share of the boundary's area; then
 whether the import would stop (two rules claim a facet, the rib is more than 70 % or less than
-2 % of the boundary). ``--png`` draws the boundary coloured by rule, in the project's frame.
+2 % of the boundary). The ``mesh`` section is checked by the config's schema first, as a run
+checks it. ``--png`` draws the boundary coloured by rule, in the project's frame.
 Exit status: 0 if the rules would do, 1 if not, 2 for a config or file that cannot be read.
 """
 
@@ -16,8 +17,10 @@ import sys
 from pathlib import Path
 
 from meshes.config import read_mesh_config
+from meshes.configfile import read_config_file
 from meshes.exceptions import GeometryError, MeshInputError
 from meshes.importing import preview_rules
+from meshes.schema import load_schema, schema_errors
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -28,6 +31,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--png", type=Path, help="draw the boundary, coloured by rule")
     args = parser.parse_args(argv)
     try:
+        # the mesh section checked as the run checks it (the schema), then read
+        problems = [p for p in schema_errors(read_config_file(args.config), load_schema())
+                    if p.startswith(("mesh.", "mesh:"))]
+        if problems:
+            raise GeometryError(f"{args.config}: invalid mesh section: " + "; ".join(problems))
         config = read_mesh_config(args.config)
         if config.file is None:
             raise GeometryError(f"{args.config}: mesh.source is not file: there is no import")

@@ -26,7 +26,6 @@ from typing import Any
 
 import jsonschema
 import numpy as np
-import yaml
 from jsonschema import validators
 
 from fem.configfile import ConfigFileError
@@ -38,10 +37,9 @@ from fem.parameters import SolverSettings
 from fem.sweep import Case, clinical_cases, random_cases, sweep_cases
 from meshes.config import MeshConfig, size_for_source
 from meshes.parametric import BreastGeometry
+from meshes.schema import SCHEMA_PATH, load_schema, schema_errors
 from studies.fe_variants import MeshSpec, Variant, expand_variants
 from surrogate.config import SurrogateConfig, SurrogateConfigError, parse_architecture
-
-SCHEMA_PATH = Path(__file__).resolve().parent.parent / "workflow" / "schemas" / "config.schema.yaml"
 
 
 class ConfigError(ValueError):
@@ -72,58 +70,6 @@ def read_config_file(path: str | Path) -> dict[str, Any]:
         return fem_read_config_file(path)
     except ConfigFileError as err:
         raise ConfigError(str(err)) from None
-
-
-def load_schema(path: str | Path = SCHEMA_PATH) -> dict[str, Any]:
-    """The JSON schema of the configuration (YAML)."""
-    return yaml.safe_load(Path(path).read_text())
-
-
-def _specific(error: jsonschema.ValidationError) -> list[jsonschema.ValidationError]:
-    """The errors that say what is wrong, for an error of a ``oneOf``/``anyOf`` alternative.
-
-    A value that fits none of the alternatives fails each of them; the alternatives of the
-    value's own type (a list for a list of C1 values) name the item at fault, e.g.
-    ``sweep.C1_kPa.1``, and the others only say that the type differs.
-    """
-    if not error.context:
-        return [error]
-    fitting = [e for e in error.context if not (e.validator == "type" and not e.relative_path)]
-    return [s for e in fitting for s in _specific(e)] or [error]
-
-
-#: Said beside a whole section missing: a user who wrote only the sections she changed.
-STANDS_ALONE = (" (a config file stands alone, nothing is taken from config.yaml: start from a "
-                "copy of it and change what you need)")
-
-
-def schema_errors(config: Mapping[str, Any], schema: dict[str, Any]) -> list[str]:
-    """Every schema violation of ``config`` as ``'dotted.key: message'``, sorted by key.
-
-    An item of a list is named by its index (``sweep.C1_kPa.1: -2.0 is less than or equal to
-    the minimum of 0``), not the whole list.
-    """
-    validator = jsonschema.Draft202012Validator(schema)
-    errors = [s for e in validator.iter_errors(config) for s in _specific(e)]
-    errors.sort(key=lambda e: [str(p) for p in e.absolute_path])
-    return [f"{'.'.join(map(str, e.absolute_path)) or '<top level>'}: {e.message}"
-            + (STANDS_ALONE if e.validator == "required" and not e.absolute_path else "")
-            for e in errors] + sorted(_non_finite(config))
-
-
-def _non_finite(value: Any, where: tuple[str, ...] = ()) -> Iterator[str]:
-    """``'dotted.key: nan is not a finite number'`` for every NaN or infinity in ``value``.
-
-    The schema's bounds do not hold them off: a comparison with NaN is never false.
-    """
-    if isinstance(value, Mapping):
-        for key, item in value.items():
-            yield from _non_finite(item, (*where, str(key)))
-    elif isinstance(value, list | tuple):
-        for index, item in enumerate(value):
-            yield from _non_finite(item, (*where, str(index)))
-    elif isinstance(value, float) and not np.isfinite(value):
-        yield f"{'.'.join(where) or '<top level>'}: {value} is not a finite number"
 
 
 def _with_defaults(validator_class: type) -> type:

@@ -8,6 +8,7 @@ the file's axes.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import meshio
@@ -19,6 +20,7 @@ from meshes.exceptions import GeometryError
 from meshes.importing import ImportSpec, write_imported_mesh
 from meshes.orientation import Orientation
 from meshes.quality import tet_volumes
+from tests.conftest import REPO
 from tests.test_mesh_import import BOX, SIZE, box_mesh
 
 # In the project's frame the chest wall is posterior: the box's face at x = BOX[0].
@@ -219,6 +221,62 @@ def test_the_preview_prints_what_each_rule_selects(tmp_path: Path) -> None:
     run = subprocess.run(cmd, capture_output=True, text=True)
     assert run.returncode == 1
     assert "the import would stop: the rib rule" in run.stdout and "narrow the rule" in run.stdout
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize(("orientation", "rib", "words"), [
+    ({}, POSTERIOR_RULE, "mesh.file.orientation"),
+    ({"axes": "LPS", "side": "left"}, {"posterior": {"angle": 30.0, "band": 1.0},
+                                       "distance": 1.0}, "mesh.file.surfaces.rib"),
+    ({"axes": "LPS", "side": "left"}, {"posterior": {"angle": "30", "band": 1.0}},
+     "mesh.file.surfaces.rib"),
+], ids=["empty-orientation", "distance-beside-posterior", "angle-as-text"])
+def test_the_preview_refuses_what_the_run_refuses(
+    tmp_path: Path, orientation: dict, rib: dict, words: str,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """A preview that said "the rules would do" where the run then stopped is worse than none."""
+    import yaml
+
+    from meshes.preview import main
+    from studies.config import ConfigError, WorkflowConfig
+
+    _, _, lps = _in_lps_mm(tmp_path)
+    mesh = {"source": "file", "file": {"path": str(lps), "units": "mm",
+                                       "orientation": orientation, "surfaces": {"rib": rib}}}
+    config = tmp_path / "import.yaml"
+    config.write_text(yaml.safe_dump({"mesh": mesh}))
+    assert main([str(config)]) == 2
+    said = capsys.readouterr().err
+    assert "invalid mesh section" in said and words in said, said
+    full = yaml.safe_load((REPO / "tests" / "config.yaml").read_text())
+    full["mesh"] = mesh
+    with pytest.raises(ConfigError, match=re.escape(words)):  # the run's own check
+        WorkflowConfig.from_mapping(full)
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize("orientation", [{"axes": "RAS", "side": "left"},
+                                         {"axes": "LAS", "side": "left"}],
+                         ids=["lps-declared-ras", "anterior-code"])
+def test_the_preview_says_the_import_would_stop_where_the_chest_wall_lands_anterior(
+    tmp_path: Path, orientation: dict, capsys: pytest.CaptureFixture[str],
+) -> None:
+    """An LPS file declared RAS, or with A for P: the run refuses it, so the preview says so."""
+    import yaml
+
+    from meshes.preview import main
+
+    _, rib_lps, lps = _in_lps_mm(tmp_path)
+    mesh = {"source": "file", "file": {"path": str(lps), "units": "mm",
+                                       "orientation": orientation, "surfaces": {"rib": rib_lps}}}
+    config = tmp_path / "import.yaml"
+    config.write_text(yaml.safe_dump({"mesh": mesh}))
+    assert main([str(config)]) == 1
+    said = capsys.readouterr().out
+    assert "the import would stop" in said and "anterior of the breast's centroid" in said
+    with pytest.raises(GeometryError, match="anterior of the breast's centroid"):
+        write_imported_mesh(ImportSpec.from_mapping(mesh["file"]), SIZE, tmp_path / "m.xdmf")
 
 
 @pytest.mark.unit
