@@ -4,8 +4,11 @@
 
 Every probe runs a real entry point in a working directory of its own: the project's
 Snakefile (``snakemake -n`` for a config, the mesh job for a geometry file, the aggregation
-job for a case folder's files) or ``python -m studies.config``. A probe passes when the run
-stops, names the problem in the words given (on the console or in the job's log), writes
+job for a case folder's files), ``python -m studies.config``, ``make reproduce``, or a
+command (``fem.cli``, ``fem.reference``, ``surrogate.cli predict``, ``studies.stiffness``,
+``report.viewer``) on a solved three-case sweep and a small model trained on it. A probe
+passes when the run stops (or, for an input that must be answered, answers), names the problem
+in the words given (on the console or in the job's log), writes
 nothing it should not (no ``results/`` for a bad config, no mesh for a bad file, the previous
 dataset untouched for bad case files) and writes no file outside its working directory.
 
@@ -183,6 +186,22 @@ CONFIG_PROBES: dict[str, Callable[[Path], Outcome]] = {
         config_with(mesh__source="file", mesh__file={"path": "b.stl", "surfaces": {}}),
         r"rib",
     ),
+    "a split fraction that is NaN": config_probe(
+        config_with(dataset__split={"train": float("nan"), "validation": 0.1, "test": 0.1}),
+        r"dataset\.split\.train: nan is not a finite number",
+    ),
+    "a prediction budget that is NaN": config_probe(
+        config_with(surrogate_study__prediction_budget_ms=float("nan")),
+        r"surrogate_study\.prediction_budget_ms: nan is not a finite number",
+    ),
+    "a reference tolerance that is NaN": config_probe(
+        config_with(reference_state__tolerance_mm=float("nan")),
+        r"reference_state\.tolerance_mm: nan is not a finite number",
+    ),
+    "a 2 x 2 sweep of the clinical cases and two more": config_probe(
+        config_with(sweep={"C1_kPa": [1.0, 5.0], "phi_deg": [0.0, 180.0]}),
+        r"sweep: 4 cases, 2 of them clinical .*? at least 5 cases",
+    ),
     "the parametric chest as an import's obstacle": config_probe(
         config_with(mesh__source="file", mesh__size={"fold_size": None, "order": 1},
                     mesh__file={"path": "b.stl", "surfaces": {"rib": RIB}},
@@ -300,14 +319,16 @@ FILE_PROBES: dict[str, Callable[[Path], Outcome]] = {
 
 # -- bad case files at aggregation ---------------------------------------------------------
 
-THREE_CASES = config_with(sweep={"C1_kPa": [1.0], "phi_deg": [0.0, 90.0, 180.0]})
+# the smallest sweep whose dataset every reader takes: three cases to train, validate and
+# test on (no clinical case, which the by-case split would hold out as test besides)
+SWEEP = config_with(sweep={"C1_kPa": [1.0], "phi_deg": [0.0, 90.0, 180.0]}, clinical=[])
 CASES = ("c1=1.00_phi=0.0_theta=0.0", "c1=1.00_phi=90.0_theta=0.0", "c1=1.00_phi=180.0_theta=0.0")
 
 
 def solved_sweep(workdir: Path) -> None:
     """Solve the three-case sweep and build its dataset once; the case-file probes copy it."""
-    path = workdir / "three.yaml"
-    path.write_text(yaml.safe_dump(THREE_CASES))
+    path = workdir / "sweep.yaml"
+    path.write_text(yaml.safe_dump(SWEEP))
     run = snakemake(workdir, path, "-j2", "results/dataset/dataset.h5")
     if run.returncode != 0:
         raise RuntimeError(f"the three-case sweep failed: {run.stderr[-2000:]}")
@@ -325,7 +346,7 @@ def case_probe(spoil: Callable[[Path], None], text: str) -> Callable[[Path, Path
         before = dataset.read_bytes()
         spoil(workdir / "results" / "cases")
         time.sleep(0.01)
-        run = snakemake(workdir, workdir / "three.yaml", "-j1", "results/dataset/dataset.h5")
+        run = snakemake(workdir, workdir / "sweep.yaml", "-j1", "results/dataset/dataset.h5")
         outcome = expect(run, text, workdir / "results/logs/aggregate.log")
         if outcome.passed and dataset.read_bytes() != before:
             return Outcome(False, "the previous dataset was changed")
@@ -374,6 +395,152 @@ CASE_PROBES: dict[str, Callable[[Path, Path], Outcome]] = {
 }
 
 
+# -- the commands, on the solved sweep and a model trained on it ----------------------------
+
+MESH = "results/mesh/mesh.xdmf"
+MODEL = "model"
+
+
+def train_model(solved: Path) -> None:
+    """A small pod model of the three-case sweep (the commands' probes load it)."""
+    run = subprocess.run(
+        [sys.executable, "-m", "surrogate.cli", "train", "results/dataset/dataset.h5",
+         "--config", str(REPO / "tests" / "config.yaml"), "--set", "structure=pod",
+         "--set", "modes=2", "--set", "max_epochs=2", "--out", MODEL],
+        cwd=solved, capture_output=True, text=True, timeout=300)
+    if run.returncode != 0:
+        raise RuntimeError(f"the probes' model did not train: {run.stderr[-2000:]}")
+
+
+def command_probe(args: list[str], text: str, status: int = 2,
+                  prepare: Callable[[Path], None] | None = None) -> Callable[[Path, Path], Outcome]:
+    """Run ``python -m ARGS`` in a copy of the solved sweep: exit ``status``, ``text`` said.
+
+    ``{...}`` in ``args`` is filled from the working directory's paths. Nothing may be written
+    in the working directory but what ``prepare`` wrote and, for a command that answers
+    (status 0), the output it was asked for.
+    """
+
+    def probe(workdir: Path, solved: Path) -> Outcome:
+        shutil.copytree(solved, workdir, symlinks=True, dirs_exist_ok=True)
+        if prepare is not None:
+            prepare(workdir)
+        before = {p: p.stat().st_mtime_ns for p in workdir.rglob("*")}
+        run = subprocess.run([sys.executable, "-m", *args], cwd=workdir, capture_output=True,
+                             text=True, timeout=300)
+        said = run.stdout + run.stderr
+        if run.returncode != status:
+            tail = " ".join(said.split())[-400:]
+            return Outcome(False, f"exit status {run.returncode}, not {status}: ...{tail}")
+        if not re.search(text, said, re.S):
+            return Outcome(False, f"{text!r} not in the output: ...{' '.join(said.split())[-400:]}")
+        if status != 0:
+            written = sorted(str(p.relative_to(workdir)) for p in workdir.rglob("*")
+                             if before.get(p) != p.stat().st_mtime_ns)
+            if written:
+                return Outcome(False, f"written although refused: {written[:5]}")
+        return Outcome(True, " ".join(re.search(text, said, re.S)[0].split())[:120])
+
+    return probe
+
+
+def _spoil_params(workdir: Path) -> None:
+    params = workdir / MODEL / "params.npz"
+    params.write_bytes(params.read_bytes()[:5000])
+
+
+def _spoil_card(workdir: Path, **normalisation: Any) -> None:
+    card = json.loads((workdir / MODEL / "model.json").read_text())
+    card["normalisation"].update(normalisation)
+    if "format_version" in normalisation:
+        card["format_version"] = card["normalisation"].pop("format_version")
+    (workdir / MODEL / "model.json").write_text(json.dumps(card))
+
+
+def _nan_node(workdir: Path) -> None:
+    import h5py
+
+    with h5py.File(workdir / "results/mesh/mesh.h5", "a") as h5:
+        h5["Mesh/mesh/geometry"][7, 0] = np.nan
+
+
+def _corner_points(workdir: Path, bom: bool = False) -> None:
+    """Points near the corners of the mesh's largest cell: inside it, far from its centroid."""
+    import h5py
+
+    with h5py.File(workdir / "results/mesh/mesh.h5") as h5:
+        x = h5["Mesh/mesh/geometry"][...]
+        cells = h5["Mesh/mesh/topology"][...][:, :4]
+    corners = x[cells]
+    volume = np.abs(np.linalg.det(corners[:, 1:] - corners[:, :1]))
+    big = corners[np.argmax(volume)]
+    weights = np.full((4, 4), 0.01) + 0.96 * np.eye(4)
+    rows = "".join(f"c{i},{a!r},{b!r},{c!r}\n" for i, (a, b, c) in enumerate(weights @ big))
+    text = "name,x,y,z\n" + rows
+    (workdir / "points.csv").write_bytes(("\ufeff" if bom else "").encode() + text.encode())
+
+
+MODEL_QUERY = ["surrogate.cli", "predict", MODEL, "--c1", "2", "--phi", "90"]
+
+COMMAND_PROBES: dict[str, Callable[[Path, Path], Outcome]] = {
+    "fem.cli at an angle of 1e300 degrees": command_probe(
+        ["fem.cli", MESH, "--c1", "1", "--phi", "1e300", "--out", "case"],
+        r"argument --phi: 1e300 is not an angle from -180 to 360 degrees"),
+    "fem.cli writing into a file": command_probe(
+        ["fem.cli", MESH, "--c1", "1", "--phi", "0", "--out", "sweep.yaml"],
+        r"argument --out: sweep\.yaml is a file, not a folder to write into"),
+    "fem.cli on a mesh with a NaN node": command_probe(
+        ["fem.cli", MESH, "--c1", "1", "--phi", "0", "--out", "case"],
+        r"mesh\.xdmf: node \d+ .*? not finite numbers", prepare=_nan_node),
+    "fem.reference with a tolerance of zero": command_probe(
+        ["fem.reference", MESH, "--c1", "1", "--phi", "180", "--out", "ref",
+         "--tolerance-mm", "0"], r"argument --tolerance-mm: 0 is not above zero"),
+    "fem.reference given a case's fields": command_probe(
+        ["fem.reference", f"results/cases/{CASES[0]}/fields.xdmf", "--c1", "1", "--phi", "180",
+         "--out", "ref"], r"is not a mesh|holds no mesh named 'mesh'"),
+    "fem.reference given an STL": command_probe(
+        ["fem.reference", "breast.stl", "--c1", "1", "--phi", "180", "--out", "ref"],
+        r"breast\.stl is not a mesh of this project",
+        prepare=lambda w: write_stl(w / "breast.stl", *box_surface())),
+    "predict at an angle of 1e300 degrees": command_probe(
+        ["surrogate.cli", "predict", MODEL, "--c1", "2", "--phi", "1e300"],
+        r"argument --phi: 1e300 is not an angle"),
+    "studies.stiffness at Φ = 1000 degrees": command_probe(
+        ["studies.stiffness", MESH, "--model", MODEL, "--phi", "1000"],
+        r"argument --phi: 1000 is not an angle"),
+    "predict with a truncated params.npz": command_probe(
+        MODEL_QUERY, r"params\.npz is not a whole NumPy archive", prepare=_spoil_params),
+    "predict with a NaN scale in model.json": command_probe(
+        MODEL_QUERY, r"normalisation\.x_std is nan, not a finite number",
+        prepare=lambda w: _spoil_card(w, x_std=float("nan"))),
+    "predict with a model of format 999": command_probe(
+        MODEL_QUERY, r"format_version 999 is not one this code reads",
+        prepare=lambda w: _spoil_card(w, format_version=999)),
+    "the viewer written over a folder": command_probe(
+        ["report.viewer", MODEL, "-o", "page.html", "--mesh", MESH],
+        r"page\.html is a folder, not a file to write",
+        prepare=lambda w: (w / "page.html").mkdir()),
+    "points inside a cell far from its centroid": command_probe(
+        [*MODEL_QUERY, "--points", "points.csv"], r"c3 +\d", status=0,
+        prepare=_corner_points),
+    "points saved as 'CSV UTF-8' (a byte-order mark)": command_probe(
+        [*MODEL_QUERY, "--points", "points.csv"], r"c0 +\d", status=0,
+        prepare=lambda w: _corner_points(w, bom=True)),
+    "points from a binary file": command_probe(
+        [*MODEL_QUERY, "--points", "points.csv"], r"points\.csv: not a text CSV",
+        prepare=lambda w: (w / "points.csv").write_bytes(bytes(range(256)))),
+}
+
+
+def workdir_probe(workdir: Path) -> Outcome:
+    """``make reproduce WORKDIR=<a file>``: one line, nothing run."""
+    target = workdir / "a_file"
+    target.write_text("")
+    run = subprocess.run(["make", "-s", "-C", str(REPO), "reproduce", f"WORKDIR={target}"],
+                         capture_output=True, text=True, timeout=300)
+    return expect(run, r"WORKDIR=\S+ is a file, not a folder to work in")
+
+
 # -- running -------------------------------------------------------------------------------
 
 
@@ -399,19 +566,25 @@ def main(argv: list[str] | None = None) -> int:
 
     selected = [
         (kind, name, probe)
-        for kind, probes in (("config", CONFIG_PROBES), ("file", FILE_PROBES))
+        for kind, probes in (("config", CONFIG_PROBES), ("file", FILE_PROBES),
+                             ("make", {"WORKDIR naming a file": workdir_probe}))
         for name, probe in probes.items()
         if args.k in name
     ]
     cases = [(n, p) for n, p in CASE_PROBES.items() if args.k in n]
+    commands = [(n, p) for n, p in COMMAND_PROBES.items() if args.k in n]
     results = []
     with ThreadPoolExecutor(max_workers=max(args.jobs, 1)) as pool:
         solved = root / "solved"
         pending = [pool.submit(run, *item) for item in selected]
-        if cases:
+        if cases or commands:
             solved.mkdir()
             solved_sweep(solved)
             pending += [pool.submit(run, "case", name, probe, solved) for name, probe in cases]
+        if commands:
+            train_model(solved)
+            pending += [pool.submit(run, "command", name, probe, solved)
+                        for name, probe in commands]
         for future in pending:
             kind, name, outcome = future.result()
             results.append(outcome.passed)
