@@ -92,3 +92,38 @@ class RunLock:
             f"({self.holder()}). Wait for it to end (or stop it): two runs in one working "
             "directory can delete each other's files. A dry run (-n) may run beside it."
         )
+
+
+def refused_marker(output: str | Path) -> Path:
+    """Where a job that refused its input says so, beside its output (hidden)."""
+    output = Path(output)
+    return output.with_name(f".{output.name}.refused")
+
+
+def mark_refused(output: str | Path, reason: str) -> None:
+    """Record that the job making ``output`` refused its input (:func:`age_refused` reads it).
+
+    An ``update()`` output is restored by Snakemake when its job fails, with a new
+    modification time: newer than the input that was refused, so the next run would say
+    "Nothing to be done" and the error would be gone with the bad file still there.
+    """
+    marker = refused_marker(output)
+    marker.parent.mkdir(parents=True, exist_ok=True)
+    marker.write_text(reason + "\n")
+
+
+def age_refused(output: str | Path) -> bool:
+    """After a failed run: make a restored output older than any input if its job refused.
+
+    The output's content is kept; only its time goes back (to the epoch), so that the next
+    run makes it again, and fails again until the input is fixed. Returns whether it did.
+    """
+    output, marker = Path(output), refused_marker(output)
+    if not marker.is_file():
+        return False
+    if output.is_file():
+        os.utime(output, (0, 0))
+        log.warning("%s was kept but its input was refused: it is marked out of date, so the "
+                    "next run makes it again (%s)", output, marker.read_text().strip())
+    marker.unlink()
+    return True

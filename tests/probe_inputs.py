@@ -337,7 +337,8 @@ def solved_sweep(workdir: Path) -> None:
 def case_probe(spoil: Callable[[Path], None], text: str) -> Callable[[Path, Path], Outcome]:
     """Spoil a copy of the solved sweep; rebuilding the dataset must fail and keep the old one.
 
-    The aggregation log must name ``text``.
+    The aggregation log must name ``text``, and a second run must fail the same way (the kept
+    dataset is out of date until the input is fixed, not "Nothing to be done").
     """
 
     def probe(workdir: Path, solved: Path) -> Outcome:
@@ -346,10 +347,13 @@ def case_probe(spoil: Callable[[Path], None], text: str) -> Callable[[Path, Path
         before = dataset.read_bytes()
         spoil(workdir / "results" / "cases")
         time.sleep(0.01)
-        run = snakemake(workdir, workdir / "sweep.yaml", "-j1", "results/dataset/dataset.h5")
-        outcome = expect(run, text, workdir / "results/logs/aggregate.log")
-        if outcome.passed and dataset.read_bytes() != before:
-            return Outcome(False, "the previous dataset was changed")
+        for attempt in ("first", "second"):  # a refused input keeps the target failing
+            run = snakemake(workdir, workdir / "sweep.yaml", "-j1", "results/dataset/dataset.h5")
+            outcome = expect(run, text, workdir / "results/logs/aggregate.log")
+            if outcome.passed and dataset.read_bytes() != before:
+                return Outcome(False, f"the previous dataset was changed ({attempt} run)")
+            if not outcome.passed:
+                return Outcome(False, f"{attempt} run: {outcome.detail}")
         return outcome
 
     return probe

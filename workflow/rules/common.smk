@@ -8,7 +8,7 @@ from snakemake.logging import logger
 
 from studies.config import ConfigError, WorkflowConfig
 from studies.fe_variants import MESH_ID_PATTERN, VARIANT_ID_PATTERN, Variant
-from studies.workdir import RunLock
+from studies.workdir import RunLock, age_refused
 from fem.sweep import ANGLE_PATTERN, C1_PATTERN
 
 # Every job's software under --use-conda (the env file says how it relates to `make setup`).
