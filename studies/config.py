@@ -5,8 +5,10 @@ mapping against ``workflow/schemas/config.schema.yaml`` (which also fills the de
 every mapping's keys and builds the objects of every layer from it: the mesh
 (:class:`meshes.config.MeshConfig`), the solve jobs' FE settings
 (:class:`fem.parameters.SolverSettings`), the sweep and the clinical cases
-(:mod:`fem.sweep`), the FE study (:mod:`studies.fe_variants`) and the surrogate with its study
-(:class:`surrogate.config.SurrogateConfig`). It lives in ``studies/`` because it spans them all.
+(:mod:`fem.sweep`), the FE study (:mod:`studies.fe_study_config`) and the surrogate with its
+study (:class:`surrogate.config.SurrogateConfig`, :mod:`studies.surrogate_study_config`). It
+lives in ``studies/`` because it spans them all; the schema and its check are
+:mod:`meshes.schema`, the error that names a key :mod:`studies.config_errors`.
 
 The schema states every bound and default; the dataclasses check what they need to stay
 valid on their own, and ``tests/test_config.py`` keeps the bounds they repeat in step with it.
@@ -18,8 +20,7 @@ from __future__ import annotations
 
 import copy
 import sys
-from collections.abc import Iterator, Mapping
-from contextlib import contextmanager
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -32,31 +33,15 @@ from fem.configfile import ConfigFileError
 from fem.configfile import read_config_file as fem_read_config_file
 from fem.contact import resolve_obstacle
 from fem.dataset import SplitFractions, direction_keys
-from fem.exceptions import FEError
 from fem.parameters import SolverSettings
-from fem.sweep import Case, clinical_cases, random_cases, sweep_cases
-from meshes.config import MeshConfig, size_for_source
+from fem.sweep import Case, clinical_cases, sweep_cases
+from meshes.config import MeshConfig
 from meshes.parametric import BreastGeometry
 from meshes.schema import SCHEMA_PATH, load_schema, schema_errors
-from studies.fe_variants import MeshSpec, Variant, expand_variants
-from surrogate.config import SurrogateConfig, SurrogateConfigError, parse_architecture
-
-
-class ConfigError(ValueError):
-    """The configuration is invalid; the message names each offending key (dotted path).
-
-    Attributes:
-        problems: one ``dotted.key: message`` (or ``dotted.key message``) per problem.
-    """
-
-    def __init__(self, *problems: str) -> None:
-        super().__init__(*problems)
-        self.problems = problems
-
-    def __str__(self) -> str:
-        if len(self.problems) == 1:
-            return self.problems[0]
-        return f"{len(self.problems)} problems:" + "".join(f"\n  {p}" for p in self.problems)
+from studies.config_errors import ConfigError, config_section
+from studies.fe_study_config import FEStudyConfig
+from studies.surrogate_study_config import SurrogateStudyConfig
+from surrogate.config import SurrogateConfig
 
 
 def read_config_file(path: str | Path) -> dict[str, Any]:
@@ -119,45 +104,6 @@ def validated(config: Mapping[str, Any], schema_path: str | Path = SCHEMA_PATH) 
     return canonical(filled)
 
 
-def _named(key: str, text: str, subkeys: tuple[str, ...] = ()) -> str:
-    """``text``, an error of config key ``key``, beginning with its full dotted key.
-
-    The libraries' messages mostly name their key already, from the section down
-    ("surrogate.width must ...") or from a sub-section ("geometry.axilla_angle must ..." of
-    ``mesh.geometry``, "loading.min_step must ..." of ``fe`` with sub-key ``loading``): those
-    are completed, the others prefixed with ``key``.
-    """
-    if text.startswith(key):
-        return text
-    parent, _, last = key.rpartition(".")
-    if parent and text.startswith(f"{last}."):
-        return f"{parent}.{text}"
-    if any(text.startswith(f"{sub}.") for sub in subkeys):
-        return f"{key}.{text}"
-    return f"{key}: {text}"
-
-
-@contextmanager
-def _section(key: str, subkeys: tuple[str, ...] = ()) -> Iterator[None]:
-    """Turn a parsing error of config key ``key`` into a :class:`ConfigError` that names it."""
-    try:
-        yield
-    except ConfigError:
-        raise
-    except (FEError, ValueError, KeyError, TypeError) as err:
-        text = f"missing key {err}" if isinstance(err, KeyError) else str(err)
-        raise ConfigError(_named(key, text, subkeys)) from None
-
-
-def default_variant(mesh: Mapping[str, Any], fe: Mapping[str, Any]) -> Variant:
-    """The FE-study variant that the workflow's own ``mesh`` and ``fe`` sections amount to."""
-    disc = fe["discretisation"]
-    degree = disc["degree"]
-    element = "p1-penalty" if disc["element"] == "p1-penalty" else f"p{degree}p{degree - 1}"
-    size = size_for_source(mesh.get("source", "parametric"), mesh["size"])
-    return Variant(MeshSpec.from_mapping(size), element, fe["solver"], disc["quadrature_degree"])
-
-
 def check_sweep_splits(cases: tuple[Case, ...], clinical: tuple[Case, ...],
                        split: SplitFractions) -> None:
     """Refuse a sweep too small for the dataset's by-case split to fill its parts.
@@ -179,280 +125,6 @@ def check_sweep_splits(cases: tuple[Case, ...], clinical: tuple[Case, ...],
 
 
 @dataclass(frozen=True, slots=True)
-class FailureEdgesConfig:
-    """The sweep's failed cases traced (``fe_study.failure_edges``, :mod:`studies.failure_edge`).
-
-    Attributes:
-        n: how many failed cases to trace (0: none).
-        step_deg: the turn's longest step (degrees).
-        resolution_deg: its shortest step before the edge is called (degrees, at most the step).
-    """
-
-    n: int
-    step_deg: float
-    resolution_deg: float
-
-    def __post_init__(self) -> None:
-        if self.n < 0:
-            raise ValueError(f"n must be 0 or more, got {self.n}")
-        if not 0 < self.resolution_deg <= self.step_deg:
-            raise ValueError(f"resolution_deg ({self.resolution_deg}) must be positive and at "
-                             f"most step_deg ({self.step_deg})")
-
-
-@dataclass(frozen=True, slots=True)
-class StabilityAuditConfig:
-    """The sweep's converged cases judged (``fe_study.stability_audit``).
-
-    See :mod:`studies.stability_audit`.
-
-    Attributes:
-        softest: how many of the sweep's C1 values to audit, softest first (0: none).
-    """
-
-    softest: int
-
-    def __post_init__(self) -> None:
-        if self.softest < 0:
-            raise ValueError(f"softest must be 0 or more, got {self.softest}")
-
-
-@dataclass(frozen=True, slots=True)
-class FoldSectionConfig:
-    """The fold cut with and without self-contact (``fe_study.fold_section``).
-
-    See :mod:`studies.fold_section`.
-
-    Attributes:
-        cases: the named cases, each (C1 kPa, Φ deg, θ deg).
-        largest: how many of the sweep's cases with the largest self-contact force to add.
-    """
-
-    cases: tuple[tuple[float, float, float], ...]
-    largest: int
-
-    def __post_init__(self) -> None:
-        if self.largest < 0:
-            raise ValueError(f"largest must be 0 or more, got {self.largest}")
-        for case in self.cases:
-            if len(case) != 3 or not np.all(np.isfinite(case)) or case[0] <= 0:
-                raise ValueError(f"a case is [C1 > 0, Φ] or [C1, Φ, θ], finite; got {case}")
-
-    @classmethod
-    def from_mapping(cls, values: Mapping[str, Any]) -> FoldSectionConfig:
-        """From the validated section (θ defaults to 0)."""
-        return cls(tuple((float(c[0]), float(c[1]), float(c[2]) if len(c) > 2 else 0.0)
-                         for c in values["cases"]), int(values["largest"]))
-
-
-@dataclass(frozen=True, slots=True)
-class FEStudyConfig:
-    """The FE study (``fe_study``): what is compared with what.
-
-    Attributes:
-        reference: the refined discretisation every other one is compared with.
-        variants: the speed-accuracy variants, sorted, each once.
-        target: the accuracy target of the speed-accuracy study (relative error).
-        max_dofs: variants with more unknowns are skipped, not solved.
-        stability_mesh: the mesh sizes of the stability maps.
-        failure_edges: how the sweep's failed cases are traced.
-        stability_audit: which of the sweep's converged cases are judged for stability.
-        fold_section: which cases are cut at the fold with and without self-contact.
-        default_variant: the variant the workflow's own mesh and ``fe`` settings amount to.
-        base_config: the ``fe``, ``material`` and ``mesh`` sections that the reference and the
-            variants depend on, without the default's discretisation and solver preset, which
-            each variant sets (so changing those re-solves no study case).
-    """
-
-    reference: Variant
-    variants: tuple[Variant, ...]
-    target: float
-    max_dofs: int
-    stability_mesh: MeshSpec
-    failure_edges: FailureEdgesConfig
-    stability_audit: StabilityAuditConfig
-    fold_section: FoldSectionConfig
-    default_variant: Variant
-    base_config: dict[str, Any]
-
-    @classmethod
-    def from_sections(cls, sections: Mapping[str, Any]) -> FEStudyConfig:
-        """Build from the validated config (``fe_study``, ``fe``, ``material``, ``mesh``)."""
-        study = sections["fe_study"]
-        ref = study["reference"]
-        with _section("fe_study.reference"):
-            reference = Variant(MeshSpec.from_mapping(ref["mesh"]), ref["element"], ref["solver"],
-                                ref["quadrature_degree"])
-        with _section("fe_study.speed_accuracy.variants"):
-            variants = tuple(expand_variants(study["speed_accuracy"]["variants"]))
-        with _section("fe_study.stability.mesh"):
-            stability_mesh = MeshSpec.from_mapping(study["stability"]["mesh"])
-        with _section("fe_study.failure_edges"):
-            edges = study["failure_edges"]
-            failure_edges = FailureEdgesConfig(edges["n"], edges["step_deg"],
-                                               edges["resolution_deg"])
-        with _section("fe_study.stability_audit"):
-            audit = StabilityAuditConfig(study["stability_audit"]["softest"])
-        with _section("fe_study.fold_section"):
-            fold = FoldSectionConfig.from_mapping(study["fold_section"])
-        with _section("mesh.size"):
-            default = default_variant(sections["mesh"], sections["fe"])
-        speed_accuracy = study["speed_accuracy"]
-        return cls(reference, variants, speed_accuracy["target"], speed_accuracy["max_dofs"],
-                   stability_mesh, failure_edges, audit, fold, default,
-                   Variant.base_config(sections))
-
-
-@dataclass(frozen=True, slots=True)
-class SurrogateVariant:
-    """A named variant of the surrogate settings (``surrogate_study.variants``).
-
-    Attributes:
-        name: its name, a wildcard of the workflow.
-        overrides: the keys it changes, as written.
-        settings: the ``surrogate`` settings with those keys changed.
-    """
-
-    name: str
-    overrides: dict[str, Any]
-    settings: SurrogateConfig
-
-
-@dataclass(frozen=True, slots=True)
-class Posture:
-    """A posture a patient takes, at one stiffness (``surrogate_study.postures``).
-
-    Attributes:
-        name: as the config names it (``prone``, ``standing``, ...).
-        note: what it is, in words (the 3D view's tooltip).
-        case: its FE case (C1, and gravity's direction relative to the body).
-        in_sweep: whether the sweep solves that case (else it is solved outside it).
-    """
-
-    name: str
-    note: str
-    case: Case
-    in_sweep: bool
-
-    @property
-    def folder(self) -> str:
-        """The case's folder under ``results/``: ``cases/<id>`` or ``outside/<id>``."""
-        return f"{'cases' if self.in_sweep else 'outside'}/{self.case.id}"
-
-
-def postures_of(section: Mapping[str, Any], sweep: tuple[Case, ...]) -> tuple[Posture, ...]:
-    """Every (posture, C1) of the ``postures`` section, postures in its order, C1 within each.
-
-    Raises:
-        ConfigError: if two postures share a name.
-    """
-    directions = section.get("directions", ())
-    names = [item["name"] for item in directions]
-    twice = sorted({name for name in names if names.count(name) > 1})
-    if twice:
-        raise ConfigError(f"surrogate_study.postures names {', '.join(map(repr, twice))} twice")
-    in_sweep = set(sweep)
-    out = []
-    for item in directions:
-        for C1 in section["C1_kPa"]:
-            case = Case(float(C1), float(item["phi"]), float(item.get("theta", 0.0)))
-            out.append(Posture(item["name"], item.get("note", ""), case, case in in_sweep))
-    return tuple(out)
-
-
-def off_grid_cases(section: Mapping[str, Any], sweep: tuple[Case, ...]) -> tuple[Case, ...]:
-    """The ``off_grid`` section's random cases within the sweep's range, less the sweep's own.
-
-    ``{n, seed, part, C1_kPa: [low, high]}``: ``n`` cases drawn from ``seed``
-    (:func:`fem.sweep.random_cases`), C1 between ``C1_kPa``'s ends (default: the sweep's
-    softest and stiffest), gravity over ``part`` of the sphere. A draw that repeats a case or
-    falls on one of the sweep's is dropped: the set is off the grid by construction.
-
-    Raises:
-        ConfigError: for a range or part that :func:`fem.sweep.random_cases` refuses.
-    """
-    n = int(section.get("n", 0))
-    if n == 0:
-        return ()
-    with _section("surrogate_study.off_grid"):
-        c1_range = section.get("C1_kPa") or (min(c.C1 for c in sweep), max(c.C1 for c in sweep))
-        drawn = random_cases(n, int(section.get("seed", 0)), tuple(c1_range),
-                             section.get("part", "caudal"))
-    in_sweep = set(sweep)
-    return tuple(c for c in dict.fromkeys(drawn) if c not in in_sweep)
-
-
-@dataclass(frozen=True, slots=True)
-class SurrogateStudyConfig:
-    """The surrogate's study (``surrogate_study``).
-
-    Attributes:
-        architectures: the architectures trained, ``<layers>x<width>``, each once.
-        repeats: trainings per architecture and per variant.
-        variants: the named variants, in the config's (sorted) order.
-        extrapolation: the FE cases of its extrapolation blocks that the sweep lacks, sorted.
-        timing_repeats: timed predictions per model.
-        prediction_budget_ms: the selection's time budget (None: by accuracy alone).
-        postures: the clinical postures at each of their C1 values.
-        off_grid: the random test cases of ``off_grid`` that the sweep lacks, in drawn order
-            (:func:`off_grid_cases`).
-        refit: whether the model used downstream is the selected run trained again on its
-            validation data too (``select_model``), or the selected run itself.
-    """
-
-    architectures: tuple[str, ...]
-    repeats: int
-    variants: tuple[SurrogateVariant, ...]
-    extrapolation: tuple[Case, ...]
-    timing_repeats: int
-    prediction_budget_ms: float | None
-    postures: tuple[Posture, ...] = ()
-    off_grid: tuple[Case, ...] = ()
-    refit: bool = True
-
-    @classmethod
-    def from_sections(
-        cls, study: Mapping[str, Any], surrogate: SurrogateConfig, sweep: tuple[Case, ...]
-    ) -> SurrogateStudyConfig:
-        """Build from the ``surrogate_study`` section, the surrogate settings and the sweep."""
-        with _section("surrogate_study.architectures"):
-            parsed = [parse_architecture(a) for a in study["architectures"]]
-            if len(set(parsed)) != len(parsed):
-                raise ConfigError("surrogate_study.architectures lists one twice")
-        variants = []
-        for name, overrides in study["variants"].items():
-            with _section(f"surrogate_study.variants.{name}"):
-                try:
-                    settings = SurrogateConfig.from_mapping({**surrogate.as_dict(), **overrides})
-                except SurrogateConfigError as err:  # named as the variant's key, not surrogate's
-                    text = str(err).replace("surrogate.", f"surrogate_study.variants.{name}.", 1)
-                    raise ConfigError(text) from None
-            variants.append(SurrogateVariant(name, dict(overrides), settings))
-        extra: set[Case] = set()
-        for i, block in enumerate(study["extrapolation"]):
-            with _section(f"surrogate_study.extrapolation.{i}"):
-                extra.update(sweep_cases(block))
-        return cls(
-            architectures=tuple(f"{layers}x{width}" for layers, width in parsed),
-            repeats=study["repeats"],
-            variants=tuple(variants),
-            extrapolation=tuple(sorted(extra - set(sweep))),
-            timing_repeats=study["timing_repeats"],
-            prediction_budget_ms=study["prediction_budget_ms"],
-            postures=postures_of(study.get("postures") or {}, sweep),
-            off_grid=off_grid_cases(study.get("off_grid") or {}, sweep),
-            refit=bool(study.get("refit", True)),
-        )
-
-    def variant(self, name: str) -> SurrogateVariant:
-        """The variant called ``name``."""
-        for variant in self.variants:
-            if variant.name == name:
-                return variant
-        raise KeyError(f"surrogate_study.variants has no {name!r}")
-
-
-@dataclass(frozen=True, slots=True)
 class ImagedConfig:
     """The mesh as an image of the loaded breast (``reference_state.imaged``) and what follows.
 
@@ -471,7 +143,7 @@ class ImagedConfig:
     observed_in: Case | None
 
     @classmethod
-    def from_section(cls, section: Mapping[str, Any]) -> ImagedConfig | None:
+    def fromconfig_section(cls, section: Mapping[str, Any]) -> ImagedConfig | None:
         """Parse ``reference_state``; None when ``imaged`` is unset.
 
         Raises:
@@ -561,28 +233,28 @@ class WorkflowConfig:
             ConfigError: naming the offending key(s), before any object is used.
         """
         sections = validated(config, schema_path)
-        with _section("mesh.geometry"):
+        with config_section("mesh.geometry"):
             BreastGeometry.from_mapping(sections["mesh"]["geometry"])  # its errors named apart
-        with _section("mesh", tuple(sections["mesh"])):
+        with config_section("mesh", tuple(sections["mesh"])):
             mesh = MeshConfig.from_mapping(sections["mesh"])
-        with _section("fe", tuple(sections["fe"])):
+        with config_section("fe", tuple(sections["fe"])):
             solver = SolverSettings.from_config(sections)
             solve_fe = resolve_obstacle(sections["fe"], sections["mesh"])
-        with _section("sweep"):
+        with config_section("sweep"):
             cases = tuple(sweep_cases(sections["sweep"]))
-        with _section("clinical"):
+        with config_section("clinical"):
             clinical = tuple(clinical_cases(sections["clinical"]))
-        with _section("dataset.split"):  # checked here, not after every solve at aggregation
+        with config_section("dataset.split"):  # checked here, not after every solve at aggregation
             split = SplitFractions(**sections["dataset"].get("split", {}))
-        with _section("sweep"):
+        with config_section("sweep"):
             check_sweep_splits(cases, clinical, split)
         fe_study = FEStudyConfig.from_sections(sections)
-        with _section("surrogate"):
+        with config_section("surrogate"):
             surrogate = SurrogateConfig.from_mapping(sections["surrogate"])
         surrogate_study = SurrogateStudyConfig.from_sections(
             sections["surrogate_study"], surrogate, cases)
-        with _section("reference_state"):
-            imaged = ImagedConfig.from_section(sections["reference_state"])
+        with config_section("reference_state"):
+            imaged = ImagedConfig.fromconfig_section(sections["reference_state"])
         return cls(mesh, solver, solve_fe, cases, clinical, fe_study, surrogate, surrogate_study,
                    imaged, sections)
 

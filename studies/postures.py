@@ -1,14 +1,14 @@
 """The surrogate in the postures a patient takes: its error against FE in each.
 
-The paper's sweep turns gravity in one plane, the patient rolling from prone through lying on
-the side to supine; the clinic adds postures outside it (standing for a mammogram, sitting
-reclined, supine tilted under ultrasound). Each posture of ``surrogate_study.postures`` is a
-direction of gravity relative to the body (:class:`studies.config.Posture`), evaluated at a
-few stiffnesses; its FE solution comes from the sweep where the sweep has it, else from an
-extra solve outside it. The table says, per posture, how far the model's worst point is from
-FE and whether the posture lies inside the directions it was trained on, and, from the first
-posture (prone: the posture of the MRI), the way the breast takes to each other posture at the
-same stiffness, with the model's error in that way: where a tumour seen in the image goes.
+The paper's sweep turns gravity in one plane, the patient rolling from prone through lying on the
+side to supine; the clinic adds postures outside it (standing for a mammogram, sitting reclined,
+supine tilted under ultrasound). Each posture of ``surrogate_study.postures`` is a direction of
+gravity relative to the body (:class:`studies.surrogate_study_config.Posture`), evaluated at a few
+stiffnesses; its FE solution comes from the sweep where the sweep has it, else from an extra solve
+outside it. The table says, per posture, how far the model's worst point is from FE and whether the
+posture lies inside the directions it was trained on, and, from the first posture (prone: the
+posture of the MRI), the way the breast takes to each other posture at the same stiffness, with the
+model's error in that way: where a tumour seen in the image goes.
 """
 
 from __future__ import annotations

@@ -23,19 +23,12 @@ from fem.sweep import Case, sample_phi, sweep_cases
 from meshes.config import SOURCES, MeshConfig
 from meshes.exceptions import GeometryError
 from meshes.parametric import BreastGeometry
+from meshes.schema import SCHEMA_PATH, load_schema
 from meshes.sizing import MeshSize
-from studies.config import (
-    SCHEMA_PATH,
-    ConfigError,
-    SurrogateStudyConfig,
-    WorkflowConfig,
-    canonical,
-    load_schema,
-    read_config_file,
-    validated,
-)
+from studies.config import ConfigError, WorkflowConfig, canonical, read_config_file, validated
 from studies.fe_variants import ELEMENTS as STUDY_ELEMENTS
 from studies.fe_variants import MeshSpec, Variant
+from studies.surrogate_study_config import SurrogateStudyConfig
 from surrogate.config import SurrogateConfig, SurrogateConfigError
 from tests.conftest import REPO
 

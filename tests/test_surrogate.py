@@ -590,7 +590,6 @@ def test_fast_prediction_is_the_plain_network(
     every network evaluated at every sample.
     """
     import warnings
-
     from dataclasses import replace
 
     import jax.numpy as jnp
