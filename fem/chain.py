@@ -163,13 +163,15 @@ def main(argv: list[str] | None = None) -> int:
     import json
     import sys
 
+    from fem.arguments import angle_deg, c1_kpa
     from meshes.io import MeshInputError
 
     parser = argparse.ArgumentParser(prog="python -m fem.chain", description=main.__doc__)
     parser.add_argument("mesh", type=Path, help="mesh XDMF with facet tags")
-    parser.add_argument("--c1", type=float, nargs="+", required=True, help="C1 values, kPa")
-    parser.add_argument("--phi", type=float, nargs="+", required=True, help="Φ values, degrees")
-    parser.add_argument("--theta", type=float, default=0.0, help="θ, degrees")
+    parser.add_argument("--c1", type=c1_kpa, nargs="+", required=True, help="C1 values, kPa")
+    parser.add_argument("--phi", type=angle_deg, nargs="+", required=True,
+                        help="Φ values, degrees")
+    parser.add_argument("--theta", type=angle_deg, default=0.0, help="θ, degrees")
     parser.add_argument("--cases", type=Path, required=True, help="folder of the case folders")
     parser.add_argument("--config", type=Path, help="workflow config (fe, material, mesh.fixed)")
     parser.add_argument("--from-rest", action="store_true", help="no guesses: every case cold")

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from fem.directions import direction_keys
 from fem.exceptions import InvalidParameterError
 from fem.parameters import STANDARD_GRAVITY, TISSUE_DENSITY, Gravity, Material
 
@@ -404,8 +405,6 @@ def _drop_aliases(directions: Sequence[tuple[float, float]]) -> list[tuple[float
     dropped with a warning; a case asked for under one of them is solved alone, outside the
     sweep.
     """
-    from fem.dataset import direction_keys
-
     keys = direction_keys(np.array([p for p, _ in directions], dtype=float),
                           np.array([t for _, t in directions], dtype=float))
     first: dict[str, tuple[float, float]] = {}
@@ -430,8 +429,6 @@ def _one_label_per_direction(directions: Sequence[tuple[float, float]],
     at Φ = 0 or 180° every θ is the same pole. Listed twice, it is solved twice, in two case
     folders.
     """
-    from fem.dataset import direction_keys
-
     pairs = [*directions, *extra]
     keys = direction_keys(np.array([p for p, _ in pairs]), np.array([t for _, t in pairs]))
     named: dict[str, tuple[float, float]] = {}

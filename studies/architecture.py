@@ -29,7 +29,7 @@ from surrogate.config import SurrogateConfig, parse_architecture
 from surrogate.model import layer_sizes, network_names
 
 if TYPE_CHECKING:
-    from surrogate.train import TrainResult
+    from surrogate.epochs import TrainResult
 
 
 @dataclass(frozen=True, slots=True)

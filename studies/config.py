@@ -32,7 +32,8 @@ from jsonschema import validators
 from fem.configfile import ConfigFileError
 from fem.configfile import read_config_file as fem_read_config_file
 from fem.contact import resolve_obstacle
-from fem.dataset import SplitFractions, direction_keys
+from fem.dataset import SplitFractions
+from fem.directions import direction_keys
 from fem.parameters import SolverSettings
 from fem.sweep import Case, clinical_cases, sweep_cases
 from meshes.config import MeshConfig

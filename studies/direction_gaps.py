@@ -33,7 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fem.dataset import Dataset, DatasetError, direction_keys, gravity_angles, read_dataset
+from fem.dataset import Dataset, DatasetError, read_dataset
+from fem.directions import direction_keys, gravity_angles
 from studies.results import Record, Result
 
 KERNEL = "cubic"
@@ -182,7 +183,7 @@ def propose(ds: Dataset, gaps: DirectionGaps, k: int) -> list[tuple[float, float
 
 
 def direction_angles(g: np.ndarray) -> tuple[float, float]:
-    """:func:`fem.dataset.gravity_angles` of ``g`` to 0.1° (a direction in the plane as (Φ, 0))."""
+    """:func:`fem.directions.gravity_angles` of ``g`` to 0.1° (one in the plane as (Φ, 0))."""
     phi, theta = (round(a, 1) + 0.0 for a in gravity_angles(g))
     return (180.0 if phi == -180.0 else phi), theta
 

@@ -43,8 +43,9 @@ from typing import Any
 
 import numpy as np
 
+from fem.arguments import angle_deg, c1_kpa, positive
 from fem.configfile import read_config_file
-from fem.dataset import gravity_angles, gravity_direction
+from fem.directions import gravity_angles, gravity_direction
 from fem.exceptions import InvalidParameterError
 from fem.parameters import Gravity, SolverSettings
 from fem.sweep import Case
@@ -511,17 +512,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("mesh", type=Path, help="the mesh (XDMF) to solve on")
     parser.add_argument("--config", type=Path, default=Path("config.yaml"),
                         help="the config whose fe: section sets the solver (default config.yaml)")
-    parser.add_argument("--c1", type=float, required=True, help="C1 (kPa)")
-    parser.add_argument("--from", dest="start", type=float, nargs=2, required=True,
+    parser.add_argument("--c1", type=c1_kpa, required=True, help="C1 (kPa)")
+    parser.add_argument("--from", dest="start", type=angle_deg, nargs=2, required=True,
                         metavar=("PHI", "THETA"), help="a converged direction (degrees)")
-    parser.add_argument("--to", dest="target", type=float, nargs=2, required=True,
+    parser.add_argument("--to", dest="target", type=angle_deg, nargs=2, required=True,
                         metavar=("PHI", "THETA"), help="the direction to turn towards")
-    parser.add_argument("--via", type=float, nargs="*", default=[],
+    parser.add_argument("--via", type=c1_kpa, nargs="*", default=[],
                         help="stiffer C1 values (kPa) to reach the start through, as a chain")
-    parser.add_argument("--step", type=float, default=1.0, help="the longest step (degrees)")
-    parser.add_argument("--resolution", type=float, default=0.05,
+    parser.add_argument("--step", type=positive, default=1.0, help="the longest step (degrees)")
+    parser.add_argument("--resolution", type=positive, default=0.05,
                         help="the shortest step tried before stopping (degrees)")
-    parser.add_argument("--meet", type=float, nargs=2, metavar=("PHI", "THETA"),
+    parser.add_argument("--meet", type=angle_deg, nargs=2, metavar=("PHI", "THETA"),
                         help="instead: turn from --from and from --to to this direction, solve "
                              "it as the sweep does too, and compare the states")
     parser.add_argument("--json", type=Path, help="write the record here")

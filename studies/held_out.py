@@ -29,7 +29,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from fem.dataset import Dataset, direction_keys, gravity_direction
+from fem.dataset import Dataset
+from fem.directions import direction_keys, gravity_direction
 from studies.results import Record, Result
 from surrogate.exceptions import ExtrapolationWarning
 

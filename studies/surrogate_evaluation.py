@@ -328,7 +328,7 @@ def evaluate_clinical(
 
 def nearest_case(ds: Dataset, C1: float, phi: float, theta: float = 0.0) -> int:
     """The converged dataset case closest in (log C1, gravity direction)."""
-    from fem.dataset import gravity_direction
+    from fem.directions import gravity_direction
 
     g = gravity_direction(np.asarray(phi, float), np.asarray(theta, float))
     angle = np.degrees(np.arccos(np.clip(ds.direction @ g, -1.0, 1.0)))

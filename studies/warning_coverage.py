@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fem.dataset import gravity_angles
+from fem.directions import gravity_angles
 from studies.results import Record, Result
 from surrogate.exceptions import ExtrapolationWarning
 from surrogate.predict import Surrogate

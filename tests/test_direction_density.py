@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fem.dataset import gravity_direction
+from fem.directions import gravity_direction
 from fem.sweep import PAPER_PHI_DEG, Case
 from studies.direction_density import _batches, designs, random_caudal_directions
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fem.dataset import Dataset, gravity_direction
+from fem.dataset import Dataset
+from fem.directions import gravity_direction
 from fem.sweep import sphere_directions
 from studies.direction_gaps import direction_angles, direction_gaps, leave_one_out, main
 

@@ -72,7 +72,7 @@ def test_the_inertia_counts_the_dense_tangents_eigenvalues(tiny_mesh: Path) -> N
 
 @pytest.mark.unit
 def test_directions_on_the_great_circle() -> None:
-    from fem.dataset import gravity_angles as direction_angles
+    from fem.directions import gravity_angles as direction_angles
     from studies.failure_edge import great_circle
 
     for phi, theta in ((-75.0, 0.0), (75.0, 0.0), (120.0, -30.0), (90.0, 90.0), (180.0, 0.0)):

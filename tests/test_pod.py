@@ -13,7 +13,8 @@ import h5py
 import numpy as np
 import pytest
 
-from fem.dataset import build_dataset, gravity_direction, read_dataset, write_points
+from fem.dataset import build_dataset, read_dataset, write_points
+from fem.directions import gravity_direction
 from fem.sweep import Case
 from surrogate.config import SurrogateConfig, SurrogateConfigError
 from surrogate.exceptions import ExtrapolationWarning, ModelFileError

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fem.dataset import Dataset, gravity_direction
+from fem.dataset import Dataset
+from fem.directions import gravity_direction
 from studies.pod_basis import fit
 from surrogate.config import SurrogateConfig
 
