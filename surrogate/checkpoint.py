@@ -29,7 +29,7 @@ from surrogate.exceptions import ModelFileError, SurrogateConfigError
 from surrogate.model import Params, from_arrays, to_arrays
 
 if TYPE_CHECKING:  # training code is not needed to save or load a model
-    from surrogate.train import TrainResult
+    from surrogate.epochs import TrainResult
 
 FORMAT_VERSION = 2
 MODEL_JSON = "model.json"

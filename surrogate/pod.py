@@ -44,14 +44,14 @@ import optax
 from fem.dataset import Dataset
 from surrogate.config import SurrogateConfig
 from surrogate.data import Normalisation
-from surrogate.model import Layers, Params, branch_weights, init_params
-from surrogate.train import (
+from surrogate.epochs import (
     EpochFigures,
     TrainResult,
     learning_rate_schedule,
     make_optimizer,
     run_epochs,
 )
+from surrogate.model import Layers, Params, branch_weights, init_params
 
 log = logging.getLogger(__name__)
 

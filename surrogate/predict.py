@@ -30,7 +30,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from fem.dataset import gravity_direction
+from fem.directions import gravity_direction
 from surrogate.checkpoint import Checkpoint, load_checkpoint
 from surrogate.exceptions import ExtrapolationWarning, ModelFileError
 from surrogate.model import (
@@ -66,9 +66,12 @@ class Surrogate:
         ModelFileError: if an exact-Dirichlet model lacks its point factor.
     """
 
-    def __init__(self, checkpoint: Checkpoint) -> None:
+    def __init__(self, checkpoint: Checkpoint, clamped_zero: bool = False) -> None:
         c = checkpoint
         self._checkpoint = c
+        #: the boundary points answer exactly zero, as FE has them on the clamped chest wall
+        #: (:meth:`at`'s points on its face), whatever the boundary mode
+        self._clamped_zero = clamped_zero
         if c.config.boundary == "exact" and c.point_factor is None:
             raise ModelFileError("an exact-Dirichlet model needs its point factor (points_factor)")
         self.config = c.config
@@ -128,7 +131,7 @@ class Surrogate:
         separable = weighs_fields(config)
         prepare = {"separable": fields_of, "pod": modes_of}.get(config.structure, split_first)
         parts = {"domain": prepare(self.params.get("domain"), domain, factor[domain])}
-        net = boundary_network(config)
+        net = None if self._clamped_zero else boundary_network(config)
         if net is not None and bound.size:
             parts["boundary"] = prepare(self.params[net], bound, factor[bound])
         if separable:
@@ -334,10 +337,10 @@ class Surrogate:
         every node of a quadratic mesh, linear between the vertices otherwise): a tumour's
         material position, found from the imaged shape (:func:`fem.tracking.to_reference`), is
         predicted directly.
-        A point on the chest wall's clamped face (where the mesh has the cells to tell) is
-        answered as the model answers its boundary nodes (exactly zero for an exact-Dirichlet
-        or ``pod`` model, as FE has it), every other point by the domain network; an
-        exact-Dirichlet model's factor is evaluated at them with the model's own length scale.
+        A point on the chest wall's clamped face (where the mesh has the cells to tell, or by a
+        ``pod`` model's modes, zero there) answers exactly zero, as FE has it, every other point
+        by the domain network; an exact-Dirichlet model's factor is evaluated at them with the
+        model's own length scale.
         Each query of the returned model costs in proportion to M.
 
         Raises:
@@ -377,7 +380,7 @@ class Surrogate:
         if c.config.structure != "pod" and c.cells is not None:
             # the networks answer anywhere, but only the body is trained: a point outside is
             # refused, and one on the chest wall's clamped face (a combination of boundary
-            # corners alone) is answered as the model answers its own boundary nodes
+            # corners alone) answers zero, as FE has it
             from surrogate.interpolation import locate
 
             rows, weights = locate(self.X, c.cells, points)
@@ -386,7 +389,7 @@ class Surrogate:
             c, X=points, boundary=boundary,
             point_factor=None if factor is None else factor.astype(np.float32),
             node_index=None, basis=basis, cells=None, nodes=None,
-        ))
+        ), clamped_zero=True)
 
     # -- queries ----------------------------------------------------------------------
     def predict(self, C1: float, phi: float, theta: float = 0.0) -> np.ndarray:
