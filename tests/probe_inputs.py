@@ -202,6 +202,16 @@ CONFIG_PROBES: dict[str, Callable[[Path], Outcome]] = {
         config_with(sweep={"C1_kPa": [1.0, 5.0], "phi_deg": [0.0, 180.0]}),
         r"sweep: 4 cases, 2 of them clinical .*? at least 5 cases",
     ),
+    "a NaN in the second observation's posture": config_probe(
+        config_with(reference_state__observation={"file": "skin.csv", "phi": float("nan")}),
+        r"reference_state\.observation\.phi: nan is not a finite number",
+    ),
+    "a posterior rule without the file's orientation": config_probe(
+        config_with(mesh__source="file", mesh__size={"fold_size": None, "order": 1},
+                    mesh__file={"path": "b.stl", "surfaces": {
+                        "rib": {"posterior": {"angle": 30, "band": 0.01}}}}),
+        r"a posterior rule needs to know where the patient's posterior is",
+    ),
     "the parametric chest as an import's obstacle": config_probe(
         config_with(mesh__source="file", mesh__size={"fold_size": None, "order": 1},
                     mesh__file={"path": "b.stl", "surfaces": {"rib": RIB}},
@@ -311,6 +321,10 @@ FILE_PROBES: dict[str, Callable[[Path], Outcome]] = {
     ),
     "a surface with a hole": file_probe(_open_surface, r"not a closed surface"),
     "two surfaces through each other": file_probe(_two_boxes_crossing, r"intersect"),
+    "a chest wall anterior of the breast, no orientation": file_probe(
+        lambda p: write_stl(p, *box_surface()), r"chest wall \(the rib facets\) lies [0-9.]+ mm "
+        r"anterior of the breast's centroid",
+        rib={"plane": {"point": [0.0, 0, 0], "normal": [-1, 0, 0]}, "distance": 0.001}),
     "a volume mesh with inverted tetrahedra": file_probe(
         _inverted_tetrahedra, r"\d+ inverted tetrahedra \(oriented opposite", suffix=".vtu"
     ),
@@ -365,6 +379,13 @@ def _summary(cases: Path, case: str, **changes: Any) -> None:
     path.write_text(json.dumps({**summary, **changes}))
 
 
+def _huge_displacement(points: Path) -> None:
+    import h5py
+
+    with h5py.File(points, "a") as h5:
+        h5["u"][3] = [1e30, 0.0, 0.0]
+
+
 def _copy_case(cases: Path, source: str, target: str) -> None:
     for name in ("summary.json", "points.h5"):
         shutil.copy(cases / source / name, cases / target / name)
@@ -386,7 +407,12 @@ CASE_PROBES: dict[str, Callable[[Path, Path], Outcome]] = {
         lambda c: _summary(c, CASES[0], C1="one"), r"C1 are not finite numbers"
     ),
     "a summary of another C1 than its folder": case_probe(
-        lambda c: _summary(c, CASES[2], C1=2.0), r"not of its folder"
+        lambda c: _summary(c, CASES[2], C1=2.0),
+        r"not of its folder.*?snakemake \S+summary\.json --forcerun \S+summary\.json"
+    ),
+    "a converged displacement of 1e30 m": case_probe(
+        lambda c: _huge_displacement(c / CASES[1] / "points.h5"),
+        r"moves a point 1e\+30 m, farther than the body's own size"
     ),
     "another case's files in a folder": case_probe(
         lambda c: _copy_case(c, CASES[0], CASES[2]),
@@ -403,17 +429,21 @@ CASE_PROBES: dict[str, Callable[[Path, Path], Outcome]] = {
 
 MESH = "results/mesh/mesh.xdmf"
 MODEL = "model"
+SEPARABLE = "separable"
 
 
 def train_model(solved: Path) -> None:
-    """A small pod model of the three-case sweep (the commands' probes load it)."""
-    run = subprocess.run(
-        [sys.executable, "-m", "surrogate.cli", "train", "results/dataset/dataset.h5",
-         "--config", str(REPO / "tests" / "config.yaml"), "--set", "structure=pod",
-         "--set", "modes=2", "--set", "max_epochs=2", "--out", MODEL],
-        cwd=solved, capture_output=True, text=True, timeout=300)
-    if run.returncode != 0:
-        raise RuntimeError(f"the probes' model did not train: {run.stderr[-2000:]}")
+    """Small models of the three-case sweep (the commands' probes load them): pod, separable."""
+    for folder, settings in ((MODEL, ["structure=pod", "modes=2"]),
+                             (SEPARABLE, ["structure=separable", "modes=2", "width=8"])):
+        run = subprocess.run(
+            [sys.executable, "-m", "surrogate.cli", "train", "results/dataset/dataset.h5",
+             "--config", str(REPO / "tests" / "config.yaml"),
+             *(a for item in [*settings, "max_epochs=2"] for a in ("--set", item)),
+             "--out", folder],
+            cwd=solved, capture_output=True, text=True, timeout=300)
+        if run.returncode != 0:
+            raise RuntimeError(f"the probes' {folder} model did not train: {run.stderr[-2000:]}")
 
 
 def command_probe(args: list[str], text: str, status: int = 2,
@@ -484,6 +514,33 @@ def _corner_points(workdir: Path, bom: bool = False) -> None:
     (workdir / "points.csv").write_bytes(("\ufeff" if bom else "").encode() + text.encode())
 
 
+def _rib_point(workdir: Path) -> None:
+    """A node of the clamped chest wall (the rib facets, tag 1), as a named point."""
+    import h5py
+
+    with h5py.File(workdir / "results/mesh/mesh.h5") as h5:
+        x = h5["Mesh/mesh/geometry"][...]
+        facets = h5["MeshTags/facet_tags/topology"][...]
+        tags = h5["MeshTags/facet_tags/Values"][...].ravel()
+    node = x[facets[tags == 1][0, 0]]
+    (workdir / "rib.csv").write_text("name,x,y,z\n" + "rib0," + ",".join(map(repr, node)) + "\n")
+
+
+def _import_config(workdir: Path, orientation: dict, rib: dict | None = None) -> None:
+    """A config importing a box written in LPS mm of a left breast, with these rules."""
+    x, tris = box_surface()
+    # a left breast: L (lateral) = +y of the project, P = +x, S = +z; a mirror image, so the
+    # triangles turn to keep facing outwards
+    lps = 1000 * x[:, [1, 0, 2]]
+    write_stl(workdir / "box_lps.stl", lps, tris[:, [0, 2, 1]])
+    rib = rib or {"plane": {"point": [0.0, 50.0, 0.0], "normal": [0.0, 1.0, 0.0]},
+                  "distance": 1.0}
+    mesh = {"source": "file", "size": {"fold_size": None, "order": 1, "global_size": 0.03},
+            "file": {"path": "box_lps.stl", "units": "mm", "orientation": orientation,
+                     "surfaces": {"rib": rib}}}
+    (workdir / "import.yaml").write_text(yaml.safe_dump({"mesh": mesh}))
+
+
 MODEL_QUERY = ["surrogate.cli", "predict", MODEL, "--c1", "2", "--phi", "90"]
 
 COMMAND_PROBES: dict[str, Callable[[Path, Path], Outcome]] = {
@@ -530,6 +587,46 @@ COMMAND_PROBES: dict[str, Callable[[Path, Path], Outcome]] = {
     "points saved as 'CSV UTF-8' (a byte-order mark)": command_probe(
         [*MODEL_QUERY, "--points", "points.csv"], r"c0 +\d", status=0,
         prepare=lambda w: _corner_points(w, bom=True)),
+    "fem.reference writing into a file": command_probe(
+        ["fem.reference", MESH, "--c1", "1", "--phi", "180", "--out", "sweep.yaml"],
+        r"argument --out: sweep\.yaml is a file, not a folder to write into"),
+    "studies.tracking on a mesh with a NaN node": command_probe(
+        ["studies.tracking", "points.csv", "--imaged", MESH, "--reference", MESH, "--model",
+         MODEL, "--c1", "1", "--phi", "0", "--out", "tracked.csv"],
+        r"mesh\.xdmf: node \d+ .*? not finite numbers",
+        prepare=lambda w: (_corner_points(w), _nan_node(w))),
+    "the viewer of a truncated model": command_probe(
+        ["report.viewer", MODEL, "-o", "page.html", "--mesh", MESH],
+        r"params\.npz is not a whole NumPy archive", prepare=_spoil_params),
+    "the viewer of a model with a NaN scale": command_probe(
+        ["report.viewer", MODEL, "-o", "page.html", "--mesh", MESH],
+        r"normalisation\.x_std is nan", prepare=lambda w: _spoil_card(w, x_std=float("nan"))),
+    "a separable model asked at a clamped node": command_probe(
+        ["surrogate.cli", "predict", SEPARABLE, "--c1", "1", "--phi", "90", "--points",
+         "rib.csv"], r"rib0 +0\.000 +0\.000 +0\.000 +0\.000", status=0,
+        prepare=_rib_point),
+    "the preview of an LPS file declared RAS": command_probe(
+        ["meshes.preview", "import.yaml"], r"the import would stop: .*? anterior of the breast",
+        status=1, prepare=lambda w: _import_config(w, {"axes": "RAS", "side": "left"})),
+    "the preview of the code LAS": command_probe(
+        ["meshes.preview", "import.yaml"], r"the import would stop: .*? anterior of the breast",
+        status=1, prepare=lambda w: _import_config(w, {"axes": "LAS", "side": "left"})),
+    "the preview of orientation {}": command_probe(
+        ["meshes.preview", "import.yaml"], r"invalid mesh section: mesh\.file\.orientation",
+        prepare=lambda w: _import_config(w, {})),
+    "the preview of a distance beside a posterior rule": command_probe(
+        ["meshes.preview", "import.yaml"], r"invalid mesh section: mesh\.file\.surfaces\.rib",
+        prepare=lambda w: _import_config(w, {"axes": "LPS", "side": "left"}, {
+            "posterior": {"angle": 30, "band": 10}, "distance": 1})),
+    "the preview says a posterior rule's band in mm": command_probe(
+        ["meshes.preview", "import.yaml"], r"rib .*? facing posterior within 30° and within "
+        r"10 mm of the most posterior point.*?the rules would do", status=0,
+        prepare=lambda w: _import_config(w, {"axes": "LPS", "side": "left"}, {
+            "posterior": {"angle": 30, "band": 10}})),
+    "the preview of an angle given as text": command_probe(
+        ["meshes.preview", "import.yaml"], r"invalid mesh section: mesh\.file\.surfaces\.rib",
+        prepare=lambda w: _import_config(w, {"axes": "LPS", "side": "left"}, {
+            "posterior": {"angle": "30", "band": 10}})),
     "points from a binary file": command_probe(
         [*MODEL_QUERY, "--points", "points.csv"], r"points\.csv: not a text CSV",
         prepare=lambda w: (w / "points.csv").write_bytes(bytes(range(256)))),
