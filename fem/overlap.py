@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from meshes.io import geometry_nodes
+from meshes.quadratic import curved_coordinates, edge_order
 
 log = logging.getLogger(__name__)
 
@@ -54,9 +55,11 @@ def self_overlap(mesh: Any, displacement: Any) -> dict[str, Any]:
 
     Candidate cells come from dolfinx's bounding-box tree of the deformed mesh (which is
     moved by ``displacement`` for the search and restored afterwards); a vertex is inside
-    a cell if its barycentric coordinates in the straight tetrahedron through the cell's
-    deformed vertices are all positive. Curved (second-order) cells are tested by that
-    straight tetrahedron.
+    a cell if its barycentric coordinates in the cell are all positive: in the straight
+    tetrahedron through the cell's deformed vertices, and, for a curved (second-order) cell,
+    in the cell's own quadratic map (Newton's method from the straight coordinates), which a
+    crease bends: a vertex inside the straight tetrahedron of a curved cell but outside the
+    cell is not inside, and one inside a cell that bulges past its straight tetrahedron is.
 
     Args:
         mesh: a serial dolfinx mesh (the reference configuration).
@@ -103,6 +106,12 @@ def self_overlap(mesh: Any, displacement: Any) -> dict[str, Any]:
     lam = np.zeros((len(cell), 3))
     lam[ok] = np.linalg.solve(edges[ok], (points[point[ok]] - corners[ok, 0])[..., None])[..., 0]
     bary = np.column_stack([1 - lam.sum(axis=1), lam])
+    if mesh.geometry.cmap.degree == 2:  # the curved cell's own map decides
+        nodes = geometry_nodes(mesh)
+        pairs = edge_order(x0, nodes[:1])
+        bary, gap = curved_coordinates(x[nodes[cell]], points[point], bary, pairs)
+        size = np.linalg.norm(np.ptp(x[nodes[cell]], axis=1), axis=1)
+        ok = np.isfinite(gap) & (gap <= 1e-9 * size)  # the map reaches the point
     strictly_inside = ok & (bary.min(axis=1) > _INSIDE)
     overlapping = np.unique(boundary[point[strictly_inside]])
     if len(overlapping):

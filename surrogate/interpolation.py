@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from meshes.quadratic import curved_coordinates, edge_order, quadratic_weights
 from surrogate.exceptions import OutsideMeshError
 
 CANDIDATES = 8
@@ -31,9 +32,6 @@ face: a point on the curved skin lies up to a fraction of a millimetre outside t
 cells of its vertices."""
 
 
-EDGES = ((0, 1), (1, 2), (0, 2), (0, 3), (1, 3), (2, 3))
-"""Corner pairs of a tetrahedron's six edges; a 10-node cell's edge nodes follow its corners in
-an order of these that :func:`edge_order` reads from the nodes' positions."""
 NEWTON_STEPS = 8
 """Newton steps that invert a curved cell's map (it is nearly affine: two or three suffice)."""
 
@@ -169,47 +167,6 @@ class _CellMaps:
         return which, bary
 
 
-def edge_order(X: np.ndarray, cells: np.ndarray) -> np.ndarray:
-    """Which corner pair each edge node of a 10-node cell sits between: (6, 2) corner slots.
-
-    Read from the nodes' positions (each edge node lies nearest the midpoint of its corners,
-    curved or not), so that any writer's node order will do, as long as every cell shares it.
-
-    Raises:
-        ValueError: if ``cells`` are not 10-node tetrahedra, or their edge nodes are not in one
-            order.
-    """
-    if cells.ndim != 2 or cells.shape[1] != 10:
-        raise ValueError(f"quadratic cells have 10 nodes, got cells of shape {cells.shape}")
-    corners, edge_nodes = X[cells[:, :4]], X[cells[:, 4:]]
-    midpoints = np.stack([(corners[:, a] + corners[:, b]) / 2 for a, b in EDGES], axis=1)
-    distance = np.linalg.norm(edge_nodes[:, :, None, :] - midpoints[:, None, :, :], axis=-1)
-    nearest = np.argmin(distance, axis=2)  # (C, 6): the pair of each edge node
-    order = nearest[0]
-    if not np.all(nearest == order) or len(set(order.tolist())) != 6:
-        raise ValueError("the cells' edge nodes are not in one order of their corner pairs")
-    return np.asarray(EDGES)[order]
-
-
-def quadratic_weights(bary: np.ndarray, pairs: np.ndarray) -> np.ndarray:
-    """The 10-node tetrahedron's shape functions at barycentric coordinates (M, 4): (M, 10).
-
-    Corner i: λ_i (2 λ_i − 1); the edge node between corners i and j: 4 λ_i λ_j.
-    """
-    corner = bary * (2.0 * bary - 1.0)
-    edge = 4.0 * bary[:, pairs[:, 0]] * bary[:, pairs[:, 1]]
-    return np.concatenate([corner, edge], axis=1)
-
-
-def _quadratic_gradients(bary: np.ndarray, pairs: np.ndarray) -> np.ndarray:
-    """d(shape functions)/d(λ1, λ2, λ3), with λ0 = 1 − λ1 − λ2 − λ3: (M, 10, 3)."""
-    dbary = np.array([[-1.0, -1.0, -1.0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])  # dλ_i/dξ
-    corner = (4.0 * bary - 1.0)[:, :, None] * dbary[None]
-    a, b = pairs[:, 0], pairs[:, 1]
-    edge = 4.0 * (bary[:, a, None] * dbary[None, b] + bary[:, b, None] * dbary[None, a])
-    return np.concatenate([corner, edge], axis=1)
-
-
 def locate_quadratic(
     X: np.ndarray, cells: np.ndarray, points: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -247,18 +204,10 @@ def _curved_weights(nodes: np.ndarray, straight: np.ndarray, points: np.ndarray,
     ``nodes`` (m, 10, 3) are each point's cell, ``straight`` its coordinates in the straight
     cell of the corners.
     """
-    xi = straight[:, 1:].copy()
-    with np.errstate(all="ignore"):
-        for _ in range(NEWTON_STEPS):
-            bary = np.concatenate([1.0 - xi.sum(1, keepdims=True), xi], axis=1)
-            residual = np.einsum("mk,mkd->md", quadratic_weights(bary, pairs), nodes) - points
-            jacobian = np.einsum("mkd,mke->mde", nodes, _quadratic_gradients(bary, pairs))
-            xi -= np.linalg.solve(jacobian, residual[..., None])[..., 0]
-        bary = np.concatenate([1.0 - xi.sum(1, keepdims=True), xi], axis=1)
-        gap = np.einsum("mk,mkd->md", quadratic_weights(bary, pairs), nodes) - points
+    bary, gap = curved_coordinates(nodes, points, straight, pairs, NEWTON_STEPS)
     # a point the curved map does not reach (outside the body, clipped to a face by locate):
     # the straight cell's coordinates
-    lost = ~np.isfinite(gap).all(axis=1) | (np.linalg.norm(gap, axis=1) > 1e-3 * OUTSIDE_M)
+    lost = ~np.isfinite(gap) | (gap > 1e-3 * OUTSIDE_M)
     bary[lost] = straight[lost]
     return quadratic_weights(bary, pairs)
 

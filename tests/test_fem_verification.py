@@ -270,3 +270,33 @@ def test_self_overlap_finds_a_fold_not_a_rigid_motion_or_a_solution(coarse_probl
     # a converged prone case on this coarse mesh does not overlap itself
     _solve(problem, solver, Material(C1=1000.0), Gravity(phi=180.0))
     assert self_overlap(msh, problem.displacement())["overlapping_vertices"] == 0
+
+
+@pytest.mark.parametrize("bulge", [0.2, -0.2], ids=["bulging", "hollow"])
+def test_self_overlap_tests_a_curved_cell_by_its_own_map(bulge: float) -> None:
+    """A vertex near a curved cell's face: inside the cell exactly when its map bulges there.
+
+    Cell A, curved: its edge node between corners 1 and 2 moved off the face x + y + z = 1 by
+    ``bulge`` along (1, 1, 0). Cell B, apart, has a vertex just outside that face (bulging: the
+    cell holds it, its straight tetrahedron does not) or just inside (hollow: the reverse).
+    """
+    from fem.overlap import self_overlap
+
+    corners = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
+    # dolfinx's order of a 10-node tetrahedron: the corners, then the edges (2,3), (1,3),
+    # (1,2), (0,3), (0,2), (0,1)
+    edges = [(2, 3), (1, 3), (1, 2), (0, 3), (0, 2), (0, 1)]
+    mid = [(corners[a] + corners[b]) / 2 for a, b in edges]
+    mid[2] = mid[2] + bulge * np.array([1.0, 1.0, 0.0]) / np.sqrt(2)
+    side = 0.04 if bulge > 0 else -0.04  # the vertex beyond (or before) the straight face
+    p = np.array([0.5, 0.5, 0.02]) + side * np.array([1.0, 1.0, 0.0])
+    other = np.array([p, p + [0.3, 0.0, 0.0], p + [0.0, 0.3, 0.0], p + [0.0, 0.0, 0.3]])
+    other_mid = [(other[a] + other[b]) / 2 for a, b in edges]
+    x = np.vstack([corners, mid, other, other_mid])
+    cells = np.array([np.arange(10), 10 + np.arange(10)], dtype=np.int64)
+    domain = ufl.Mesh(ufl.VectorElement("Lagrange", "tetrahedron", 2))
+    msh = dmesh.create_mesh(MPI.COMM_WORLD, cells, x, domain)
+    u = fem.Function(fem.VectorFunctionSpace(msh, ("Lagrange", 2)))
+    straight = np.linalg.solve((corners[1:] - corners[0]).T, p - corners[0])
+    assert (straight.min() > 0 and straight.sum() < 1) == (bulge < 0)  # the straight test's say
+    assert self_overlap(msh, u)["overlapping_vertices"] == (1 if bulge > 0 else 0)

@@ -19,16 +19,10 @@ import pytest
 from fem.dataset import FIELD_DATASET, DatasetError, build_dataset, read_dataset, write_points
 from fem.directions import gravity_direction
 from fem.sweep import Case
+from meshes.quadratic import EDGES, edge_order, quadratic_weights
 from surrogate.config import SurrogateConfig
 from surrogate.exceptions import ExtrapolationWarning, ModelFileError
-from surrogate.interpolation import (
-    EDGES,
-    at_centroids,
-    edge_order,
-    interpolate,
-    locate_quadratic,
-    quadratic_weights,
-)
+from surrogate.interpolation import at_centroids, interpolate, locate_quadratic
 
 pytestmark = pytest.mark.unit
 
