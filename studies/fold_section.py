@@ -116,15 +116,16 @@ def choose_cases(columns: dict[str, np.ndarray], named: list[Case], largest: int
     dataset without ``self_contact_force_N`` (solved without self-contact) adds none.
     """
     chosen = list(dict.fromkeys(named))
+    limit = len(chosen) + largest
     force = columns.get("self_contact_force_N")
     if largest and force is not None:
         force = np.nan_to_num(np.asarray(force, dtype=float), nan=0.0)
         ok = np.asarray(columns["converged"], dtype=bool) & (force > 0)
         for i in np.flatnonzero(ok)[np.argsort(-force[ok], kind="stable")]:
+            if len(chosen) >= limit:
+                break
             case = Case(float(columns["C1"][i]), float(columns["phi"][i]),
                         float(columns["theta"][i]))
-            if len(chosen) >= len(named) + largest:
-                break
             if case not in chosen:
                 chosen.append(case)
     return chosen
