@@ -22,7 +22,6 @@ sweep with the largest self-contact force (:func:`choose_cases`); the workflow's
 
 from __future__ import annotations
 
-import argparse
 import logging
 import sys
 import time
@@ -36,7 +35,7 @@ from fem.overlap import geometry_displacement
 from fem.parameters import SolverSettings
 from fem.sweep import Case
 from studies.results import Record, Result
-from studies.self_contact_benchmark import parse_case, solve_pairs
+from studies.self_contact_benchmark import case_arguments, settings_of, solve_pairs
 
 log = logging.getLogger(__name__)
 
@@ -218,21 +217,13 @@ def fold_sections(mesh_path: str | Path, settings: SolverSettings,
 
 def main(argv: list[str] | None = None) -> int:
     """Command line: see the module docstring."""
-    from fem.configfile import read_config_file
-
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("mesh", type=Path, help="mesh XDMF with facet tags")
-    parser.add_argument("--config", type=Path, help="workflow config (fe, material, mesh)")
-    parser.add_argument("--case", type=parse_case, action="append", required=True,
-                        help="C1:PHI[:THETA] in kPa and degrees; repeat for more")
+    parser = case_arguments(__doc__.split("\n\n")[0])
     parser.add_argument("-o", "--output", type=Path, required=True, help="JSON to write")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO)
-    if not args.mesh.is_file():
-        print(f"error: mesh {args.mesh} does not exist", file=sys.stderr)
+    settings = settings_of(args)
+    if settings is None:
         return 2
-    settings = SolverSettings.from_config(read_config_file(args.config)) if args.config \
-        else SolverSettings()
     fold_sections(args.mesh, settings, args.case).write(args.output)
     return 0
 

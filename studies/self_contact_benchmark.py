@@ -124,21 +124,34 @@ def table(rows: list[dict[str, Any]]) -> str:
     return "\n".join(out)
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Command line: see the module docstring."""
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def case_arguments(description: str) -> argparse.ArgumentParser:
+    """A parser of a mesh, ``--config`` and repeated ``--case`` (this study's and its kin's)."""
+    parser = argparse.ArgumentParser(description=description)
     parser.add_argument("mesh", type=Path, help="mesh XDMF with facet tags")
     parser.add_argument("--config", type=Path, help="workflow config (fe, material, mesh)")
     parser.add_argument("--case", type=parse_case, action="append", required=True,
                         help="C1:PHI[:THETA] in kPa and degrees; repeat for more")
+    return parser
+
+
+def settings_of(args: argparse.Namespace) -> SolverSettings | None:
+    """The config's solver settings (the defaults without one); None, said, if no mesh."""
+    if not args.mesh.is_file():
+        print(f"error: mesh {args.mesh} does not exist", file=sys.stderr)
+        return None
+    return SolverSettings.from_config(read_config_file(args.config)) if args.config \
+        else SolverSettings()
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command line: see the module docstring."""
+    parser = case_arguments(__doc__.split("\n\n")[0])
     parser.add_argument("--json", type=Path, help="also write the rows here")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
-    if not args.mesh.is_file():
-        print(f"error: mesh {args.mesh} does not exist", file=sys.stderr)
+    settings = settings_of(args)
+    if settings is None:
         return 2
-    settings = SolverSettings.from_config(read_config_file(args.config)) if args.config \
-        else SolverSettings()
     rows = compare(args.mesh, settings, args.case)
     print(table(rows))
     if args.json:
