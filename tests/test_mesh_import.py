@@ -70,10 +70,18 @@ def write_volume(path: Path, x: np.ndarray, tets: np.ndarray) -> Path:
     return path
 
 
-def spec(path: Path, units: str = "m", **surfaces: dict) -> ImportSpec:
-    return ImportSpec.from_mapping(
-        {"path": str(path), "units": units, "surfaces": surfaces or {"rib": RIB_PLANE}}
-    )
+#: The boxes below stand on their chest wall at the file's x = 0, +x pointing out of the chest
+#: (anterior): the file's axes are A, L, S of a left breast. Without it the import takes the
+#: file to be in the project's frame (+x posterior), and refuses a chest wall anterior.
+OUT_OF_THE_CHEST = {"axes": "ALS", "side": "left"}
+
+
+def spec(path: Path, units: str = "m", orientation: dict | None = None,
+         **surfaces: dict) -> ImportSpec:
+    values = {"path": str(path), "units": units, "surfaces": surfaces or {"rib": RIB_PLANE}}
+    if orientation is not None:
+        values["orientation"] = orientation
+    return ImportSpec.from_mapping(values)
 
 
 # -- the acceptance test of the issue ------------------------------------------------------
@@ -124,7 +132,8 @@ def test_plane_rules_name_the_box_faces(tmp_path: Path) -> None:
     stl = write_surface(tmp_path / "box.stl", *box_mesh(2))
     top = {"plane": {"point": [0, 0, BOX[2]], "normal": [0, 0, 1]}, "distance": 0.001}
     report = write_imported_mesh(
-        spec(stl, rib=RIB_PLANE, cranial=top), SIZE, tmp_path / "m.xdmf", tmp_path / "m.png"
+        spec(stl, orientation=OUT_OF_THE_CHEST, rib=RIB_PLANE, cranial=top), SIZE,
+        tmp_path / "m.xdmf", tmp_path / "m.png"
     )
     areas = report["area_m2"]
     assert areas["rib"] == pytest.approx(BOX[1] * BOX[2], rel=1e-9)
@@ -141,7 +150,8 @@ def test_units_are_converted(tmp_path: Path) -> None:
     x, tris = box_mesh(2)
     stl = write_surface(tmp_path / "box_mm.stl", 1000.0 * x, tris)
     rib = {"plane": {"point": [0, 0, 0], "normal": [1, 0, 0]}, "distance": 1.0}  # 1 mm
-    report = write_imported_mesh(spec(stl, "mm", rib=rib), SIZE, tmp_path / "m.xdmf")
+    report = write_imported_mesh(spec(stl, "mm", OUT_OF_THE_CHEST, rib=rib), SIZE,
+                                 tmp_path / "m.xdmf")
     assert report["volume_m3"] == pytest.approx(np.prod(BOX), rel=1e-9)
 
 
@@ -162,7 +172,8 @@ def test_group_rule_on_a_gmsh_volume_mesh(tmp_path: Path) -> None:
         model.mesh.generate(3)
         gmsh.write(str(path))
     report = write_imported_mesh(
-        spec(path, rib={"group": "chest_wall"}, cranial={"group": 8}), SIZE, tmp_path / "m.xdmf"
+        spec(path, orientation=OUT_OF_THE_CHEST, rib={"group": "chest_wall"}, cranial={"group": 8}),
+        SIZE, tmp_path / "m.xdmf"
     )
     assert report["area_m2"]["rib"] == pytest.approx(BOX[1] * BOX[2], rel=1e-9)
     assert report["area_m2"]["cranial"] == pytest.approx(BOX[0] * BOX[1], rel=1e-9)
@@ -174,7 +185,8 @@ def test_group_rule_on_a_gmsh_volume_mesh(tmp_path: Path) -> None:
 @pytest.mark.parametrize("suffix", [".vtu", ".xdmf"])
 def test_volume_mesh_formats(tmp_path: Path, suffix: str) -> None:
     path = write_volume(tmp_path / f"box{suffix}", *box_mesh(3))
-    report = write_imported_mesh(spec(path), SIZE, tmp_path / "m.xdmf")
+    report = write_imported_mesh(spec(path, orientation=OUT_OF_THE_CHEST), SIZE,
+                                 tmp_path / "m.xdmf")
     assert report["volume_m3"] == pytest.approx(np.prod(BOX), rel=1e-9)
     assert report["area_m2"]["rib"] == pytest.approx(BOX[1] * BOX[2], rel=1e-9)
 
@@ -511,7 +523,8 @@ def test_a_small_model_declared_in_centimetres_is_refused_by_its_volume(tmp_path
         UnitsError, match=r"holds 12 l of tissue with units 'cm'.*read in mm it would hold 12 ml"
     ):
         write_imported_mesh(spec(stl, "cm", rib=rib), SIZE, tmp_path / "m.xdmf")
-    report = write_imported_mesh(spec(stl, "mm", rib=rib), SIZE, tmp_path / "m.xdmf")
+    report = write_imported_mesh(spec(stl, "mm", OUT_OF_THE_CHEST, rib=rib), SIZE,
+                                 tmp_path / "m.xdmf")
     assert report["input"]["volume_ml"] == pytest.approx(12.0, rel=1e-9)
 
 
