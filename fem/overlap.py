@@ -84,7 +84,8 @@ def self_overlap(mesh: Any, displacement: Any) -> dict[str, Any]:
     mesh.topology.create_connectivity(tdim - 1, tdim)
     facets = dmesh.exterior_facet_indices(mesh.topology)
     boundary = np.unique(entities_to_geometry(mesh._mesh, tdim - 1, facets, False)[:, :tdim])
-    cell_vertices = geometry_nodes(mesh)[:, : tdim + 1]  # a cell's vertices are its first nodes
+    nodes = geometry_nodes(mesh)
+    cell_vertices = nodes[:, : tdim + 1]  # a cell's vertices are its first nodes
 
     x0 = mesh.geometry.x.copy()
     x = x0 + geometry_displacement(mesh, displacement)
@@ -107,7 +108,6 @@ def self_overlap(mesh: Any, displacement: Any) -> dict[str, Any]:
     lam[ok] = np.linalg.solve(edges[ok], (points[point[ok]] - corners[ok, 0])[..., None])[..., 0]
     bary = np.column_stack([1 - lam.sum(axis=1), lam])
     if mesh.geometry.cmap.degree == 2:  # the curved cell's own map decides
-        nodes = geometry_nodes(mesh)
         pairs = edge_order(x0, nodes[:1])
         bary, gap = curved_coordinates(x[nodes[cell]], points[point], bary, pairs)
         size = np.linalg.norm(np.ptp(x[nodes[cell]], axis=1), axis=1)

@@ -223,6 +223,21 @@ def test_the_preview_prints_what_each_rule_selects(tmp_path: Path) -> None:
     assert "the import would stop: the rib rule" in run.stdout and "narrow the rule" in run.stdout
 
 
+def _import_config(folder: Path, orientation: dict, rib: dict | None = None) -> tuple[dict, Path]:
+    """The box in LPS mm of a left breast, as a config's mesh section (the LPS rib by default).
+
+    Returns the section and the config file written with it alone.
+    """
+    import yaml
+
+    _, rib_lps, lps = _in_lps_mm(folder)
+    mesh = {"source": "file", "file": {"path": str(lps), "units": "mm", "orientation": orientation,
+                                       "surfaces": {"rib": rib if rib is not None else rib_lps}}}
+    config = folder / "import.yaml"
+    config.write_text(yaml.safe_dump({"mesh": mesh}))
+    return mesh, config
+
+
 @pytest.mark.unit
 @pytest.mark.parametrize(("orientation", "rib", "words"), [
     ({}, POSTERIOR_RULE, "mesh.file.orientation"),
@@ -241,11 +256,7 @@ def test_the_preview_refuses_what_the_run_refuses(
     from meshes.preview import main
     from studies.config import ConfigError, WorkflowConfig
 
-    _, _, lps = _in_lps_mm(tmp_path)
-    mesh = {"source": "file", "file": {"path": str(lps), "units": "mm",
-                                       "orientation": orientation, "surfaces": {"rib": rib}}}
-    config = tmp_path / "import.yaml"
-    config.write_text(yaml.safe_dump({"mesh": mesh}))
+    mesh, config = _import_config(tmp_path, orientation, rib)
     assert main([str(config)]) == 2
     said = capsys.readouterr().err
     assert "invalid mesh section" in said and words in said, said
@@ -263,15 +274,9 @@ def test_the_preview_says_the_import_would_stop_where_the_chest_wall_lands_anter
     tmp_path: Path, orientation: dict, capsys: pytest.CaptureFixture[str],
 ) -> None:
     """An LPS file declared RAS, or with A for P: the run refuses it, so the preview says so."""
-    import yaml
-
     from meshes.preview import main
 
-    _, rib_lps, lps = _in_lps_mm(tmp_path)
-    mesh = {"source": "file", "file": {"path": str(lps), "units": "mm",
-                                       "orientation": orientation, "surfaces": {"rib": rib_lps}}}
-    config = tmp_path / "import.yaml"
-    config.write_text(yaml.safe_dump({"mesh": mesh}))
+    mesh, config = _import_config(tmp_path, orientation)
     assert main([str(config)]) == 1
     said = capsys.readouterr().out
     assert "the import would stop" in said and "anterior of the breast's centroid" in said
