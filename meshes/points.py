@@ -21,10 +21,17 @@ HEADER = ["name", "x", "y", "z"]
 def read_points(path: Path) -> tuple[list[str], np.ndarray]:
     """Names and coordinates (n, 3) of a ``name,x,y,z`` CSV.
 
+    A regular file (the header, then four fields a row, finite numbers) is read by pandas' C
+    parser, in about a second a million points; anything else by Python's ``csv`` module, row
+    by row, which names what is wrong.
+
     Raises:
         MeshInputError: naming the file and the row for a missing header, a short row or a
             coordinate that is not a finite number, and the file for one that is not text.
     """
+    regular = _read_regular(path)
+    if regular is not None:
+        return regular
     try:  # "utf-8-sig": a spreadsheet's "CSV UTF-8" starts with a byte-order mark
         with path.open(newline="", encoding="utf-8-sig") as f:
             rows = list(csv.reader(f))
@@ -50,6 +57,30 @@ def read_points(path: Path) -> tuple[list[str], np.ndarray]:
     if not names:
         raise MeshInputError(f"{path}: no points below the header")
     return names, np.array(points)
+
+
+def _read_regular(path: Path) -> tuple[list[str], np.ndarray] | None:
+    """:func:`read_points` by pandas' C parser; None for a file it does not read as regular."""
+    import pandas as pd
+
+    try:
+        with path.open(newline="", encoding="utf-8-sig") as f:
+            header = next(csv.reader([f.readline()]), [])
+            if [c.strip().lower() for c in header] != HEADER:
+                return None
+            frame = pd.read_csv(f, header=None, names=HEADER, dtype={"name": str},
+                                keep_default_na=False, engine="c",
+                                float_precision="round_trip")
+    except (UnicodeDecodeError, csv.Error, ValueError, pd.errors.ParserError):
+        return None
+    xyz = frame[HEADER[1:]]
+    if frame.empty or not all(np.issubdtype(t, np.floating) or np.issubdtype(t, np.integer)
+                              for t in xyz.dtypes):
+        return None
+    points = xyz.to_numpy(dtype=float)
+    if not np.all(np.isfinite(points)):
+        return None
+    return frame["name"].tolist(), points
 
 
 def write_points(path: Path, names: list[str], points: np.ndarray) -> None:

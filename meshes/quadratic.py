@@ -9,6 +9,11 @@ from __future__ import annotations
 
 import numpy as np
 
+CONVERGED = 1e-12
+"""A Newton step on a curved cell's reference coordinates this small (each one, in every point
+of a block) ends it: the map is nearly affine, so the steps shrink quadratically to the
+rounding floor of a few 1e-14 within three or four."""
+
 EDGES = ((0, 1), (1, 2), (0, 2), (0, 3), (1, 3), (2, 3))
 """Corner pairs of a tetrahedron's six edges; a 10-node cell's edge nodes follow its corners in
 an order of these that :func:`edge_order` reads from the nodes' positions."""
@@ -70,7 +75,10 @@ def curved_coordinates(nodes: np.ndarray, points: np.ndarray, start: np.ndarray,
             bary = np.concatenate([1.0 - xi.sum(1, keepdims=True), xi], axis=1)
             residual = np.einsum("mk,mkd->md", quadratic_weights(bary, pairs), nodes) - points
             jacobian = np.einsum("mkd,mke->mde", nodes, quadratic_gradients(bary, pairs))
-            xi -= np.linalg.solve(jacobian, residual[..., None])[..., 0]
+            step = np.linalg.solve(jacobian, residual[..., None])[..., 0]
+            xi -= step
+            if not np.any(np.abs(step) > CONVERGED):  # NaN steps stop it too: unreachable
+                break
         bary = np.concatenate([1.0 - xi.sum(1, keepdims=True), xi], axis=1)
         gap = np.linalg.norm(np.einsum("mk,mkd->md", quadratic_weights(bary, pairs), nodes)
                              - points, axis=1)

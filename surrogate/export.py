@@ -58,8 +58,15 @@ def export_web(model: Surrogate) -> dict[str, Any]:
     A ``pod`` model has no point networks: its one part carries its ``modes`` at the points
     instead of layers, (points, 3, ``modes``), and the page weighs them as a separable model's
     fields (without the 1/√modes of a separable model's sum). Its rib points are zero.
+
+    Raises:
+        ValueError: for a ``pod`` model asked at more points than its nodes
+            (:meth:`Surrogate.at`), which holds no modes at them.
     """
     config, norm = model.config, model.normalisation
+    if config.structure == "pod" and model.basis is None:
+        raise ValueError(f"a pod model asked at {len(model.X)} points, more than its mesh has "
+                         "nodes, holds no modes there to export: ask it at fewer points")
     factor = np.ones(len(model.X)) if model.point_factor is None else model.point_factor
     parts: dict[str, dict[str, Any]] = {}
     members = {"domain": np.flatnonzero(~model.boundary)}

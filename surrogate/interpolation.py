@@ -190,11 +190,24 @@ def locate_quadratic(
     pairs = edge_order(X, cells)
     which, bary = _cells_holding(X, cells[:, :4], points)
     rows = cells[which]
-    weights = np.empty((len(points), 10))
-    for start in range(0, len(points), BLOCK):
-        block = slice(start, start + BLOCK)
+    # a cell whose edge nodes sit at their corners' midpoints maps affinely: the straight
+    # coordinates are its own, and only the points of curved cells need Newton's method
+    curved = np.flatnonzero(_curved(X, cells, pairs)[which])
+    weights = quadratic_weights(bary, pairs)
+    for start in range(0, len(curved), BLOCK):
+        block = curved[start:start + BLOCK]
         weights[block] = _curved_weights(X[rows[block]], bary[block], points[block], pairs)
     return rows, weights
+
+
+def _curved(X: np.ndarray, cells: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """Whether each 10-node cell (C,) is curved: an edge node off its corners' midpoint by
+    more than a rounding error of the cell's size."""
+    corners = X[cells[:, :4]]
+    midpoints = 0.5 * (corners[:, pairs[:, 0]] + corners[:, pairs[:, 1]])
+    off = np.abs(X[cells[:, 4:]] - midpoints).max(axis=(1, 2))
+    size = np.abs(corners - corners[:, :1]).max(axis=(1, 2))
+    return off > 1e-12 * size
 
 
 def _curved_weights(nodes: np.ndarray, straight: np.ndarray, points: np.ndarray,
@@ -225,6 +238,19 @@ def locate_in(X: np.ndarray, cells: np.ndarray, points: np.ndarray
     if cells.shape[1] == 10:
         return locate_quadratic(X, cells, points)
     return locate(X, cells[:, :4], points)
+
+
+def interpolation_matrix(rows: np.ndarray, weights: np.ndarray, nodes: int) -> Any:
+    """The located points' shape functions as a sparse (M, ``nodes``) matrix (CSR).
+
+    ``matrix @ f`` is :func:`interpolate`'s ``f`` (nodes, k) at the points, in M × nodes-a-cell
+    products: the way to carry a field to many more points than the mesh has nodes.
+    """
+    from scipy.sparse import csr_matrix
+
+    m, k = rows.shape
+    return csr_matrix((weights.ravel(), rows.ravel(), np.arange(0, m * k + 1, k)),
+                      shape=(m, nodes))
 
 
 def interpolate(field: np.ndarray, rows: np.ndarray, weights: np.ndarray) -> np.ndarray:

@@ -66,7 +66,8 @@ class Surrogate:
         ModelFileError: if an exact-Dirichlet model lacks its point factor.
     """
 
-    def __init__(self, checkpoint: Checkpoint, clamped_zero: bool = False) -> None:
+    def __init__(self, checkpoint: Checkpoint, clamped_zero: bool = False,
+                 between: tuple[np.ndarray, Any] | None = None) -> None:
         c = checkpoint
         self._checkpoint = c
         #: the boundary points answer exactly zero, as FE has them on the clamped chest wall
@@ -87,6 +88,15 @@ class Surrogate:
         self.held_out = list(c.held_out)
         self._build_range_checks()
         self._build_predictor()
+        #: (:meth:`at` for many points) the field is predicted at the checkpoint's nodes, then
+        #: carried to ``points`` by this sparse (M, nodes) matrix of shape functions
+        self._between = None
+        if between is not None:
+            points, self._between = between
+            self.X = points
+            self.boundary = np.zeros(len(points), dtype=bool)
+            self.node_index = np.arange(len(points))
+            self.basis = None
 
     # -- construction -----------------------------------------------------------------
     def _build_predictor(self) -> None:
@@ -341,7 +351,9 @@ class Surrogate:
         ``pod`` model's modes, zero there) answers exactly zero, as FE has it, every other point
         by the domain network; an exact-Dirichlet model's factor is evaluated at them with the
         model's own length scale.
-        Each query of the returned model costs in proportion to M.
+        Each query of the returned model costs in proportion to M; a ``pod`` model asked at
+        more points than its nodes predicts at its nodes and carries the field to the points
+        by the same shape functions (no modes held at each point).
 
         Raises:
             ValueError: if ``points`` is not a finite (M, 3) array; for a ``pod`` model, also
@@ -363,19 +375,34 @@ class Surrogate:
             factor = dirichlet_factor(self.X, self.boundary, c.config.bc_length, at=points)
         basis = None
         if c.config.structure == "pod":
-            from surrogate.interpolation import interpolate, locate, locate_quadratic
+            from surrogate.interpolation import (
+                interpolate,
+                interpolation_matrix,
+                locate,
+                locate_quadratic,
+            )
 
             if c.nodes is not None:
+                nodes = c.nodes.X, c.nodes.basis
                 where = locate_quadratic(c.nodes.X, c.nodes.cells, points)
-                basis = interpolate(c.nodes.basis, *where).astype(np.float32, copy=False)
             elif c.cells is not None:
-                basis = interpolate(c.basis, *locate(self.X, c.cells, points)).astype(
-                    np.float32, copy=False)
+                nodes = self.X, c.basis
+                where = locate(self.X, c.cells, points)
             else:
                 raise ValueError(
                     "this pod model answers at its material points only: its dataset has no "
                     "mesh cells to interpolate its modes in (rebuild the dataset with its mesh, "
                     "snakemake --forcerun aggregate, and train again)")
+            if len(points) > len(nodes[0]):
+                # more points than nodes: the field at the nodes, then at the points (the same
+                # sum by linearity), in memory and time that grow with the points as 3 values
+                # each, not as 3 × modes
+                return Surrogate(replace(
+                    c, X=nodes[0], boundary=np.zeros(len(nodes[0]), dtype=bool),
+                    point_factor=None, node_index=None, basis=nodes[1], cells=None, nodes=None,
+                ), clamped_zero=True,
+                    between=(points, interpolation_matrix(*where, len(nodes[0]))))
+            basis = interpolate(nodes[1], *where).astype(np.float32, copy=False)
         boundary = np.zeros(len(points), dtype=bool)
         if c.config.structure != "pod" and c.cells is not None:
             # the networks answer anywhere, but only the body is trained: a point outside is
@@ -408,7 +435,10 @@ class Surrogate:
                 below a C1 at which the sweep's FE solve failed beside its direction, or below
                 the softest C1 trained beside it (:meth:`softest_beside`).
         """
-        return np.asarray(self._run(self._parts, self.features(C1, phi, theta)))
+        u = np.asarray(self._run(self._parts, self.features(C1, phi, theta)))
+        if self._between is not None:
+            u = (self._between @ u).astype(np.float32)
+        return u
 
     def features(self, C1: float, phi: float, theta: float = 0.0) -> np.ndarray:
         """Checked query features: scaled C1, gravity direction, output gain (5,), float32."""

@@ -310,3 +310,28 @@ def test_mesh_config_rejects_unknown_keys_and_missing_file() -> None:
         MeshConfig.from_mapping({"source": "parametric", "fixed": {"rib": "all"}}).input_files()
         == []
     )
+
+
+def test_a_points_file_reads_the_same_by_either_reader(tmp_path: Path) -> None:
+    """The C parser's names and numbers are the row-by-row reader's, to the last bit.
+
+    A regular file takes the fast reader; one it does not read as regular (a short row) falls
+    to the row-by-row one, which names the row. Names that look like numbers or "NA" stay text.
+    """
+    from meshes import points as pts
+    from meshes.exceptions import MeshInputError
+
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(5, 3)) * 0.05
+    names = ["007", "NA", "tumour, centre", " margin", ""]
+    path = tmp_path / "p.csv"
+    pts.write_points(path, names, X)
+    assert pts._read_regular(path) is not None
+    read_names, read_X = pts.read_points(path)
+    assert read_names == names and np.array_equal(read_X, X)
+    path.write_bytes(b"\xef\xbb\xbf" + path.read_bytes().replace(b"\r\n", b"\n") + b"\n\n")
+    assert pts.read_points(path)[0] == names  # a byte-order mark, blank lines at the end
+    path.write_text(path.read_text(encoding="utf-8-sig") + "short,1,2\n")
+    assert pts._read_regular(path) is None
+    with pytest.raises(MeshInputError, match=r"row 9: expected name,x,y,z, got \['short'"):
+        pts.read_points(path)

@@ -140,6 +140,28 @@ def test_between_the_points_a_pod_model_interpolates_in_the_tetrahedra(trained) 
         model.at(np.array([[0.5, 0.5, 0.5], [0.5, 0.5, 1.1]]))
 
 
+def test_at_more_points_than_nodes_a_pod_model_predicts_at_its_nodes_first(trained) -> None:
+    """The field at the nodes carried to the points: the modes' interpolation's answer."""
+    from surrogate.export import export_web
+    from surrogate.predict import Surrogate
+
+    ds, _, folder = trained
+    model = Surrogate.load(folder)
+    rng = np.random.default_rng(3)
+    corners = ds.X[ds.cells[rng.integers(0, len(ds.cells), 3 * ds.n_points)]]
+    many = np.einsum("mj,mjd->md", rng.dirichlet(np.ones(4), len(corners)), corners)
+    query = (2.0, 60.0, 0.0)
+    at_many = model.at(many)
+    assert at_many.basis is None and at_many.X.shape == many.shape  # no modes at the points
+    by_parts = np.concatenate([model.at(part).predict(*query)
+                               for part in np.array_split(many, 4)])  # fewer than the nodes
+    u = at_many.predict(*query)
+    assert u.dtype == np.float32 and u.shape == many.shape
+    np.testing.assert_allclose(u, by_parts, rtol=0, atol=1e-5 * np.abs(by_parts).max())
+    with pytest.raises(ValueError, match="more than its mesh has nodes"):
+        export_web(at_many)
+
+
 def test_the_command_line_predicts_at_named_points(
     trained, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
