@@ -201,8 +201,11 @@ def locate_quadratic(
 
 
 def _curved(X: np.ndarray, cells: np.ndarray, pairs: np.ndarray) -> np.ndarray:
-    """Whether each 10-node cell (C,) is curved: an edge node off its corners' midpoint by
-    more than a rounding error of the cell's size."""
+    """Whether each 10-node cell (C,) is curved.
+
+    Curved: an edge node lies off its corners' midpoint by more than a rounding error of the
+    cell's size.
+    """
     corners = X[cells[:, :4]]
     midpoints = 0.5 * (corners[:, pairs[:, 0]] + corners[:, pairs[:, 1]])
     off = np.abs(X[cells[:, 4:]] - midpoints).max(axis=(1, 2))
