@@ -11,7 +11,7 @@ import pytest
 
 pytestmark = pytest.mark.unit
 
-PACKAGES = ("meshes", "fem", "surrogate", "studies", "report")
+PACKAGES = ("meshes", "fem", "surrogate", "studies", "report", "benchmarks")
 
 
 def test_no_module_imports_itself_back() -> None:

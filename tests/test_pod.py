@@ -437,3 +437,15 @@ def test_a_refit_trains_on_the_validation_cases_for_the_epochs_chosen(
     with pytest.raises(ValueError, match="material points, the dataset"):
         refit_model(folder, dataclasses.replace(ds, X=ds.X[:10]), tmp_path / "other")
     assert not (tmp_path / "other").exists()
+
+
+def test_the_points_benchmark_times_the_command_at_toy_size(
+        trained, capsys: pytest.CaptureFixture[str]) -> None:
+    """``benchmarks.predict_points``: the command run on drawn points, its figures printed."""
+    from benchmarks.predict_points import main
+
+    _, _, folder = trained
+    assert main([str(folder), "--points", "300", "--c1", "2", "--phi", "60"]) == 0
+    said = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert said["points"] == 300 and said["said"].startswith("300 points: max |u| = ")
+    assert said["wall_s"] > 0 and said["peak_rss_gb"] > 0 and said["max_displacement_mm"] > 0

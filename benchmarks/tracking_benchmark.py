@@ -1,6 +1,6 @@
 """Benchmark: points tracked from prone to supine by FE and by the surrogate.
 
-    .venv/bin/python -m studies.tracking_benchmark MESH --model MODEL [--config config.yaml]
+    .venv/bin/python -m benchmarks.tracking_benchmark MESH --model MODEL [--config config.yaml]
         [--c1 1.0] [--points 100] [--observed 180] [--target 0] [--target-theta 0] [--seed 0]
 
 ``MESH`` is the reference the surrogate was trained on (the sweep's mesh). The imaged shape is

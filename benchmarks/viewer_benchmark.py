@@ -1,6 +1,6 @@
 """How fast the interactive view answers: one update measured in the page, in headless Chromium.
 
-    .venv/bin/python -m studies.viewer_benchmark results/viewer/index.html [--updates 200]
+    .venv/bin/python -m benchmarks.viewer_benchmark results/viewer/index.html [--updates 200]
 
 One update is what a user's drag costs: the surrogate's prediction at the surface vertices in
 the page's JavaScript, the colours, and one frame drawn and finished (``gl.finish``). The page
@@ -78,7 +78,7 @@ def format_benchmark(result: ViewerBenchmark) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Print the benchmark (``--json FILE`` writes it too)."""
-    parser = argparse.ArgumentParser(prog="python -m studies.viewer_benchmark",
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.viewer_benchmark",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("page", type=Path, help="the viewer's index.html")
     parser.add_argument("--updates", type=int, default=200)

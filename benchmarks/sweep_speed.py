@@ -15,7 +15,7 @@ accounting of the finished child, so the other path's load does not enter it): j
 the DAG, the mesh and the dataset alike, divided by the number of cases. The answers of the two
 are compared case by case at every material point.
 
-``python -m studies.sweep_speed --config config.yaml [--phi -120 0 90 180] [--out DIR]``
+``python -m benchmarks.sweep_speed --config config.yaml [--phi -120 0 90 180] [--out DIR]``
 prints the table and writes ``DIR/sweep_speed.json``.
 """
 
@@ -172,7 +172,7 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point (see the module docstring)."""
     from studies.config import ConfigError, WorkflowConfig, read_config_file
 
-    parser = argparse.ArgumentParser(prog="python -m studies.sweep_speed",
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.sweep_speed",
                                      description=__doc__.splitlines()[0])
     parser.add_argument("--config", type=Path, default=Path("config.yaml"))
     parser.add_argument("--phi", type=float, nargs="+", default=list(DEFAULT_PHI))

@@ -1,6 +1,6 @@
 """Benchmark: one clinical case at image resolution, each linear-solver path in its own process.
 
-``python -m studies.large_case [--mesh MESH] [--size 0.0031] [--c1 1.0] [--phi 180]``
+``python -m benchmarks.large_case [--mesh MESH] [--size 0.0031] [--c1 1.0] [--phi 180]``
 
 Without ``--mesh`` it writes the corpus's scan-like anatomy (:mod:`meshes.corpus`) and imports
 it remeshed to ``--size`` metres (0.0031 m gives about 97k tetrahedra, 447k P2/P1 unknowns, the

@@ -1,6 +1,6 @@
 """Benchmark: the default solver against its settings before the robustness changes, one run.
 
-``python -m studies.solver_regression MESH [--config config.yaml] [--repeats 2]``
+``python -m benchmarks.solver_regression MESH [--config config.yaml] [--repeats 2]``
 
 The clinical cases of the config solved on ``MESH`` with the config's solver settings and with
 the same settings put back as they were before issue 21 (:data:`BEFORE`: GMRES tested on the
