@@ -54,11 +54,14 @@ node_modules/.package-lock.json: package.json package-lock.json
 	npm ci --no-audit --no-fund
 	touch $@
 
-# The checks first (seconds), then the suite; `make test PYTEST_ARGS="-m unit"` runs one layer
-# (markers in pyproject.toml: unit, solve, workflow, cluster).
+# The checks first (seconds), then the suite on every core (pytest-xdist: TEST_WORKERS workers,
+# each module's tests on one worker, so that its fixtures are built once);
+# `make test PYTEST_ARGS="-m unit"` runs one layer (markers in pyproject.toml: unit, solve,
+# workflow, cluster), `TEST_WORKERS=0` one test at a time.
 PYTEST_ARGS ?=
+TEST_WORKERS ?= auto
 test: setup lint
-	$(PY) -m pytest -q $(PYTEST_ARGS) tests
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadscope --durations=15 $(PYTEST_ARGS) tests
 
 # The config is checked first (a YAML syntax error with its line, every bad value named), then
 # the run. Every run of the Snakefile holds the working directory's run lock (studies.workdir):

@@ -1,13 +1,16 @@
-"""Shared fixtures: one coarse parametric mesh per test session."""
+"""Shared fixtures: one coarse parametric mesh and one small workflow run per test session."""
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import re
+import shutil
 import subprocess
 import sys
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -41,17 +44,49 @@ def _free_solver_options() -> Iterator[None]:
             options.delValue(key)
 
 
+@contextmanager
+def built_once(tmp_path_factory: pytest.TempPathFactory, name: str) -> Iterator[Path | None]:
+    """A folder that one process of the session builds and every other one reads.
+
+    Under pytest-xdist each worker runs its own session fixtures; this gives them one folder
+    in the session's shared temporary root, under a file lock: the first worker to take it
+    gets the folder to build (yields it; the build is recorded when the block ends without an
+    error), the others wait for the lock and get None, the folder being built. A build that
+    failed is retried by the next worker, which then fails the same way.
+    """
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent  # the session's root, above the workers' own
+    folder, done = root / name, root / f"{name}.built"
+    with open(root / f"{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if done.exists():
+            yield None
+            return
+        shutil.rmtree(folder, ignore_errors=True)
+        folder.mkdir()
+        yield folder
+        done.touch()
+
+
+def shared_folder(tmp_path_factory: pytest.TempPathFactory, name: str) -> Path:
+    """The folder :func:`built_once` builds under ``name``."""
+    root = tmp_path_factory.getbasetemp()
+    return (root.parent if os.environ.get("PYTEST_XDIST_WORKER") else root) / name
+
+
 @pytest.fixture(scope="session")
 def coarse_mesh(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The default geometry on a coarse mesh (about 1,000 vertices), as XDMF."""
+    """The default geometry on a coarse mesh (about 1,000 vertices), as XDMF (built once)."""
     from meshes.build import MeshSize, write_parametric_mesh
     from meshes.parametric import BreastGeometry
 
-    folder = tmp_path_factory.mktemp("mesh")
-    path = folder / "mesh.xdmf"
-    report = write_parametric_mesh(BreastGeometry(), MeshSize(**COARSE), path)
-    (folder / "quality.json").write_text(json.dumps(report))
-    return path
+    with built_once(tmp_path_factory, "mesh") as folder:
+        if folder is not None:
+            report = write_parametric_mesh(BreastGeometry(), MeshSize(**COARSE),
+                                           folder / "mesh.xdmf")
+            (folder / "quality.json").write_text(json.dumps(report))
+    return shared_folder(tmp_path_factory, "mesh") / "mesh.xdmf"
 
 
 def snakemake(
@@ -89,9 +124,11 @@ def job_counts(output: str) -> dict[str, int]:
 def small_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The whole workflow run once on tests/config.yaml; tests only read it.
 
-    The target is ``all``: sweep, dataset, FE study, surrogate study, report.
+    The target is ``all``: sweep, dataset, FE study, surrogate study, report. Built once
+    for all the session's workers (:func:`built_once`).
     """
-    workdir = tmp_path_factory.mktemp("workflow")
-    run = snakemake(workdir, "-j2")
-    assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
-    return workdir
+    with built_once(tmp_path_factory, "workflow") as workdir:
+        if workdir is not None:
+            run = snakemake(workdir, "-j2")
+            assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
+    return shared_folder(tmp_path_factory, "workflow")

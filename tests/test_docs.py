@@ -14,8 +14,11 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
 LOG = ROOT / "docs" / "results-log.md"
+TOPICS = sorted((ROOT / "docs" / "results-log").glob("*.md"))
+LONGEST_PAGE = 1000
+"""Lines a page of ``docs/`` may hold: a results-log topic that passes it is split."""
 
 
 def anchor(heading: str) -> str:
@@ -58,12 +61,21 @@ def test_every_local_link_finds_its_file_and_heading(page: Path) -> None:
 
 
 def test_the_results_logs_contents_list_every_entry_in_order() -> None:
-    text = _prose(LOG.read_text())
-    entries = re.findall(r"^## (.+)$", text, re.M)
-    listed = re.findall(r"^(\d+)\. \[(.+?)\]\(#(.+?)\)$", text, re.M)
-    assert [title for _, title, _ in listed] == entries
-    assert [int(n) for n, _, _ in listed] == list(range(1, len(entries) + 1))
-    assert all(target == anchor(title) for _, title, target in listed)
+    """The log's contents number every entry of its topic files once, in each file's order."""
+    listed = re.findall(r"^(\d+)\. \[(.+?)\]\((results-log/[\w\-]+\.md)#(.+?)\)$",
+                        _prose(LOG.read_text()), re.M)
+    assert [int(n) for n, *_ in listed] == list(range(1, len(listed) + 1))
+    assert all(target == anchor(title) for _, title, _, target in listed)
+    assert TOPICS
+    for topic in TOPICS:
+        entries = re.findall(r"^## (.+)$", _prose(topic.read_text()), re.M)
+        named = [title for _, title, path, _ in listed if path == f"results-log/{topic.name}"]
+        assert named == entries, topic.name
+
+
+@pytest.mark.parametrize("page", PAGES, ids=lambda p: str(p.relative_to(ROOT)))
+def test_no_page_of_the_docs_passes_a_thousand_lines(page: Path) -> None:
+    assert len(page.read_text().splitlines()) <= LONGEST_PAGE
 
 
 def test_a_reworded_heading_breaks_its_links(tmp_path: Path) -> None:
@@ -76,3 +88,14 @@ def test_a_reworded_heading_breaks_its_links(tmp_path: Path) -> None:
     other.write_text("[ok](page.md#notes-1) [gone](page.md#not-a-heading) [web](https://x.org)\n")
     assert local_links(other) == ["page.md#notes-1", "page.md#not-a-heading"]
     assert "not-a-heading" not in anchors(page)
+
+
+def test_the_readme_stays_a_guide_of_at_most_three_hundred_lines() -> None:
+    """Reference detail belongs to a page of ``docs/`` that the README links (issue 60)."""
+    assert len((ROOT / "README.md").read_text().splitlines()) <= 300
+
+
+def test_the_readme_links_every_page_of_the_docs() -> None:
+    linked = {link.partition("#")[0] for link in local_links(ROOT / "README.md")}
+    pages = {f"docs/{page.name}" for page in (ROOT / "docs").glob("*.md")}
+    assert pages <= linked, sorted(pages - linked)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
+import tempfile
 import time
 from base64 import urlsafe_b64decode
 from pathlib import Path
@@ -113,9 +114,10 @@ def _planned(workdir: Path, change: dict) -> dict[str, int]:
         for p in parents:
             node = node.setdefault(p, {})
         node[key] = value
-    path = workdir / "changed.yaml"
-    path.write_text(yaml.safe_dump(config))
-    run = snakemake(workdir, "-n", "-j2", config=path)
+    with tempfile.TemporaryDirectory() as folder:  # the run is shared: nothing written there
+        path = Path(folder) / "changed.yaml"
+        path.write_text(yaml.safe_dump(config))
+        run = snakemake(workdir, "-n", "-j2", config=path)
     assert run.returncode == 0, run.stderr[-3000:]
     text = run.stdout + run.stderr
     return job_counts(text) if "Job stats:" in text else {}
