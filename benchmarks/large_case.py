@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from fem.dataset import read_points
+from fem.case_files import read_points
 
 #: The two paths: the preset's own choice, and full rank forced.
 PATHS = {"by size (default)": {}, "full rank": {"blr_above_dofs": 10**12}}

@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from fem.dataset import read_points
+from fem.case_files import read_points
 from fem.sweep import Case
 from studies.machine import MachineState, machine_state, run_pinned
 from studies.results import Record, Result

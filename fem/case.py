@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 from mpi4py import MPI
 
-from fem.dataset import write_points
+from fem.case_files import write_points
 from fem.exceptions import InvalidParameterError
 from fem.io import (
     CaseWriter,

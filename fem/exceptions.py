@@ -13,3 +13,7 @@ class InvalidParameterError(FEError, ValueError):
 
 class MeshError(FEError, ValueError):
     """The mesh cannot be used: no fixed surface, inverted or degenerate cells, ..."""
+
+
+class DatasetError(ValueError):
+    """A case file or the dataset is missing, truncated or inconsistent (the message names it)."""

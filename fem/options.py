@@ -18,7 +18,7 @@ Presets (``fe.solver`` in the config):
     Krylov solve needed more than ``refactor_above_its`` iterations or failed, and
     whenever a Newton iteration close to the solution reduced the residual by less than
     the factor ``refactor_above_ratio`` (a stall). An increment that still fails after getting
-    within ``fem.solver.RETRY_BELOW`` of its first residual, or whose Krylov solves
+    within ``fem.convergence.RETRY_BELOW`` of its first residual, or whose Krylov solves
     failed, is tried again from the same guess with a fresh factorisation at every
     iteration (exact Newton) before the loader cuts the step. Above ``blr_above_dofs``
     unknowns the kept factorisation is block low-rank (:data:`BLR_OPTIONS`). One MUMPS
@@ -63,7 +63,7 @@ LINE_SEARCHES = ("bt", "l2", "cp", "basic")
 #: ``refactor_above_its``: re-factorise the tangent when the previous Krylov solve
 #: took more iterations than this (0: factorise at every Newton iteration).
 #: ``refactor_above_ratio``: re-factorise when the last Newton iteration, already within
-#: ``fem.solver.RETRY_BELOW`` of its first residual, left more than this fraction of the
+#: ``fem.convergence.RETRY_BELOW`` of its first residual, left more than this fraction of the
 #: residual (a stalling inexact solve; 1 never).
 #: ``load_atol``: Newton's absolute residual tolerance as a fraction of the norm of the
 #: full gravity load, so that the test means the same on every mesh, unit and size

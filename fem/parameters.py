@@ -219,7 +219,7 @@ class Loading:
             pass got further. A case that converges without it is solved exactly as
             before.
         stall_window: the last resort gives an attempt up once this many Newton iterations
-            sit on a plateau of the residual (``fem.solver._stalled``) instead of running on
+            sit on a plateau of the residual (``fem.convergence.stalled``) instead of running on
             to its 60th iteration there; 0 turns the test off. The last resort's failing
             attempts on the default mesh sat on such plateaus for up to 50 iterations.
         rescue_min_step: smallest increment of the last resort before the case is declared

@@ -15,7 +15,6 @@ from report.common import case_id
 from report.html import figure
 from studies.architecture import ArchitectureTable, VariantComparison
 from studies.corpus import CorpusTable
-from studies.failure_edge import SweepEdges
 from studies.fe_benchmark import ClinicalBenchmark
 from studies.fe_speed_accuracy import SpeedAccuracy
 from studies.fold_section import FoldSections
@@ -30,6 +29,7 @@ from studies.stability_audit import StabilityAudit
 from studies.stiffness import StiffnessResult
 from studies.surrogate_benchmark import SurrogateBenchmark
 from studies.surrogate_evaluation import ClinicalEvaluation, Extrapolation
+from studies.sweep_edges import SweepEdges
 from studies.tracking import TrackingResult
 from studies.warning_coverage import WarningCoverage
 from surrogate.checkpoint import read_history, read_model_card

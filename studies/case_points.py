@@ -24,7 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fem.dataset import DatasetError, read_node_displacement
+from fem.case_files import read_node_displacement
+from fem.exceptions import DatasetError
 from fem.io import SUMMARY_NAME
 from meshes.exceptions import MeshInputError
 from meshes.points import moved_table, movement_table, read_points, write_points
@@ -41,7 +42,7 @@ def fe_at_points(case: str | Path, points: np.ndarray) -> np.ndarray:
 
     Raises:
         CasePointsError: for a folder without ``summary.json`` or a case that did not converge.
-        fem.dataset.DatasetError: for fields that cannot be read.
+        fem.exceptions.DatasetError: for fields that cannot be read.
         surrogate.exceptions.OutsideMeshError: for a point more than 1 mm outside the mesh.
     """
     case = Path(case)

@@ -32,9 +32,9 @@ from jsonschema import validators
 from fem.configfile import ConfigFileError
 from fem.configfile import read_config_file as fem_read_config_file
 from fem.contact import resolve_obstacle
-from fem.dataset import SplitFractions
 from fem.directions import direction_keys
 from fem.parameters import SolverSettings
+from fem.splits import SplitFractions
 from fem.sweep import Case, clinical_cases, sweep_cases
 from meshes.config import MeshConfig
 from meshes.parametric import BreastGeometry
@@ -291,7 +291,7 @@ class WorkflowConfig:
 
         ``by_case`` always; ``by_direction`` with at least three directions; ``by_c1`` with
         at least three C1 values besides the softest and the stiffest, which always train
-        (:func:`fem.dataset.group_partition`).
+        (:func:`fem.splits.group_partition`).
         """
         phi = np.array([case.phi for case in self.cases], dtype=float)
         theta = np.array([case.theta for case in self.cases], dtype=float)

@@ -42,7 +42,7 @@ import numpy as np
 import yaml
 
 from fem.sweep import PAPER_PHI_DEG, Case, sphere_directions
-from studies.held_out import CaseErrors, ErrorSpread
+from studies.case_errors import CaseErrors, ErrorSpread
 from studies.machine import MachineState, machine_state
 from studies.results import Record, Result
 
@@ -182,7 +182,8 @@ def run(config_path: Path, ns: tuple[int, ...], n_test: int, c1: tuple[float, ..
             (str(mesh), batch, str(root), config.solve_fe, config.section("material"),
              config.section("mesh", "fixed")) for batch in _batches(todo, jobs)])
 
-    from fem.dataset import build_dataset, read_dataset
+    from fem.aggregate import build_dataset
+    from fem.dataset import read_dataset
 
     def dataset(name: str, dirs: list[tuple[float, float]]) -> tuple[Path, list[Case]]:
         cases = sorted({Case(C1, p, t) for p, t in dirs for C1 in c1})

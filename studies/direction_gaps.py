@@ -33,8 +33,9 @@ from pathlib import Path
 
 import numpy as np
 
-from fem.dataset import Dataset, DatasetError, read_dataset
+from fem.dataset import Dataset, read_dataset
 from fem.directions import direction_keys, gravity_angles
+from fem.exceptions import DatasetError
 from studies.results import Record, Result
 
 KERNEL = "cubic"

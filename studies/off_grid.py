@@ -23,7 +23,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from studies.held_out import ErrorSpread
+from studies.case_errors import ErrorSpread
 from studies.postures import PostureRow, evaluate_postures
 from studies.results import Result, write_json
 from surrogate.predict import Surrogate

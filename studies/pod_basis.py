@@ -38,8 +38,9 @@ from pathlib import Path
 
 import numpy as np
 
-from fem.dataset import Dataset, read_dataset, read_summary
-from studies.held_out import CaseErrors, Centroids, ErrorSpread
+from fem.case_files import read_summary
+from fem.dataset import Dataset, read_dataset
+from studies.case_errors import CaseErrors, Centroids, ErrorSpread
 from studies.surrogate_evaluation import fe_in_model_order
 from surrogate.config import SurrogateConfig
 from surrogate.exceptions import ExtrapolationWarning

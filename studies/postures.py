@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from studies.held_out import CaseErrors, Centroids
+from studies.case_errors import CaseErrors, Centroids
 from studies.results import Record, Result
 from studies.surrogate_evaluation import extrapolation_kind, fe_in_model_order
 from surrogate.exceptions import ExtrapolationWarning
@@ -98,7 +98,7 @@ def evaluate_postures(
         ValueError: if a case's material points are not the model's, or a centroid lies
             outside the model's mesh.
     """
-    from fem.dataset import read_summary
+    from fem.case_files import read_summary
 
     rows = []
     fields: list[tuple[np.ndarray, np.ndarray] | None] = []  # each row's (model, FE), mm

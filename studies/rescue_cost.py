@@ -2,7 +2,7 @@
 
 The soft cases that fail, or converge only after the last resort, are most of a sweep's cost:
 their last resort runs attempts of up to 60 Newton iterations, many of them on a plateau of the
-residual (``fe.loading.stall_window`` gives those up, :func:`fem.solver._stalled`), and cuts its
+residual (``fe.loading.stall_window`` gives those up, :func:`fem.convergence.stalled`), and cuts its
 steps back down to ``fe.loading.rescue_min_step``. This runs the given directions' chains (the
 C1 values stiffest first, each case from its stiffer neighbours as in the sweep:
 :mod:`fem.chain`) twice at once, each way in its own process per direction, pinned to its own
@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from fem.dataset import read_points
+from fem.case_files import read_points
 from fem.exceptions import InvalidParameterError
 from fem.parameters import Loading, as_dict
 from fem.sweep import Case

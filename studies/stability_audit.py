@@ -37,8 +37,7 @@ from typing import Any
 import numpy as np
 
 from fem.configfile import read_config_file
-from fem.dataset import DatasetError
-from fem.exceptions import InvalidParameterError
+from fem.exceptions import DatasetError, InvalidParameterError
 from fem.parameters import SolverSettings
 from fem.sweep import Case
 from studies.machine import machine_state

@@ -240,10 +240,10 @@ def extrapolation_kind(model: Surrogate, C1: float, phi: float, theta: float) ->
         kinds.append("C1 below range")
     elif C1 > hi + 1e-9:
         kinds.append("C1 above range")
-    elif model.softest_beside(C1, phi, theta) is not None:
+    elif model.trained.softest_beside(C1, phi, theta) is not None:
         kinds.append("C1 below its direction's range")
-    if model.range_checks()["directions"] is not None:
-        if model.direction_outside(phi, theta) is not None:
+    if model.trained.range_checks()["directions"] is not None:
+        if model.trained.direction_outside(phi, theta) is not None:
             kinds.append("unseen direction")
         return ", ".join(kinds) or "in range"
     if not any(abs(((phi - p) + 180.0) % 360.0 - 180.0) < 1e-6 for p in training_range["phi_deg"]):
@@ -343,7 +343,7 @@ def fe_in_model_order(model: Surrogate, points_path: str | Path) -> tuple[np.nda
     Raises:
         ValueError: if the case's file lacks one of the model's material points.
     """
-    from fem.dataset import read_points
+    from fem.case_files import read_points
 
     points = read_points(points_path)
     row_of = np.full(max(points["node_index"].max(), model.node_index.max()) + 1, -1)
@@ -366,7 +366,7 @@ def evaluate_extrapolation(
         ds: the training dataset (for the nearest in-sweep case).
         cases: ``(summary.json, points.h5)`` of each extra case.
     """
-    from fem.dataset import read_summary
+    from fem.case_files import read_summary
 
     out: dict[str, Any] = {name: {"rows": [], "failed_fe": []} for name in models}
     for summary_path, points_path in cases:

@@ -9,7 +9,8 @@ not the network) and counts the share that warns, by C1 band and by kind: the pa
 where a user gets an answer without a warning, and where she does not.
 
 The queries: C1 uniform in the model's trained range; gravity directions uniform on the sphere
-and kept where they lie among the training directions (``Surrogate.direction_outside`` None),
+and kept where they lie among the training directions
+(``TrainingRange.direction_outside`` None),
 or, for a model of the plane, Φ uniform outside its arc without training angles, at its trained
 θ. ``python -m studies.warning_coverage MODEL [--draws N] [--seed S] [--bands C1 ...] [--json
 OUT]`` prints the table; the workflow's rule ``warning_coverage`` writes it for the selected model
@@ -96,7 +97,7 @@ def _directions(
     model: Surrogate, rng: np.random.Generator, n: int
 ) -> tuple[np.ndarray, np.ndarray]:
     """``n`` query directions (Φ, θ in degrees) drawn evenly, less those outside the trained."""
-    checks = model.range_checks()
+    checks = model.trained.range_checks()
     if checks["directions"] is None:  # a model of the plane: Φ at its trained θ
         phi = rng.uniform(-180.0, 180.0, n)
         gap = checks["phi_gap"]
@@ -109,7 +110,7 @@ def _directions(
     g = rng.normal(size=(n, 3))
     g /= np.linalg.norm(g, axis=1, keepdims=True)
     phi, theta = np.array([gravity_angles(row) for row in g]).T
-    inside = np.array([model.direction_outside(float(p), float(t)) is None
+    inside = np.array([model.trained.direction_outside(float(p), float(t)) is None
                        for p, t in zip(phi, theta, strict=True)], dtype=bool)
     return phi[inside], theta[inside]
 
@@ -130,7 +131,7 @@ def warning_coverage(
     """
     if draws < 1:
         raise ValueError(f"draws must be positive, got {draws}")
-    low, high = model.range_checks()["c1_kPa"]
+    low, high = model.trained.range_checks()["c1_kPa"]
     if low is None or high is None:
         raise ValueError("the model records no finite trained C1 range")
     rng = np.random.default_rng(seed)
@@ -145,8 +146,8 @@ def warning_coverage(
         if not any(issubclass(w.category, ExtrapolationWarning) for w in caught):
             continue
         warned[i] = True
-        failed = model.unconverged_beside(C1, p, t) is not None
-        softest = not failed and model.softest_beside(C1, p, t) is not None
+        failed = model.trained.unconverged_beside(C1, p, t) is not None
+        softest = not failed and model.trained.softest_beside(C1, p, t) is not None
         kinds[KINDS[0]] += failed
         kinds[KINDS[1]] += softest
         kinds[KINDS[2]] += not (failed or softest)

@@ -40,7 +40,7 @@ import numpy as np
 
 from fem.arguments import angle_deg, c1_kpa
 from fem.configfile import read_config_file
-from fem.dataset import DatasetError
+from fem.exceptions import DatasetError
 from meshes.points import moved_table, movement_table, read_points, write_points
 from surrogate.config import SurrogateConfig
 from surrogate.exceptions import ExtrapolationWarning, OutsideMeshError, SurrogateError

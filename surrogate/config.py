@@ -6,7 +6,7 @@ import math
 from dataclasses import asdict, dataclass, fields, replace
 from typing import Any
 
-from fem.dataset import SPLIT_KINDS
+from fem.splits import SPLIT_KINDS
 from surrogate.exceptions import SurrogateConfigError
 
 ACTIVATIONS = ("tanh", "relu", "gelu", "silu")
@@ -78,7 +78,7 @@ class SurrogateConfig:
         seed: the one seed of all randomness.
         split: ``by_sample`` (the paper's random 80/10/10 of points), ``by_case`` (whole
             setups held out), ``by_direction`` (whole gravity directions) or ``by_c1``
-            (whole C1 values); see :data:`fem.dataset.SPLIT_KINDS`.
+            (whole C1 values); see :data:`fem.splits.SPLIT_KINDS`.
     """
 
     hidden_layers: int = 3

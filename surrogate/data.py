@@ -17,7 +17,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from fem.dataset import Dataset, DatasetError
+from fem.dataset import Dataset
+from fem.exceptions import DatasetError
 
 N_INPUTS = 7
 DIRECTION = slice(4, 7)

@@ -84,7 +84,7 @@ def export_web(model: Surrogate) -> dict[str, Any]:
             parts[part]["modes"] = encode_array(model.basis[index], "float32")
         else:
             parts[part]["layers"] = _layers(model.params["domain" if part == "domain" else net])
-    checks = model.range_checks()
+    checks = model.trained.range_checks()
     return {
         "format": FORMAT,
         "version": VERSION,

@@ -10,7 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fem.dataset import DatasetError, mesh_cells
+from fem.aggregate import mesh_cells
+from fem.exceptions import DatasetError
 from surrogate.exceptions import ModelFileError
 from surrogate.predict import Surrogate
 

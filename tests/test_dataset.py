@@ -14,7 +14,11 @@ import h5py
 import numpy as np
 import pytest
 
-from fem.dataset import BOUNDARY, DatasetError, SplitFractions, build_dataset, write_points
+from fem.aggregate import build_dataset
+from fem.case_files import write_points
+from fem.dataset import BOUNDARY
+from fem.exceptions import DatasetError
+from fem.splits import SplitFractions
 from fem.sweep import Case
 
 pytestmark = pytest.mark.unit
@@ -349,7 +353,7 @@ def test_group_splits_hold_out_whole_directions_and_whole_c1_values(tmp_path: Pa
 
 def test_the_by_c1_split_always_tests_its_softest_free_value() -> None:
     """Whatever the seed, the second softest C1 is tested, and the draw still holds out others."""
-    from fem.dataset import group_partition, softest_held_out_c1
+    from fem.splits import group_partition, softest_held_out_c1
 
     c1 = np.repeat([0.8, 1.0, 1.2, 1.4, 1.6, 1.8, 2.0], 3)
     cases = np.arange(c1.size)

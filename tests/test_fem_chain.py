@@ -138,8 +138,8 @@ def test_the_answer_does_not_depend_on_where_the_path_starts(coarse_mesh: Path) 
 
 
 def test_a_chain_writes_every_case_as_run_case_does(coarse_mesh: Path, tmp_path: Path) -> None:
+    from fem.case_files import read_points
     from fem.chain import solve_chain
-    from fem.dataset import read_points
 
     cases = [Case(1.0, 180.0), Case(5.0, 180.0), Case(2.0, 180.0), Case(5.0, 0.0)]
     solved = solve_chain(coarse_mesh, cases, lambda case: tmp_path / case.id)

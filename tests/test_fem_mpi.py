@@ -32,7 +32,7 @@ def test_two_processes_give_the_serial_displacement(
     coarse_mesh: Path, tmp_path: Path, solver: str
 ) -> None:
     from fem.case import run_case
-    from fem.dataset import read_points
+    from fem.case_files import read_points
     from fem.parameters import SolverSettings
     from fem.sweep import Case
 
@@ -72,7 +72,7 @@ def test_two_processes_give_the_serial_displacement(
 def test_two_processes_give_the_serial_contact(coarse_mesh: Path, tmp_path: Path) -> None:
     """With contact on and the mound resting on the chest, MPI changes nothing either."""
     from fem.case import run_case
-    from fem.dataset import read_points
+    from fem.case_files import read_points
     from fem.parameters import SolverSettings
     from fem.sweep import Case
 

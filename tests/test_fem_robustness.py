@@ -33,7 +33,7 @@ def test_unconvergeable_case_ends_failed_with_fraction_and_reason(
     assert on_disk["rejected_steps"] >= 1 and on_disk["first_failure"]
     assert len(on_disk["load_path"]) <= 6
     # the fields hold the last converged state, which is finite and uninverted
-    from fem.dataset import read_points
+    from fem.case_files import read_points
 
     points = read_points(tmp_path / "case" / "points.h5")
     assert np.all(np.isfinite(points["u"]))
@@ -116,10 +116,10 @@ def test_the_stall_test_keeps_petscs_own_tests_where_it_does_not_stall(coarse_me
 
 
 def test_the_stall_test_tells_a_plateau_from_a_noisy_descent() -> None:
-    from fem.solver import _stalled
+    from fem.convergence import stalled
 
     plateau = [0.36, 0.18, 0.1, *[0.072, 0.071, 0.073, 0.071] * 2]  # traced: 40 such iterations
-    assert _stalled(plateau, 8) and not _stalled(plateau, 9) and not _stalled(plateau, 0)
+    assert stalled(plateau, 8) and not stalled(plateau, 9) and not stalled(plateau, 0)
     # Newton on its way over the fold: noisy, then converging (traced, 31 iterations)
     noisy = [0.14, 0.1, 0.065, 0.047, 0.013, 0.0031, 0.0023, 0.0019, 0.002, 0.0016, 0.0029,
              0.0011, 0.0023, 0.0018, 0.0018, 0.0021, 0.0018, 0.0026, 0.0013, 0.0018, 0.0013]
@@ -128,14 +128,14 @@ def test_the_stall_test_tells_a_plateau_from_a_noisy_descent() -> None:
                 0.0359, 0.0337, 0.0268, 0.0235, 0.0221, 0.0213, 0.0212, 0.0202, 0.0201, 0.0178,
                 0.0185, 0.0158, 0.0169, 0.0164, 0.0156, 0.0164, 0.0163, 0.0126, 0.00881]
     for moving in (noisy, creeping):
-        assert not any(_stalled(moving[:k], 8) for k in range(len(moving) + 1))
+        assert not any(stalled(moving[:k], 8) for k in range(len(moving) + 1))
     # flat, but at less than half the best residual before: progress, not a stall
-    assert not _stalled([1.0, 0.9, *[0.4] * 8], 8) and _stalled([1.0, 0.7, *[0.4] * 8], 8)
+    assert not stalled([1.0, 0.9, *[0.4] * 8], 8) and stalled([1.0, 0.7, *[0.4] * 8], 8)
 
 
 def test_a_solve_whose_residual_stops_falling_is_given_up_as_stalled(coarse_mesh: Path) -> None:
     from fem.case import CaseRunner
-    from fem.solver import STALL_RATIO
+    from fem.convergence import STALL_RATIO
 
     case = Case(0.8, -90.0)  # soft, rolled medially: the line search damps the first iterations
     with CaseRunner(coarse_mesh, SolverSettings(contact=None)) as runner:

@@ -55,7 +55,7 @@ def test_a_large_case_skips_measuring_the_factorisation_unit(
 
 def test_run_case_writes_complete_outputs(coarse_mesh: Path, tmp_path: Path) -> None:
     from fem.case import run_case
-    from fem.dataset import read_points
+    from fem.case_files import read_points
 
     summary = run_case(coarse_mesh, Case(5.0, 0.0), tmp_path / "case")
     files = sorted(p.name for p in (tmp_path / "case").iterdir())

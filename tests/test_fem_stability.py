@@ -137,7 +137,7 @@ def _columns(rows: list[tuple[float, float, float, bool]]) -> dict[str, np.ndarr
 
 @pytest.mark.unit
 def test_the_sweeps_failures_are_traced_softest_first_from_the_nearest_converged_case() -> None:
-    from studies.failure_edge import choose_traces
+    from studies.sweep_edges import choose_traces
 
     columns = _columns([
         (1.2, -75.0, 0.0, True), (1.0, -75.0, 0.0, True), (0.9, -75.0, 0.0, False),
@@ -164,7 +164,7 @@ def test_the_sweeps_failures_are_traced_softest_first_from_the_nearest_converged
 def test_a_traced_sweep_is_written_read_and_shown(tiny_mesh: Path, tmp_path: Path) -> None:
     """The record of a sweep's traces round-trips, and the report's table shows it."""
     from report.sections.stability import failure_edges_section
-    from studies.failure_edge import SweepEdges, sweep_edges
+    from studies.sweep_edges import SweepEdges, sweep_edges
 
     # a "failed" case that the turn reaches: the record says so, and names its start
     columns = _columns([(1.0, 180.0, 0.0, True), (1.0, 160.0, 0.0, False)])
@@ -219,9 +219,8 @@ def test_held_out_cases_are_banded_by_their_angle_to_the_nearest_failure() -> No
 
     from report.context import Context
     from report.sections.generalisation import held_out_part
+    from studies.case_errors import CaseErrors, ErrorSpread
     from studies.held_out import (
-        CaseErrors,
-        ErrorSpread,
         HeldOutBlock,
         HeldOutEvaluation,
         by_failure_distance,

@@ -142,7 +142,7 @@ def test_the_displacement_is_the_same_in_either_frame(tmp_path: Path) -> None:
     The twin's field is mapped back into the file's axes and units (mm) for the comparison.
     """
     from fem.case import run_case
-    from fem.dataset import read_points
+    from fem.case_files import read_points
     from fem.sweep import Case
 
     project, rib_lps, lps = _in_lps_mm(tmp_path)

@@ -13,7 +13,9 @@ import h5py
 import numpy as np
 import pytest
 
-from fem.dataset import build_dataset, read_dataset, write_points
+from fem.aggregate import build_dataset
+from fem.case_files import write_points
+from fem.dataset import read_dataset
 from fem.directions import gravity_direction
 from fem.sweep import Case
 from surrogate.config import SurrogateConfig, SurrogateConfigError
@@ -330,7 +332,7 @@ def test_a_dataset_refuses_a_mesh_that_is_not_its_points(
     cube: tuple[Path, Path], tmp_path: Path
 ) -> None:
     """The cells come from the cases' own mesh; another one is named and nothing is written."""
-    from fem.dataset import DatasetError
+    from fem.exceptions import DatasetError
     from meshes.io import GEOMETRY_DATASET, TOPOLOGY_DATASET
 
     folder = cube[0].parent

@@ -16,8 +16,11 @@ import h5py
 import numpy as np
 import pytest
 
-from fem.dataset import FIELD_DATASET, DatasetError, build_dataset, read_dataset, write_points
+from fem.aggregate import build_dataset
+from fem.case_files import FIELD_DATASET, write_points
+from fem.dataset import read_dataset
 from fem.directions import gravity_direction
+from fem.exceptions import DatasetError
 from fem.sweep import Case
 from meshes.quadratic import EDGES, edge_order, quadratic_weights
 from surrogate.config import SurrogateConfig
@@ -254,7 +257,8 @@ def test_the_held_out_and_posture_errors_are_taken_between_the_points_too(
     the model fitted at every node answers them as well as its material points, the one fitted
     at the vertices misses the curvature, and the evaluations report both at the centroids.
     """
-    from studies.held_out import Centroids, evaluate_held_out, trained_cases
+    from studies.case_errors import Centroids
+    from studies.held_out import evaluate_held_out, trained_cases
     from studies.postures import evaluate_postures
 
     folder, summaries, points, fields = sweep
@@ -396,7 +400,8 @@ def test_a_held_out_block_without_cases_the_by_sample_model_trained_on(
     """Where the by-sample model trained on none of a split's test cases, no row says it did."""
     from report.context import Context
     from report.sections.generalisation import held_out_part
-    from studies.held_out import CaseErrors, ErrorSpread, HeldOutBlock, HeldOutEvaluation
+    from studies.case_errors import CaseErrors, ErrorSpread
+    from studies.held_out import HeldOutBlock, HeldOutEvaluation
 
     folder = sweep[0]
     ds = read_dataset(folder / "ds.h5")

@@ -202,14 +202,8 @@ def test_the_by_c1_cases_are_told_apart_by_whether_their_c1_is_interpolated() ->
 
     from report.context import Context
     from report.sections.generalisation import held_out_part
-    from studies.held_out import (
-        CaseErrors,
-        ErrorSpread,
-        HeldOutBlock,
-        HeldOutEvaluation,
-        by_bracket,
-        c1_bracketed,
-    )
+    from studies.case_errors import CaseErrors, ErrorSpread
+    from studies.held_out import HeldOutBlock, HeldOutEvaluation, by_bracket, c1_bracketed
 
     # two directions: the plane's -90 at 0.8, 1.0 and 1.2; a band's direction at 1.0 and 1.2
     ds = SimpleNamespace(C1=np.array([0.8, 1.0, 1.2, 1.0, 1.2, 0.8]),

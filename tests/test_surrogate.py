@@ -9,7 +9,8 @@ import h5py
 import numpy as np
 import pytest
 
-from fem.dataset import build_dataset, write_points
+from fem.aggregate import build_dataset
+from fem.case_files import write_points
 from fem.sweep import Case
 from surrogate.config import SurrogateConfig, SurrogateConfigError
 
@@ -198,7 +199,8 @@ def test_training_reduces_the_loss_and_round_trips(dataset_path: Path, tmp_path:
 
 
 def test_bad_inputs_are_named(dataset_path: Path, tmp_path: Path) -> None:
-    from fem.dataset import DatasetError, read_dataset
+    from fem.dataset import read_dataset
+    from fem.exceptions import DatasetError
     from surrogate.checkpoint import save_model
     from surrogate.exceptions import ExtrapolationWarning, ModelFileError
     from surrogate.predict import Surrogate
@@ -278,9 +280,9 @@ def test_prediction_warns_where_the_sweep_did_not_converge(
             model.predict(C1, phi)
     # the same directions under other names: (90°, θ = 180°) is (-90°, 0°), θ = 360° is θ = 0°;
     # the plane judges them by its own name, and the θ of a direction in it is no extrapolation
-    assert model.plane_name(90.0, 180.0) == (-90.0, 0.0)
-    assert model.plane_name(45.0, 360.0) == (45.0, 0.0)
-    assert model.plane_name(90.0, 20.0) == (90.0, 20.0)
+    assert model.trained.plane_name(90.0, 180.0) == (-90.0, 0.0)
+    assert model.trained.plane_name(45.0, 360.0) == (45.0, 0.0)
+    assert model.trained.plane_name(90.0, 20.0) == (90.0, 20.0)
     with pytest.warns(ExtrapolationWarning) as caught:
         model.predict(2.0, 90.0, 180.0)
     assert [str(w.message) for w in caught] == [
@@ -387,7 +389,7 @@ def test_a_model_of_the_caudal_half_warns_by_direction(tmp_path: Path) -> None:
     )
     save_model(tmp_path / "model", result, ds)
     model = Surrogate.load(tmp_path / "model")
-    checks = model.range_checks()
+    checks = model.trained.range_checks()
     assert checks["phi_gap"] is None and len(checks["directions"]) == 32
     assert 20 < checks["direction_spacing_deg"] < 30  # 32 directions over a half sphere
     with warnings.catch_warnings():
@@ -426,9 +428,9 @@ def test_a_model_of_the_caudal_half_warns_by_direction(tmp_path: Path) -> None:
         result.train_cases, [ds.case_index(1.0, *nearest)]))
     save_model(tmp_path / "band", band, ds)
     banded = Surrogate.load(tmp_path / "band")
-    assert banded.range_checks()["c1_kPa"] == [1.0, 3.0]
-    assert banded.softest_beside(1.0, 90.0, -90.0) == (3.0, *nearest)
-    assert banded.softest_beside(3.0, 90.0, -90.0) is None
+    assert banded.trained.range_checks()["c1_kPa"] == [1.0, 3.0]
+    assert banded.trained.softest_beside(1.0, 90.0, -90.0) == (3.0, *nearest)
+    assert banded.trained.softest_beside(3.0, 90.0, -90.0) is None
     assert extrapolation_kind(banded, 1.0, *nearest) == "C1 below its direction's range"
     assert extrapolation_kind(banded, 1.0, 0.0, 0.0) == "in range"
     assert warns(banded, ds, ds.case_index(1.0, *nearest))  # what the held-out study records

@@ -45,7 +45,7 @@ def test_arrays_travel_exactly() -> None:
 
 def test_the_page_predicts_what_python_predicts(viewer: Path, model: Surrogate) -> None:
     """20 random setups in the training range: every material point within 1e-4 mm."""
-    lo, hi = model.range_checks()["c1_kPa"]
+    lo, hi = model.trained.range_checks()["c1_kPa"]
     rng = np.random.default_rng(24)
     setups = np.column_stack([rng.uniform(lo, hi, 20), rng.uniform(-150, 180, 20),
                               rng.uniform(-180, 180, 20)])
@@ -159,7 +159,7 @@ def test_the_colour_scale_reads_from_zero_to_its_top(viewer: Path) -> None:
 def test_outside_the_training_range_the_page_says_what_predict_warns(
     viewer: Path, model: Surrogate
 ) -> None:
-    lo, hi = model.range_checks()["c1_kPa"]
+    lo, hi = model.trained.range_checks()["c1_kPa"]
     with open_page(viewer, ready=READY) as (page, _, _):
         # the last two: directions of the trained plane under other names, judged as Python
         # judges them (no θ warning)
@@ -206,7 +206,7 @@ def test_below_a_directions_softest_trained_c1_the_page_says_what_predict_warns(
     build_viewer(tmp_path / "model", results / "mesh" / "mesh.xdmf",
                  results / "dataset" / "dataset.h5", page_path)
     model = Surrogate.load(tmp_path / "model")
-    assert model.range_checks()["c1_kPa"] == [1.0, 5.0]
+    assert model.trained.range_checks()["c1_kPa"] == [1.0, 5.0]
     with open_page(page_path, ready=READY) as (page, errors, _):
         for C1, phi, theta, expected in ((1.0, 90.0, 0.0, 1), (3.0, 45.0, 0.0, 1),
                                          (5.0, 90.0, 0.0, 0), (1.0, 0.0, 0.0, 0),

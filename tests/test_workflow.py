@@ -256,7 +256,8 @@ def test_a_cases_fe_field_answers_at_named_points(
     import json
     import shutil
 
-    from fem.dataset import read_dataset, read_node_displacement
+    from fem.case_files import read_node_displacement
+    from fem.dataset import read_dataset
     from meshes.points import read_points
     from studies.case_points import CasePointsError, fe_at_points, main
     from surrogate.interpolation import at_centroids

@@ -8,14 +8,8 @@ from typing import Any
 
 from report.context import Context
 from report.html import fmt, h3, missing, para, pct, table
-from studies.held_out import (
-    BRACKET_LABELS,
-    CaseErrors,
-    ErrorSpread,
-    HeldOutBlock,
-    by_bracket,
-    by_failure_distance,
-)
+from studies.case_errors import CaseErrors, ErrorSpread
+from studies.held_out import BRACKET_LABELS, HeldOutBlock, by_bracket, by_failure_distance
 from studies.off_grid import GOALS_MM
 from studies.postures import PostureRow
 

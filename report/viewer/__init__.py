@@ -239,7 +239,7 @@ def build_viewer(
     }
     if start:
         data["starts"][-1]["selected"] = True
-    C1s = [c for c in model.range_checks()["c1_kPa"] if c is not None]
+    C1s = [c for c in model.trained.range_checks()["c1_kPa"] if c is not None]
     first = initial or (cases[0] if cases else {
         "C1": float(np.median(C1s)) if C1s else 1.0, "phi": 180.0, "theta": 0.0})
     env = jinja2.Environment(

@@ -22,7 +22,7 @@ import sys
 from pathlib import Path
 
 from fem.arguments import output_file
-from fem.dataset import DatasetError
+from fem.exceptions import DatasetError
 from meshes.exceptions import MeshInputError
 from meshes.points import read_points
 from report.viewer import ViewerError, build_viewer

@@ -305,7 +305,7 @@ class WebSurrogate {
     return ev.out;
   }
 
-  // A query in a one-plane model's plane under the plane's own name, as Surrogate.plane_name:
+  // A query in a one-plane model's plane under the plane's own name, as TrainingRange.plane_name:
   // gravity at (Φ, θ0 + 180°) is gravity at (−Φ, θ0).
   planeName(phi, theta) {
     const r = this.range;
@@ -393,7 +393,7 @@ class WebSurrogate {
           + `backs C1 ≤ ${c1} kPa there`);
       }
     }
-    // as Surrogate.softest_beside: a direction beside the query trained only at stiffer C1
+    // as TrainingRange.softest_beside: a direction beside the query trained only at stiffer C1
     const stiffer = beside(r.softest).filter(([c1]) => C1 < c1 - 1e-9);
     if (!failed && !(lo !== null && C1 < lo - 1e-9) && stiffer.length) {
       const [c1, p, t] = greatest(stiffer);

@@ -1,6 +1,8 @@
 """Snakemake adapter: gather all case files into one HDF5 dataset."""
 
-from fem.dataset import DatasetError, SplitFractions, build_dataset
+from fem.aggregate import build_dataset
+from fem.exceptions import DatasetError
+from fem.splits import SplitFractions
 from studies.joblog import job_log
 from studies.workdir import mark_refused
 
