@@ -55,13 +55,14 @@ node_modules/.package-lock.json: package.json package-lock.json
 	touch $@
 
 # The checks first (seconds), then the suite on every core (pytest-xdist: TEST_WORKERS workers,
-# each module's tests on one worker, so that its fixtures are built once);
+# each module's tests on one worker, so that its fixtures are built once; the longest modules
+# first, in tests/conftest.py's order);
 # `make test PYTEST_ARGS="-m unit"` runs one layer (markers in pyproject.toml: unit, solve,
 # workflow, cluster), `TEST_WORKERS=0` one test at a time.
 PYTEST_ARGS ?=
 TEST_WORKERS ?= auto
 test: setup lint
-	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadscope --durations=15 $(PYTEST_ARGS) tests
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadscope --no-loadscope-reorder --durations=15 $(PYTEST_ARGS) tests
 
 # The config is checked first (a YAML syntax error with its line, every bad value named), then
 # the run. Every run of the Snakefile holds the working directory's run lock (studies.workdir):

@@ -111,8 +111,9 @@ def reason_name(reason: int) -> str:
     return SNES_REASONS.get(reason, str(reason)).lower()
 
 
-def default_test(snes: PETSc.SNES, its: int, norms: tuple[float, float, float], first_norm: float,
-             divtol: float, history: list[float], window: int) -> tuple[int, bool]:
+def default_test(snes: PETSc.SNES, its: int, norms: tuple[float, float, float],
+                 first_norm: float, divtol: float, history: list[float],
+                 window: int) -> tuple[int, bool]:
     """PETSc 3.18's default convergence test, plus the stall test: (reason, stalled).
 
     Installed only for a solve with a stall window, so that every other solve keeps PETSc's

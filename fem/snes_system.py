@@ -24,11 +24,12 @@ from petsc4py import PETSc
 
 from fem.linear_setup import (
     homogeneous_dofs,
+    linear_path,
     rigid_body_modes,
     single_field,
     split_index_sets,
 )
-from fem.options import BLR_OPTIONS, solver_options
+from fem.options import BLR_OPTIONS, SOLVER_KEYS, solver_options
 from fem.parameters import STANDARD_GRAVITY
 from fem.problem import GravityProblem
 
@@ -137,6 +138,14 @@ class SnesSystem:
 
     # -- set-up ---------------------------------------------------------------------------
     @property
+    def _self_contact(self) -> Any:
+        """The problem's self-contact assembler (:mod:`fem.self_contact`), if it has one.
+
+        Read at each use: moving the problem's geometry rebuilds it. A problem of another
+        kind (the solver takes any with forms, conditions and a state) has none.
+        """
+        return getattr(self.problem, "self_contact", None)
+
     def _create_matrix(self, form: Any) -> PETSc.Mat:
         """A matrix of ``form``'s sparsity; with self-contact, one that takes new entries.
 
@@ -163,9 +172,23 @@ class SnesSystem:
         return None
 
     @property
+    def linear_path(self) -> str:
+        """The linear solver this problem got, in words (recorded in every case's summary)."""
+        return linear_path(self.options, self.refactor_above_its, self.low_rank)
+
     @property
+    def _petsc_options(self) -> dict[str, Any]:
+        return {k: v for k, v in self.options.items() if k not in SOLVER_KEYS}
+
     @property
+    def _fieldsplit(self) -> bool:
+        return self.options.get("pc_type") == "fieldsplit"
+
     @property
+    def _uses_amg(self) -> bool:
+        amg = ("gamg", "ml", "hypre")
+        return self.options.get("pc_type") in amg or self.options.get("fieldsplit_u_pc_type") in amg
+
     def _configure_pc(self, ksp: PETSc.KSP, A: PETSc.Mat) -> None:
         """Tell the preconditioner the field split and the rigid-body modes."""
         pc = ksp.getPC()

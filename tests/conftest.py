@@ -22,6 +22,23 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 COARSE = {"global_size": 0.03, "mound_size": 0.02, "order": 1}
 
 
+#: Modules that take longest, or wait longest (the cluster's scheduler), in the order the
+#: parallel suite starts them (``make test``: ``--dist loadscope --no-loadscope-reorder``), so
+#: that the workers finish together; the workflow's module first, as it builds the small run
+#: that later modules read (:func:`small_run`). The others follow in the order pytest finds them.
+LONGEST_FIRST = (
+    "test_workflow.py", "test_slurm.py", "test_probe_inputs.py", "test_self_contact.py",
+    "test_reference.py", "test_workflow_safety.py", "test_viewer.py", "test_fem_robustness.py",
+    "test_surrogate.py", "test_sweep_workflow.py", "test_fem_mpi.py", "test_fem_solvers.py",
+)
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """The longest modules first (:data:`LONGEST_FIRST`), each module's tests kept together."""
+    rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
+
+
 @pytest.fixture(autouse=True, scope="module")
 def _free_solver_options() -> Iterator[None]:
     """After each test module, drop its solvers' entries from PETSc's options database.

@@ -136,6 +136,8 @@ def test_small_sweep_runs_through_slurm(slurm_cluster: dict[str, str], tmp_path:
         # poll sooner than a real cluster needs, to keep the test short
         "--slurm-init-seconds-before-status-checks",
         "2",
+        "--seconds-between-status-checks",
+        "1",
         "results/dataset/dataset.h5",
         env=slurm_cluster,
         timeout=900,

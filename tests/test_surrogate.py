@@ -364,8 +364,9 @@ def test_a_model_of_the_caudal_half_warns_by_direction(tmp_path: Path) -> None:
     from studies.surrogate_evaluation import extrapolation_kind
     from surrogate.checkpoint import save_model
     from surrogate.exceptions import ExtrapolationWarning
-    from surrogate.predict import Surrogate, _unit_directions
+    from surrogate.predict import Surrogate
     from surrogate.train import train_and_evaluate
+    from surrogate.training_range import _unit_directions
 
     rng = np.random.default_rng(0)
     X = rng.uniform(0, 1, size=(N, 3))
