@@ -30,6 +30,7 @@ from report.sections.generalisation import generalisation_section
 from report.sections.mesh import mesh_section
 from report.sections.paper import paper_section
 from report.sections.reference import reference_section
+from report.sections.run_time import run_time_section
 from report.sections.scene import scene_needs_section
 from report.sections.stability import stability_section
 from report.sections.surrogate import surrogate_speed_accuracy_section
@@ -60,6 +61,7 @@ SECTIONS: tuple[tuple[str, str, Callable[[Context], str]], ...] = (
     ("reference", "From the imaged shape to the reference state", reference_section),
     ("paper", "The paper side by side", paper_section),
     ("sweep-cost", "Sweep cost", sweep_cost_section),
+    ("run-time", "The time of this run", run_time_section),
     ("training", "Surrogate training", training_section),
 )
 

@@ -24,6 +24,7 @@ from studies.off_grid import OffGridEvaluation
 from studies.postures import PostureEvaluation
 from studies.reference_roundtrip import RoundTripTable
 from studies.reference_state import ReferenceRecord
+from studies.run_log import run_time
 from studies.stability import StabilityMap
 from studies.stability_audit import StabilityAudit
 from studies.stiffness import StiffnessResult
@@ -42,7 +43,7 @@ INPUT_NAMES = (
     "extrapolation", "benchmark", "clinical_fields", "fe_clinical", "fe_speed_accuracy",
     "fe_stability", "corpus", "reference_roundtrip", "reference_record", "tracking", "stiffness",
     "viewer", "held_out", "postures", "off_grid", "fe_failure_edges", "fe_stability_audit",
-    "fe_fold_section", "warning_coverage",
+    "fe_fold_section", "warning_coverage", "run_log",
 )
 
 
@@ -71,6 +72,8 @@ RESULT_TYPES: dict[str, Callable[[Path], Any]] = {
     "postures": PostureEvaluation.read,
     "off_grid": OffGridEvaluation.read,
     "warning_coverage": WarningCoverage.read,
+    # this run's own Snakemake log, up to the report (workflow/scripts/report.py)
+    "run_log": run_time,
 }
 
 

@@ -308,6 +308,7 @@ REPORT_SECTIONS = (
     "Stability",
     "The paper side by side",
     "Sweep cost",
+    "The time of this run",
     "Surrogate training",
     "From the imaged shape to the reference state",
     "The surrogate between its cases and in every posture",
@@ -335,6 +336,9 @@ def test_small_sweep_report(small_run: Path) -> None:
     for heading in REPORT_SECTIONS:
         assert f"<h2>{heading}</h2>" in page, heading
     assert "could not be built" not in page
+    # the run that built it, from its own Snakemake log: every stage before the report ended
+    run_time = html_table(page, "run-time")
+    assert "<td>dataset</td><td>1 of 1</td>" in run_time and "the dataset " in page
     # every figure is a PNG beside the page, referenced relatively, and has content
     images = re.findall(r'<img[^>]*src="([^"]+)"', page)
     config = yaml.safe_load((REPO / "tests" / "config.yaml").read_text())

@@ -2,6 +2,12 @@
 
 from report.build import build_report
 from studies.joblog import job_log
+from studies.run_log import newest_log
 
 job_log(snakemake.log[0])
-build_report(dict(snakemake.input.items()), snakemake.output.html, snakemake.params.clinical)
+inputs = dict(snakemake.input.items())
+try:  # this run's own log, up to this job: its time by stage (not an input: it is the run's)
+    inputs["run_log"] = newest_log(".")
+except FileNotFoundError:
+    pass
+build_report(inputs, snakemake.output.html, snakemake.params.clinical)

@@ -1,0 +1,233 @@
+"""How long a workflow run took, by stage and job, read from Snakemake's own run log.
+
+Every run of the Snakefile writes ``.snakemake/log/<start>.snakemake.log``: the job stats it
+planned, then for each job a line ``[<date>]`` before ``rule NAME:`` (or ``localrule``) with its
+``jobid``, and ``[<date>]`` before ``Finished jobid: N (Rule: NAME)`` when it ends. This module
+reads those lines (to the second, as Snakemake writes them) into each job's start and end,
+groups the rules into the study's stages (:data:`STAGES`) and gives each stage's jobs, the sum
+of their wall times, when its first job started and when its last ended, counted from the run's
+start: the dataset, the selected model, the report and the 3D view are milestones a user waits
+for. A job still running (or failed) has no end.
+
+``python -m studies.run_log [LOG] [--json OUT]`` prints the table for a log (by default the
+newest under ``.snakemake/log`` of the working directory).
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+from collections.abc import Iterable
+from dataclasses import dataclass
+from datetime import datetime
+from pathlib import Path
+
+from studies.results import Record, Result
+
+#: The study's stages, in the order a run reaches them, each with the rules (names, or name
+#: prefixes ending in ``*``) that belong to it; a rule of none is ``other``.
+STAGES: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("mesh", ("mesh", "reference_state")),
+    ("sweep", ("solve", "solve_chain", "solve_refine_chain*")),
+    ("dataset", ("aggregate",)),
+    ("surrogate", ("train_study_run", "architecture_study", "select_model")),
+    ("surrogate studies", ("train_variant_run", "variants", "train_held_out", "held_out",
+                           "clinical", "extrapolation", "postures", "off_grid",
+                           "warning_coverage", "surrogate_benchmark", "solve_outside")),
+    ("FE study", ("fe_*",)),
+    ("reference and tracking", ("reference_roundtrip", "tracking", "stiffness")),
+    ("corpus", ("corpus_*",)),
+    ("report and 3D view", ("report", "viewer")),
+)
+
+#: The rules whose end a user waits for, in words.
+MILESTONES = {"aggregate": "the dataset", "select_model": "the selected model",
+              "report": "the report", "viewer": "the 3D view"}
+
+_DATE = re.compile(r"^\[(\w{3} \w{3} +\d+ \d\d:\d\d:\d\d \d{4})\]$")
+_START = re.compile(r"^(?:local)?(?:rule|checkpoint) (\w+):$")
+_JOBID = re.compile(r"^\s+jobid: (\d+)$")
+_FINISHED = re.compile(r"^Finished jobid: (\d+) \(Rule: (\w+)\)$")
+
+
+def stage_of(rule: str) -> str:
+    """The stage of :data:`STAGES` a rule belongs to (``other`` for none)."""
+    for stage, rules in STAGES:
+        for pattern in rules:
+            if rule == pattern or (pattern.endswith("*") and rule.startswith(pattern[:-1])):
+                return stage
+    return "other"
+
+
+@dataclass(frozen=True, slots=True)
+class JobTime(Record):
+    """One job of a run.
+
+    Attributes:
+        rule: its rule.
+        jobid: Snakemake's number for it in this run.
+        start_s: when it started, seconds after the run's first job started.
+        end_s: when it ended, the same way; None while it runs, or where it failed.
+    """
+
+    rule: str
+    jobid: int
+    start_s: float
+    end_s: float | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class StageTime(Record):
+    """One stage of a run: its jobs and when they ran.
+
+    Attributes:
+        stage: its name (:data:`STAGES`).
+        jobs: jobs started.
+        finished: of those, jobs that ended.
+        job_s: the sum of the ended jobs' wall times (two at once on two cores count twice).
+        first_start_s: when its first job started, after the run's start.
+        last_end_s: when its last job ended; None while one runs or where one failed.
+    """
+
+    stage: str
+    jobs: int
+    finished: int
+    job_s: float
+    first_start_s: float
+    last_end_s: float | None
+
+
+@dataclass(frozen=True, slots=True)
+class RunTime(Result):
+    """A workflow run's time by stage (:func:`run_time`).
+
+    Attributes:
+        log: the run log read.
+        started: when its first job started (ISO 8601, the log's local time).
+        planned: the jobs the run planned (its job stats' total).
+        finished: the jobs that ended.
+        span_s: from the first job's start to the last end read.
+        stages: each stage that ran, in :data:`STAGES` order.
+        milestones: ``{what: seconds after the start}`` for each of :data:`MILESTONES` done.
+    """
+
+    log: str
+    started: str
+    planned: int | None
+    finished: int
+    span_s: float
+    stages: list[StageTime]
+    milestones: dict[str, float]
+
+
+def read_jobs(lines: Iterable[str]) -> tuple[list[JobTime], datetime | None, int | None]:
+    """The jobs of a run log's lines, when its first job started, and the jobs it planned."""
+    when: datetime | None = None
+    pending: tuple[str, datetime] | None = None
+    starts: dict[int, tuple[str, datetime]] = {}
+    ends: dict[int, datetime] = {}
+    planned = None
+    for line in lines:
+        line = line.rstrip("\n")
+        if planned is None and (total := re.match(r"^total\s+(\d+)$", line)):
+            planned = int(total.group(1))
+        if date := _DATE.match(line):
+            when = datetime.strptime(date.group(1), "%a %b %d %H:%M:%S %Y")
+        elif (rule := _START.match(line)) and when is not None:
+            pending = (rule.group(1), when)
+        elif (job := _JOBID.match(line)) and pending is not None:
+            starts.setdefault(int(job.group(1)), pending)
+            pending = None
+        elif (done := _FINISHED.match(line)) and when is not None:
+            ends[int(done.group(1))] = when
+    if not starts:
+        return [], None, planned
+    origin = min(start for _, start in starts.values())
+    jobs = [JobTime(rule=rule, jobid=jobid, start_s=(start - origin).total_seconds(),
+                    end_s=(ends[jobid] - origin).total_seconds() if jobid in ends else None)
+            for jobid, (rule, start) in sorted(starts.items(), key=lambda kv: kv[1][1])]
+    return jobs, origin, planned
+
+
+def run_time(log: str | Path) -> RunTime:
+    """A run log's time by stage, and when each milestone was written.
+
+    Raises:
+        ValueError: if the log holds no job.
+    """
+    path = Path(log)
+    with path.open(encoding="utf-8", errors="replace") as fh:
+        jobs, origin, planned = read_jobs(fh)
+    if origin is None:
+        raise ValueError(f"{path}: no job in this Snakemake log")
+    stages = []
+    for stage, _ in (*STAGES, ("other", ())):
+        mine = [job for job in jobs if stage_of(job.rule) == stage]
+        if not mine:
+            continue
+        ended = [job for job in mine if job.end_s is not None]
+        stages.append(StageTime(
+            stage=stage, jobs=len(mine), finished=len(ended),
+            job_s=sum(job.end_s - job.start_s for job in ended),
+            first_start_s=min(job.start_s for job in mine),
+            last_end_s=max(job.end_s for job in ended) if len(ended) == len(mine) else None))
+    ends = [job.end_s for job in jobs if job.end_s is not None]
+    milestones = {what: max(job.end_s for job in jobs if job.rule == rule)
+                  for rule, what in MILESTONES.items()
+                  if any(job.rule == rule and job.end_s is not None for job in jobs)}
+    return RunTime(log=str(path), started=origin.isoformat(), planned=planned,
+                   finished=len(ends), span_s=max(ends, default=0.0), stages=stages,
+                   milestones=milestones)
+
+
+def newest_log(workdir: str | Path = ".") -> Path:
+    """The newest run log under ``workdir``'s ``.snakemake/log``.
+
+    Raises:
+        FileNotFoundError: if there is none.
+    """
+    logs = sorted(Path(workdir, ".snakemake", "log").glob("*.snakemake.log"))
+    if not logs:
+        raise FileNotFoundError(f"no Snakemake run log under {Path(workdir, '.snakemake/log')}")
+    return logs[-1]
+
+
+def _minutes(seconds: float | None) -> str:
+    return "running" if seconds is None else f"{seconds / 60:.1f} min"
+
+
+def table(run: RunTime) -> str:
+    """The run's stages as a text table, then its milestones."""
+    lines = [f"{run.log}: started {run.started}, {run.finished} of {run.planned or '?'} jobs "
+             f"ended, {_minutes(run.span_s)} to the last",
+             f"{'stage':<24} {'jobs':>9} {'job time':>10} {'from':>10} {'to':>10}"]
+    for s in run.stages:
+        lines.append(f"{s.stage:<24} {s.finished:>4} of {s.jobs:<2} {_minutes(s.job_s):>10} "
+                     f"{_minutes(s.first_start_s):>10} {_minutes(s.last_end_s):>10}")
+    for what, seconds in run.milestones.items():
+        lines.append(f"{what} written after {_minutes(seconds)}")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Print a run log's time by stage."""
+    parser = argparse.ArgumentParser(prog="python -m studies.run_log",
+                                     description=__doc__.splitlines()[0])
+    parser.add_argument("log", nargs="?",
+                        help="a Snakemake run log (default: the newest in .snakemake/log)")
+    parser.add_argument("--json", help="also write the result here")
+    args = parser.parse_args(argv)
+    try:
+        run = run_time(args.log or newest_log())
+    except (OSError, ValueError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    print(table(run))
+    if args.json:
+        run.write(args.json)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,109 @@
+"""A run's time by stage, read from Snakemake's run log (studies.run_log)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from studies.run_log import RunTime, main, read_jobs, run_time, stage_of
+
+pytestmark = pytest.mark.unit
+
+LOG = """Building DAG of jobs...
+Job stats:
+job           count
+----------  -------
+mesh              1
+solve_chain       2
+aggregate         1
+report            1
+total             5
+
+Select jobs to execute...
+[Sun Nov 29 01:29:51 2026]
+localrule mesh:
+    output: results/mesh/mesh.xdmf
+    jobid: 4
+    reason: Missing output files
+[Sun Nov 29 01:29:54 2026]
+Finished jobid: 4 (Rule: mesh)
+1 of 5 steps (20%) done
+[Sun Nov 29 01:29:54 2026]
+localrule solve_chain:
+    jobid: 7
+[Sun Nov 29 01:29:55 2026]
+rule solve_refine_chain_2:
+    jobid: 8
+[Sun Nov 29 01:31:54 2026]
+Finished jobid: 7 (Rule: solve_chain)
+[Sun Nov 29 01:32:55 2026]
+Finished jobid: 8 (Rule: solve_refine_chain_2)
+[Sun Nov 29 01:33:00 2026]
+localrule aggregate:
+    jobid: 2
+[Sun Nov 29 01:33:30 2026]
+Finished jobid: 2 (Rule: aggregate)
+[Sun Nov 29 01:33:31 2026]
+localrule report:
+    jobid: 1
+"""
+
+
+def test_a_run_log_gives_each_stage_its_jobs_and_times(tmp_path: Path) -> None:
+    jobs, origin, planned = read_jobs(LOG.splitlines(keepends=True))
+    assert planned == 5 and origin is not None and origin.minute == 29
+    assert [(j.rule, j.jobid, j.start_s, j.end_s) for j in jobs] == [
+        ("mesh", 4, 0.0, 3.0), ("solve_chain", 7, 3.0, 123.0),
+        ("solve_refine_chain_2", 8, 4.0, 184.0), ("aggregate", 2, 189.0, 219.0),
+        ("report", 1, 220.0, None)]
+    path = tmp_path / "run.snakemake.log"
+    path.write_text(LOG)
+    run = run_time(path)
+    by = {s.stage: s for s in run.stages}
+    assert list(by) == ["mesh", "sweep", "dataset", "report and 3D view"]
+    sweep = by["sweep"]
+    assert (sweep.jobs, sweep.finished, sweep.job_s, sweep.first_start_s, sweep.last_end_s) \
+        == (2, 2, 300.0, 3.0, 184.0)
+    assert by["report and 3D view"].last_end_s is None  # still running
+    assert run.milestones == {"the dataset": 219.0} and run.span_s == 219.0
+    assert run.finished == 4 and run.planned == 5
+    run.write(tmp_path / "run.json")
+    assert RunTime.read(tmp_path / "run.json") == run
+
+
+def test_every_rule_of_the_workflow_has_a_stage() -> None:
+    import re
+
+    from tests.conftest import REPO
+
+    rules = {m for path in (REPO / "workflow" / "rules").glob("*.smk")
+             for m in re.findall(r"^\s*(?:rule|use rule \w+ as) (\w+)", path.read_text(), re.M)}
+    rules -= {"all", "fe_study", "corpus"}  # targets that run nothing themselves
+    assert rules and {rule for rule in rules if stage_of(rule) == "other"} == set()
+
+
+def test_the_command_prints_the_table_or_names_a_log_without_jobs(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "run.snakemake.log"
+    path.write_text(LOG)
+    assert main([str(path)]) == 0
+    said = capsys.readouterr().out
+    assert "4 of 5 jobs ended" in said and "the dataset written after 3.6 min" in said
+    path.write_text("Building DAG of jobs...\n")
+    assert main([str(path)]) == 2
+    assert "no job in this Snakemake log" in capsys.readouterr().err
+
+
+def test_the_report_shows_the_runs_time_by_stage(tmp_path: Path) -> None:
+    from report.build import build_report
+
+    path = tmp_path / "run.snakemake.log"
+    path.write_text(LOG)
+    page = build_report({"run_log": path}, tmp_path / "report" / "index.html", []).read_text()
+    section = page.split("<h2>The time of this run</h2>")[1].split("<h2>")[0]
+    assert "4 of 5 planned jobs" in section and "<td>sweep</td><td>2 of 2</td>" in section
+    assert "<td>running</td>" in section  # the report's own job
+    assert "the dataset 3.6 min" in section
+    page = build_report({}, tmp_path / "other" / "index.html", []).read_text()
+    assert "No Snakemake run log was found" in page
