@@ -7,7 +7,9 @@ reads those lines (to the second, as Snakemake writes them) into each job's star
 groups the rules into the study's stages (:data:`STAGES`) and gives each stage's jobs, the sum
 of their wall times, when its first job started and when its last ended, counted from the run's
 start: the dataset, the selected model, the report and the 3D view are milestones a user waits
-for. A job still running (or failed) has no end.
+for. A job still running (or failed) has no end. While a run goes on, the time left is
+estimated from the jobs it planned (its job stats) that have not ended, each at the mean time
+of its rule's ended jobs (else its stage's, else every ended job's), on the run's cores.
 
 ``python -m studies.run_log [LOG] [--json OUT]`` prints the table for a log (by default the
 newest under ``.snakemake/log`` of the working directory).
@@ -110,6 +112,10 @@ class RunTime(Result):
         span_s: from the first job's start to the last end read.
         stages: each stage that ran, in :data:`STAGES` order.
         milestones: ``{what: seconds after the start}`` for each of :data:`MILESTONES` done.
+        cores: the cores the run was given; None where the log does not say.
+        left_s: the estimated time left (see the module docstring); None before any job ended.
+        unseen: of the jobs left, those whose rule and stage have no ended job yet (counted at
+            the mean of every ended job: the estimate is rough while there are any).
     """
 
     log: str
@@ -119,6 +125,56 @@ class RunTime(Result):
     span_s: float
     stages: list[StageTime]
     milestones: dict[str, float]
+    cores: int | None = None
+    left_s: float | None = None
+    unseen: int = 0
+
+
+def read_plan(lines: Iterable[str]) -> tuple[dict[str, int], int | None]:
+    """A run log's planned jobs by rule (its first job stats) and the cores it was given."""
+    plan: dict[str, int] = {}
+    cores = None
+    in_stats = False
+    for line in lines:
+        line = line.strip()
+        if cores is None and (given := re.match(r"^Provided cores: (\d+)$", line)):
+            cores = int(given.group(1))
+        if line == "Job stats:":
+            in_stats = not plan
+        elif in_stats and (row := re.match(r"^(\w+)\s+(\d+)$", line)):
+            if row.group(1) == "total":
+                in_stats = False
+            else:
+                plan[row.group(1)] = int(row.group(2))
+    return plan, cores
+
+
+def time_left(jobs: list[JobTime], plan: dict[str, int],
+              cores: int | None) -> tuple[float | None, int]:
+    """The estimated time left, and how many of the jobs left are of kinds not run yet.
+
+    Each planned job not ended counts its rule's mean so far (else its stage's, else every
+    ended job's), and the sum is shared by the cores.
+    """
+    ended = [job for job in jobs if job.end_s is not None]
+    if not ended or not plan:
+        return None, 0
+
+    def mean(group: list[JobTime]) -> float | None:
+        return sum(j.end_s - j.start_s for j in group) / len(group) if group else None
+
+    overall = mean(ended)
+    left, unseen = 0.0, 0
+    for rule, count in plan.items():
+        done = [job for job in ended if job.rule == rule]
+        each = mean(done)
+        if each is None:
+            each = mean([job for job in ended if stage_of(job.rule) == stage_of(rule)])
+        remaining = max(count - len(done), 0)
+        if each is None:
+            each, unseen = overall, unseen + remaining
+        left += remaining * each
+    return left / max(cores or 1, 1), unseen
 
 
 def read_jobs(lines: Iterable[str]) -> tuple[list[JobTime], datetime | None, int | None]:
@@ -158,7 +214,9 @@ def run_time(log: str | Path) -> RunTime:
     """
     path = Path(log)
     with path.open(encoding="utf-8", errors="replace") as fh:
-        jobs, origin, planned = read_jobs(fh)
+        lines = fh.readlines()
+    jobs, origin, planned = read_jobs(lines)
+    plan, cores = read_plan(lines)
     if origin is None:
         raise ValueError(f"{path}: no job in this Snakemake log")
     stages = []
@@ -176,9 +234,10 @@ def run_time(log: str | Path) -> RunTime:
     milestones = {what: max(job.end_s for job in jobs if job.rule == rule)
                   for rule, what in MILESTONES.items()
                   if any(job.rule == rule and job.end_s is not None for job in jobs)}
+    left, unseen = time_left(jobs, plan, cores)
     return RunTime(log=str(path), started=origin.isoformat(), planned=planned,
                    finished=len(ends), span_s=max(ends, default=0.0), stages=stages,
-                   milestones=milestones)
+                   milestones=milestones, cores=cores, left_s=left, unseen=unseen)
 
 
 def newest_log(workdir: str | Path = ".") -> Path:
@@ -207,6 +266,12 @@ def table(run: RunTime) -> str:
                      f"{_minutes(s.first_start_s):>10} {_minutes(s.last_end_s):>10}")
     for what, seconds in run.milestones.items():
         lines.append(f"{what} written after {_minutes(seconds)}")
+    if run.left_s is not None and run.finished < (run.planned or 0):
+        lines.append(f"about {_minutes(run.left_s)} left (each job not ended at its rule's mean "
+                     f"so far, on {run.cores or 1} cores)")
+        if run.unseen:
+            lines.append(f"  {run.unseen} of the jobs left are of kinds not run yet, counted at "
+                         "the mean of every ended job: a rough estimate until each has run")
     return "\n".join(lines)
 
 

@@ -6,11 +6,12 @@ from pathlib import Path
 
 import pytest
 
-from studies.run_log import RunTime, main, read_jobs, run_time, stage_of
+from studies.run_log import RunTime, main, read_jobs, read_plan, run_time, stage_of
 
 pytestmark = pytest.mark.unit
 
 LOG = """Building DAG of jobs...
+Provided cores: 2
 Job stats:
 job           count
 ----------  -------
@@ -68,8 +69,17 @@ def test_a_run_log_gives_each_stage_its_jobs_and_times(tmp_path: Path) -> None:
     assert by["report and 3D view"].last_end_s is None  # still running
     assert run.milestones == {"the dataset": 219.0} and run.span_s == 219.0
     assert run.finished == 4 and run.planned == 5
+    # left: one more solve_chain planned (2 of them, 1 ended: 120 s) and the report (a stage
+    # with no ended job: the mean of every ended job, (3 + 120 + 180 + 30) / 4), on 2 cores
+    assert run.cores == 2 and run.unseen == 1
+    assert run.left_s == pytest.approx((120.0 + 333.0 / 4) / 2)
     run.write(tmp_path / "run.json")
     assert RunTime.read(tmp_path / "run.json") == run
+
+
+def test_the_plan_is_the_first_job_stats_only() -> None:
+    plan, cores = read_plan((LOG + "Job stats:\njob count\nreport 9\ntotal 9\n").splitlines())
+    assert plan == {"mesh": 1, "solve_chain": 2, "aggregate": 1, "report": 1} and cores == 2
 
 
 def test_every_rule_of_the_workflow_has_a_stage() -> None:
@@ -90,6 +100,7 @@ def test_the_command_prints_the_table_or_names_a_log_without_jobs(
     assert main([str(path)]) == 0
     said = capsys.readouterr().out
     assert "4 of 5 jobs ended" in said and "the dataset written after 3.6 min" in said
+    assert "min left" in said and "1 of the jobs left are of kinds not run yet" in said
     path.write_text("Building DAG of jobs...\n")
     assert main([str(path)]) == 2
     assert "no job in this Snakemake log" in capsys.readouterr().err
