@@ -32,6 +32,7 @@ rule aggregate:
         "results/logs/aggregate.log",
     benchmark:
         "results/benchmarks/aggregate.tsv"
+    priority: 50
     threads: 1
     resources:
         mem_mb=4000,

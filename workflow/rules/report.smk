@@ -68,6 +68,7 @@ rule viewer:
         initial=None if IMAGED is None else IMAGED.view_query(),
     log:
         "results/logs/viewer.log",
+    priority: 40
     threads: 1
     resources:
         mem_mb=2000,

@@ -65,6 +65,8 @@ for chain_rule in CHAIN_RULES if CONFIG.chains else ():
             "results/logs/solve_chain/{direction}.log",
         benchmark:
             "results/benchmarks/solve_chain/{direction}.tsv"
+        # the sweep, the dataset, the selected model and the 3D view before the longer studies
+        priority: 50
         threads: 1
         resources:
             mem_mb=3000,

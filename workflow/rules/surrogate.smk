@@ -24,6 +24,7 @@ rule train_study_run:
         "results/logs/surrogate/study/{arch}_r{repeat}.log",
     benchmark:
         "results/benchmarks/surrogate/study/{arch}_r{repeat}.tsv"
+    priority: 40
     threads: 1
     resources:
         mem_mb=4000,
@@ -47,6 +48,7 @@ rule architecture_study:
         budget_ms=CONFIG.surrogate_study.prediction_budget_ms,
     log:
         "results/logs/surrogate/architecture_study.log",
+    priority: 40
     threads: 2
     resources:
         mem_mb=2000,
@@ -73,6 +75,7 @@ rule select_model:
         "results/logs/surrogate/select_model.log",
     benchmark:
         "results/benchmarks/surrogate/select_model.tsv"
+    priority: 40
     threads: 1
     resources:
         mem_mb=lambda wildcards: 4000 if CONFIG.surrogate_study.refit else 500,
