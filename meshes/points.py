@@ -37,7 +37,7 @@ def read_points(path: Path) -> tuple[list[str], np.ndarray]:
             rows = list(csv.reader(f))
     except (UnicodeDecodeError, csv.Error) as err:
         raise MeshInputError(f"{path}: not a text CSV of name,x,y,z ({err})") from None
-    if not rows or [c.strip().lower() for c in rows[0]] != HEADER:
+    if not rows or not _is_header(rows[0]):
         raise MeshInputError(f"{path}: the first row must be the header {','.join(HEADER)}")
     names, points = [], []
     for number, row in enumerate(rows[1:], start=2):
@@ -59,14 +59,18 @@ def read_points(path: Path) -> tuple[list[str], np.ndarray]:
     return names, np.array(points)
 
 
+def _is_header(row: list[str]) -> bool:
+    """Whether a CSV row is the header ``name,x,y,z`` (any case, spaces around the names)."""
+    return [c.strip().lower() for c in row] == HEADER
+
+
 def _read_regular(path: Path) -> tuple[list[str], np.ndarray] | None:
     """:func:`read_points` by pandas' C parser; None for a file it does not read as regular."""
     import pandas as pd
 
     try:
         with path.open(newline="", encoding="utf-8-sig") as f:
-            header = next(csv.reader([f.readline()]), [])
-            if [c.strip().lower() for c in header] != HEADER:
+            if not _is_header(next(csv.reader([f.readline()]), [])):
                 return None
             frame = pd.read_csv(f, header=None, names=HEADER, dtype={"name": str},
                                 keep_default_na=False, engine="c",

@@ -107,7 +107,7 @@ class RunTime(Result):
     Attributes:
         log: the run log read.
         started: when its first job started (ISO 8601, the log's local time).
-        planned: the jobs the run planned (its job stats' total).
+        planned: the jobs the run planned (its first job stats).
         finished: the jobs that ended.
         span_s: from the first job's start to the last end read.
         stages: each stage that ran, in :data:`STAGES` order.
@@ -177,17 +177,14 @@ def time_left(jobs: list[JobTime], plan: dict[str, int],
     return left / max(cores or 1, 1), unseen
 
 
-def read_jobs(lines: Iterable[str]) -> tuple[list[JobTime], datetime | None, int | None]:
-    """The jobs of a run log's lines, when its first job started, and the jobs it planned."""
+def read_jobs(lines: Iterable[str]) -> tuple[list[JobTime], datetime | None]:
+    """The jobs of a run log's lines, and when its first job started (None: no job)."""
     when: datetime | None = None
     pending: tuple[str, datetime] | None = None
     starts: dict[int, tuple[str, datetime]] = {}
     ends: dict[int, datetime] = {}
-    planned = None
     for line in lines:
         line = line.rstrip("\n")
-        if planned is None and (total := re.match(r"^total\s+(\d+)$", line)):
-            planned = int(total.group(1))
         if date := _DATE.match(line):
             when = datetime.strptime(date.group(1), "%a %b %d %H:%M:%S %Y")
         elif (rule := _START.match(line)) and when is not None:
@@ -198,12 +195,12 @@ def read_jobs(lines: Iterable[str]) -> tuple[list[JobTime], datetime | None, int
         elif (done := _FINISHED.match(line)) and when is not None:
             ends[int(done.group(1))] = when
     if not starts:
-        return [], None, planned
+        return [], None
     origin = min(start for _, start in starts.values())
     jobs = [JobTime(rule=rule, jobid=jobid, start_s=(start - origin).total_seconds(),
                     end_s=(ends[jobid] - origin).total_seconds() if jobid in ends else None)
             for jobid, (rule, start) in sorted(starts.items(), key=lambda kv: kv[1][1])]
-    return jobs, origin, planned
+    return jobs, origin
 
 
 def run_time(log: str | Path) -> RunTime:
@@ -215,7 +212,7 @@ def run_time(log: str | Path) -> RunTime:
     path = Path(log)
     with path.open(encoding="utf-8", errors="replace") as fh:
         lines = fh.readlines()
-    jobs, origin, planned = read_jobs(lines)
+    jobs, origin = read_jobs(lines)
     plan, cores = read_plan(lines)
     if origin is None:
         raise ValueError(f"{path}: no job in this Snakemake log")
@@ -231,11 +228,13 @@ def run_time(log: str | Path) -> RunTime:
             first_start_s=min(job.start_s for job in mine),
             last_end_s=max(job.end_s for job in ended) if len(ended) == len(mine) else None))
     ends = [job.end_s for job in jobs if job.end_s is not None]
-    milestones = {what: max(job.end_s for job in jobs if job.rule == rule)
-                  for rule, what in MILESTONES.items()
-                  if any(job.rule == rule and job.end_s is not None for job in jobs)}
+    milestones = {}
+    for rule, what in MILESTONES.items():
+        ended = [job.end_s for job in jobs if job.rule == rule and job.end_s is not None]
+        if ended:
+            milestones[what] = max(ended)
     left, unseen = time_left(jobs, plan, cores)
-    return RunTime(log=str(path), started=origin.isoformat(), planned=planned,
+    return RunTime(log=str(path), started=origin.isoformat(), planned=sum(plan.values()) or None,
                    finished=len(ends), span_s=max(ends, default=0.0), stages=stages,
                    milestones=milestones, cores=cores, left_s=left, unseen=unseen)
 
@@ -252,22 +251,29 @@ def newest_log(workdir: str | Path = ".") -> Path:
     return logs[-1]
 
 
-def _minutes(seconds: float | None) -> str:
-    return "running" if seconds is None else f"{seconds / 60:.1f} min"
+def duration(seconds: float | None) -> str:
+    """A duration of a run in seconds, minutes or hours; ``running`` for a job not ended."""
+    if seconds is None:
+        return "running"
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.1f} min"
+    return f"{seconds / 3600:.2f} h"
 
 
 def table(run: RunTime) -> str:
     """The run's stages as a text table, then its milestones."""
     lines = [f"{run.log}: started {run.started}, {run.finished} of {run.planned or '?'} jobs "
-             f"ended, {_minutes(run.span_s)} to the last",
+             f"ended, {duration(run.span_s)} to the last",
              f"{'stage':<24} {'jobs':>9} {'job time':>10} {'from':>10} {'to':>10}"]
     for s in run.stages:
-        lines.append(f"{s.stage:<24} {s.finished:>4} of {s.jobs:<2} {_minutes(s.job_s):>10} "
-                     f"{_minutes(s.first_start_s):>10} {_minutes(s.last_end_s):>10}")
+        lines.append(f"{s.stage:<24} {s.finished:>4} of {s.jobs:<2} {duration(s.job_s):>10} "
+                     f"{duration(s.first_start_s):>10} {duration(s.last_end_s):>10}")
     for what, seconds in run.milestones.items():
-        lines.append(f"{what} written after {_minutes(seconds)}")
+        lines.append(f"{what} written after {duration(seconds)}")
     if run.left_s is not None and run.finished < (run.planned or 0):
-        lines.append(f"about {_minutes(run.left_s)} left (each job not ended at its rule's mean "
+        lines.append(f"about {duration(run.left_s)} left (each job not ended at its rule's mean "
                      f"so far, on {run.cores or 1} cores)")
         if run.unseen:
             lines.append(f"  {run.unseen} of the jobs left are of kinds not run yet, counted at "

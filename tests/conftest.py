@@ -9,8 +9,7 @@ import re
 import shutil
 import subprocess
 import sys
-from collections.abc import Iterator
-from contextlib import contextmanager
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -61,15 +60,15 @@ def _free_solver_options() -> Iterator[None]:
             options.delValue(key)
 
 
-@contextmanager
-def built_once(tmp_path_factory: pytest.TempPathFactory, name: str) -> Iterator[Path | None]:
+def built_once(tmp_path_factory: pytest.TempPathFactory, name: str,
+               build: Callable[[Path], None]) -> Path:
     """A folder that one process of the session builds and every other one reads.
 
     Under pytest-xdist each worker runs its own session fixtures; this gives them one folder
     in the session's shared temporary root, under a file lock: the first worker to take it
-    gets the folder to build (yields it; the build is recorded when the block ends without an
-    error), the others wait for the lock and get None, the folder being built. A build that
-    failed is retried by the next worker, which then fails the same way.
+    calls ``build(folder)`` (recorded as built when it returns), the others wait for the lock
+    and read what it built. A build that failed is retried by the next worker, which then
+    fails the same way.
     """
     root = tmp_path_factory.getbasetemp()
     if os.environ.get("PYTEST_XDIST_WORKER"):
@@ -77,19 +76,12 @@ def built_once(tmp_path_factory: pytest.TempPathFactory, name: str) -> Iterator[
     folder, done = root / name, root / f"{name}.built"
     with open(root / f"{name}.lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
-        if done.exists():
-            yield None
-            return
-        shutil.rmtree(folder, ignore_errors=True)
-        folder.mkdir()
-        yield folder
-        done.touch()
-
-
-def shared_folder(tmp_path_factory: pytest.TempPathFactory, name: str) -> Path:
-    """The folder :func:`built_once` builds under ``name``."""
-    root = tmp_path_factory.getbasetemp()
-    return (root.parent if os.environ.get("PYTEST_XDIST_WORKER") else root) / name
+        if not done.exists():
+            shutil.rmtree(folder, ignore_errors=True)
+            folder.mkdir()
+            build(folder)
+            done.touch()
+    return folder
 
 
 @pytest.fixture(scope="session")
@@ -98,12 +90,11 @@ def coarse_mesh(tmp_path_factory: pytest.TempPathFactory) -> Path:
     from meshes.build import MeshSize, write_parametric_mesh
     from meshes.parametric import BreastGeometry
 
-    with built_once(tmp_path_factory, "mesh") as folder:
-        if folder is not None:
-            report = write_parametric_mesh(BreastGeometry(), MeshSize(**COARSE),
-                                           folder / "mesh.xdmf")
-            (folder / "quality.json").write_text(json.dumps(report))
-    return shared_folder(tmp_path_factory, "mesh") / "mesh.xdmf"
+    def build(folder: Path) -> None:
+        report = write_parametric_mesh(BreastGeometry(), MeshSize(**COARSE), folder / "mesh.xdmf")
+        (folder / "quality.json").write_text(json.dumps(report))
+
+    return built_once(tmp_path_factory, "mesh", build) / "mesh.xdmf"
 
 
 def snakemake(
@@ -144,8 +135,8 @@ def small_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     The target is ``all``: sweep, dataset, FE study, surrogate study, report. Built once
     for all the session's workers (:func:`built_once`).
     """
-    with built_once(tmp_path_factory, "workflow") as workdir:
-        if workdir is not None:
-            run = snakemake(workdir, "-j2")
-            assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
-    return shared_folder(tmp_path_factory, "workflow")
+    def build(workdir: Path) -> None:
+        run = snakemake(workdir, "-j2")
+        assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
+
+    return built_once(tmp_path_factory, "workflow", build)

@@ -4,16 +4,7 @@ from __future__ import annotations
 
 from report.context import Context
 from report.html import para, table
-from studies.run_log import STAGES
-
-
-def clock(seconds: float) -> str:
-    """A duration of a run, in seconds, minutes or hours."""
-    if seconds < 90:
-        return f"{seconds:.0f} s"
-    if seconds < 5400:
-        return f"{seconds / 60:.1f} min"
-    return f"{seconds / 3600:.2f} h"
+from studies.run_log import duration
 
 
 def run_time_section(ctx: Context) -> str:
@@ -29,13 +20,11 @@ def run_time_section(ctx: Context) -> str:
         "each), and when the stage's first job started and its last ended, counted from the "
         "run's start. A run resumed from an earlier one counts only its own jobs; "
         "python -m studies.run_log prints the same for any run's log.", "caption")]
-    order = [stage for stage, _ in STAGES] + ["other"]
-    rows = [[s.stage, f"{s.finished} of {s.jobs}", clock(s.job_s), clock(s.first_start_s),
-             "running" if s.last_end_s is None else clock(s.last_end_s)]
-            for s in sorted(run.stages, key=lambda s: order.index(s.stage))]
+    rows = [[s.stage, f"{s.finished} of {s.jobs}", duration(s.job_s),
+             duration(s.first_start_s), duration(s.last_end_s)] for s in run.stages]
     out.append(table(["stage", "jobs ended", "job time", "started after", "ended after"], rows,
                      table_id="run-time"))
     if run.milestones:
         out.append(para("Written after: " + ", ".join(
-            f"{what} {clock(at)}" for what, at in run.milestones.items()) + "."))
+            f"{what} {duration(at)}" for what, at in run.milestones.items()) + "."))
     return "".join(out)
