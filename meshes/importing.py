@@ -21,7 +21,6 @@ closed, self-intersecting, degenerate or inverted elements, no rib facets.
 from __future__ import annotations
 
 import logging
-import math
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -52,13 +51,14 @@ from meshes.checks import (
 )
 from meshes.exceptions import (
     GeometryError,
-    InvalidElementsError,
     MeshInputError,
     SurfaceRuleError,
 )
 from meshes.orientation import Orientation, check_chest_wall_posterior
 from meshes.quality import exterior_faces, tet_volumes
 from meshes.reading import SURFACE_SUFFIXES, VOLUME_SUFFIXES, InputMesh, read_input
+from meshes.remesh import check_dihedral_floor, compact, fill_surface
+from meshes.repair import repair_surface
 from meshes.sizing import MeshSize
 from meshes.tags import Boundary
 
@@ -133,6 +133,18 @@ class ImportSpec:
             orientation=Orientation.from_mapping(values.get("orientation")),
         )
 
+    def rules(self) -> dict[Boundary, BoundaryRule]:
+        """The boundary rules (the file's axes and units)."""
+        return dict(self.surfaces)
+
+    def select_posterior(self) -> np.ndarray:
+        """The patient's posterior in the file's axes (for a posterior rule)."""
+        return self.orientation.to_file(POSTERIOR)
+
+    def read_volume(self, size: MeshSize) -> InputVolume:
+        """The file read, checked and filled with tetrahedra (:func:`read_volume`)."""
+        return read_volume(self, size)
+
     def input_files(self) -> list[str]:
         """Every file the import reads (for the workflow's dependencies)."""
         return [self.path] + [r.surface for r in self.surfaces.values() if r.surface is not None]
@@ -147,103 +159,6 @@ class ImportSpec:
         The import does not translate, so points and vectors go back by the same linear map.
         """
         return self.orientation.to_file(values) / UNITS[self.units]
-
-
-def tetrahedralise_surface(
-    points: np.ndarray, tris: np.ndarray, size: MeshSize, remesh: bool
-) -> tuple[np.ndarray, np.ndarray]:
-    """Fill a closed surface with tetrahedra (gmsh).
-
-    Args:
-        points: vertices of the checked closed surface, metres.
-        tris: its triangles.
-        size: ``global_size`` bounds the tetrahedra (and the remeshed triangles).
-        remesh: reparametrise and remesh the surface instead of keeping its triangles.
-
-    Returns:
-        ``(points, tets)`` of the volume mesh.
-    """
-    import gmsh
-
-    from meshes.build import gmsh_session, mesh_arrays
-
-    with gmsh_session("import") as model:
-        surface = model.addDiscreteEntity(2)
-        model.mesh.addNodes(2, surface, np.arange(1, len(points) + 1), points.ravel())
-        model.mesh.addElementsByType(surface, 2, [], (tris + 1).ravel())
-        if remesh:
-            # Split the surface at sharp edges (> 40°) into patches gmsh can reparametrise.
-            model.mesh.classifySurfaces(math.radians(40.0), True, True, math.pi)
-            model.mesh.createGeometry()
-        surfaces = [tag for _, tag in model.getEntities(2)]
-        loop = model.geo.addSurfaceLoop(surfaces)
-        model.geo.addVolume([loop])
-        model.geo.synchronize()
-        gmsh.option.setNumber("Mesh.MeshSizeMax", size.global_size)
-        gmsh.option.setNumber("Mesh.MeshSizeMin", 0.0)
-        gmsh.option.setNumber("Mesh.Algorithm3D", 1)
-        gmsh.option.setNumber("Mesh.Optimize", 1)
-        # Netgen's optimiser moves and swaps to remove slivers (the tetrahedra of a
-        # remeshed noisy surface otherwise reach dihedral angles near 1°)
-        gmsh.option.setNumber("Mesh.OptimizeNetgen", 1)
-        gmsh.option.setNumber("Mesh.RandomSeed", 1)
-        model.mesh.generate(3)
-        x, tets, _ = mesh_arrays(model, {})
-        if _worst_dihedral(x, tets) < MIN_DIHEDRAL_DEG:
-            for method in ("Relocate3D", "Netgen"):
-                model.mesh.optimize(method)
-            x, tets, _ = mesh_arrays(model, {})
-    used = np.unique(tets)
-    remap = np.full(len(x), -1, dtype=np.int64)
-    remap[used] = np.arange(len(used))
-    return x[used], remap[tets]
-
-
-#: Smallest dihedral angle (degrees) accepted in a tetrahedron the import makes: below it a
-#: cell is a sliver, whose stiffness conditions the tangent badly and whose P2 interpolation
-#: errs (a regular tetrahedron has 70.5°).
-MIN_DIHEDRAL_DEG = 10.0
-
-
-def _worst_dihedral(x: np.ndarray, tets: np.ndarray) -> float:
-    from meshes.quality import dihedral_angles
-
-    return float(dihedral_angles(x, tets).min()) if len(tets) else 180.0
-
-
-def check_dihedral_floor(x: np.ndarray, tets: np.ndarray, what: str, strict: bool) -> dict:
-    """Count the cells below :data:`MIN_DIHEDRAL_DEG`; refuse them (``strict``) or warn.
-
-    Returns:
-        ``{"min_dihedral_deg", "cells_below_floor", "floor_deg"}`` for the quality report.
-
-    Raises:
-        InvalidElementsError: if ``strict`` and a cell is below the floor, naming the worst
-            cells (index, smallest angle, centroid).
-    """
-    from meshes.quality import dihedral_angles
-
-    angles = dihedral_angles(x, tets).min(axis=1)
-    below = np.flatnonzero(angles < MIN_DIHEDRAL_DEG)
-    record = {"min_dihedral_deg": float(angles.min()), "cells_below_floor": int(below.size),
-              "floor_deg": MIN_DIHEDRAL_DEG}
-    if below.size == 0:
-        return record
-    worst = below[np.argsort(angles[below])][:3]
-    named = "; ".join(
-        f"cell {i}: {angles[i]:.2f}° at ({', '.join(f'{1e3 * c:.1f}' for c in x[tets[i]].mean(0))})"
-        " mm" for i in worst
-    )
-    message = (f"{what}: {below.size} of {len(tets)} tetrahedra have a dihedral angle below "
-               f"{MIN_DIHEDRAL_DEG:g}° (worst {named})")
-    if strict:
-        raise InvalidElementsError(
-            f"{message}, after gmsh's optimisers: remesh with a smaller mesh.size.global_size, "
-            "or smooth the surface"
-        )
-    log.warning("%s; slivers condition the solver badly: remesh them (mesh.file.remesh: true "
-                "for a surface) where the solve struggles", message)
-    return record
 
 
 @dataclass(frozen=True)
@@ -266,19 +181,21 @@ class InputVolume:
     group_names: dict[str, int]
     info: dict[str, Any]
 
-    def select(self, spec: ImportSpec) -> dict[Boundary, np.ndarray]:
+    def select(self, spec: Any) -> dict[Boundary, np.ndarray]:
         """The boundary faces each of ``spec``'s rules selects (in the file's axes and units).
+
+        ``spec`` is an :class:`ImportSpec` or a :class:`meshes.image.ImageSpec`.
 
         Raises:
             NoRibFacetsError, SurfaceRuleError: for a rule that selects nothing or names an
                 unknown group (:func:`meshes.boundary_rules.select_facets`).
         """
-        return select_facets(self.x, self.faces, spec.surfaces, spec.units, self.groups,
-                             self.group_names, spec.orientation.to_file(POSTERIOR))
+        return select_facets(self.x, self.faces, spec.rules(), spec.units, self.groups,
+                             self.group_names, spec.select_posterior())
 
 
 def prepare_input(
-    spec: ImportSpec, size: MeshSize
+    spec: Any, size: MeshSize
 ) -> tuple[np.ndarray, np.ndarray, dict[Boundary, np.ndarray], dict[str, Any]]:
     """Read, check, tetrahedralise (if a surface) and name the boundary of an input.
 
@@ -291,12 +208,12 @@ def prepare_input(
     Raises:
         MeshInputError: (a subclass naming the problem) for any broken input.
     """
-    volume = read_volume(spec, size)
+    volume = spec.read_volume(size)
     x, tets, info = volume.x, volume.tets, volume.info
     selected = volume.select(spec)
-    check_selection(x, volume.faces, selected, spec.surfaces)
+    check_selection(x, volume.faces, selected, spec.rules())
     facets = name_facets(volume.faces, selected)
-    info["rules"] = {b.label: r.describe() for b, r in spec.surfaces.items()}
+    info["rules"] = {b.label: r.describe() for b, r in spec.rules().items()}
     x, tets, facets = into_project_frame(x, tets, facets, spec.orientation)
     info["orientation"] = spec.orientation.describe()
     check_chest_wall_posterior(x, facets[Boundary.RIB], spec.orientation,
@@ -317,8 +234,7 @@ def read_volume(spec: ImportSpec, size: MeshSize) -> InputVolume:
         used = np.unique(mesh.tets)
         remap = np.full(len(mesh.points), -1, dtype=np.int64)
         remap[used] = np.arange(len(used))
-        x = mesh.points[used]
-        tets = remap[mesh.tets]
+        x, tets = compact(mesh.points, mesh.tets)
         tris = remap[mesh.triangles] if len(mesh.triangles) else mesh.triangles
         mesh = InputMesh(x, tets, tris, mesh.triangle_groups, mesh.group_names)
         info["extent_m"] = check_plausible_size(x, spec.units, what)
@@ -337,14 +253,17 @@ def read_volume(spec: ImportSpec, size: MeshSize) -> InputVolume:
         x, tris = merge_duplicate_points(mesh.points, mesh.triangles, 1e-9 * max(extent, 1e-12))
         info["extent_m"] = check_plausible_size(x, spec.units, what)
         check_triangles(x, tris, what)
+        x, tris, info["repair"] = repair_surface(x, tris, what)
         check_closed(x, tris, what)
         info["volume_ml"] = check_plausible_volume(enclosed_volume(x, tris), spec.units, what)
         check_no_self_intersections(x, tris, what)
         info["kind"] = "closed surface"
         info["surface_triangles"] = int(len(tris))
         info["remeshed"] = spec.remesh
-        x, tets = tetrahedralise_surface(x, tris, size, spec.remesh)
-        tets = check_tetrahedra(x, tets, "the tetrahedralised surface")
+        filled = fill_surface(x, tris, size, spec.remesh)
+        info["fill"] = filled.describe()
+        tets = check_tetrahedra(filled.x, filled.tets, "the tetrahedralised surface")
+        x = filled.x
         # a remeshed surface is the import's own work: it must meet the floor; kept triangles
         # bound what the optimisers can do, so there the import warns
         info["quality_floor"] = check_dihedral_floor(
@@ -357,26 +276,27 @@ def read_volume(spec: ImportSpec, size: MeshSize) -> InputVolume:
 
 
 def preview_rules(
-    spec: ImportSpec, size: MeshSize, png_path: str | Path | None = None
+    spec: Any, size: MeshSize, png_path: str | Path | None = None
 ) -> tuple[dict[str, dict[str, float]], str | None]:
     """What each boundary rule selects, without meshing for the solver or solving.
 
     Returns:
-        ``(summary, problem)``: per boundary its facets, area (m²) and share of the boundary's
-        area (:func:`meshes.boundary_rules.selection_summary`); and why the import would stop
-        (two rules claim a facet, the rib is too much or too little), or None.
+        ``(summary, problem, info)``: per boundary its facets, area (m²) and share of the
+        boundary's area (:func:`meshes.boundary_rules.selection_summary`); why the import would
+        stop (two rules claim a facet, the rib is too much or too little), or None; and what
+        was read and done (:attr:`InputVolume.info`).
 
     Raises:
         MeshInputError: for broken input, or a rule that selects nothing.
     """
-    volume = read_volume(spec, size)
+    volume = spec.read_volume(size)
     selected = volume.select(spec)
     summary = selection_summary(volume.x, volume.faces, selected)
     x, _, facets = into_project_frame(
         volume.x, volume.tets, name_facets(volume.faces, selected), spec.orientation
     )
     try:  # the run's checks of the selection and of the frame, in its order
-        check_selection(volume.x, volume.faces, selected, spec.surfaces)
+        check_selection(volume.x, volume.faces, selected, spec.rules())
         check_chest_wall_posterior(x, facets[Boundary.RIB], spec.orientation,
                                    f"the input {spec.path}")
         problem = None
@@ -386,7 +306,7 @@ def preview_rules(
         from meshes.plot import plot_boundaries
 
         plot_boundaries(x, facets, png_path, title=f"rules on {Path(spec.path).name}")
-    return summary, problem
+    return summary, problem, volume.info
 
 
 def into_project_frame(
@@ -440,7 +360,7 @@ def import_size(size: MeshSize) -> MeshSize:
 
 
 def write_imported_mesh(
-    spec: ImportSpec,
+    spec: Any,
     size: MeshSize,
     xdmf_path: str | Path,
     png_path: str | Path | None = None,
@@ -463,7 +383,7 @@ def write_imported_mesh(
         groups = add_tagged_mesh(model, x, tets, facets)
         report = gmsh_quality(model, groups)
         write_gmsh_model(model, xdmf_path)
-    report["source"] = "file"
+    report["source"] = "image" if info.get("kind") == "label volume" else "file"
     report["input"] = info
     report["anatomy"] = imported_anatomy(x, facets)
     report["size"] = size.as_dict()

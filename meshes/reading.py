@@ -1,7 +1,14 @@
 """Read a user's surface or volume mesh file into points, tetrahedra and tagged triangles (metres).
 
-Files are read with meshio; an XDMF written by dolfinx (several grids: mesh and tags), which
-meshio cannot read, is read with dolfinx, its facet tags becoming named groups.
+Each kind of file is read by the library made for it, as the tools of the field write it:
+
+* surfaces of modelling and scanning tools (``.obj`` with texture coordinates, normals, groups
+  and quads; ``.ply`` with colours; ASCII and binary ``.stl``; ``.off``) with trimesh, which
+  splits quads and polygons into triangles;
+* VTK's XML polygon data (``.vtp``) with VTK's own reader;
+* volume meshes (``.msh``, ``.vtu``, legacy ``.vtk``, single-grid ``.xdmf``) with meshio; an
+  XDMF written by dolfinx (several grids: mesh and tags), which meshio cannot read, with
+  dolfinx, its facet tags becoming named groups.
 """
 
 from __future__ import annotations
@@ -15,8 +22,12 @@ from meshes.checks import UNITS, merge_duplicate_points
 from meshes.exceptions import MeshInputError
 from meshes.tags import Boundary
 
-SURFACE_SUFFIXES = (".stl", ".obj", ".ply")
-VOLUME_SUFFIXES = (".msh", ".vtu", ".xdmf")
+SURFACE_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".vtp")
+VOLUME_SUFFIXES = (".msh", ".vtu", ".vtk", ".xdmf")
+"""A legacy ``.vtk`` file may hold a surface as well: the content decides, not the suffix."""
+
+#: Surface files read with trimesh (the others with meshio, ``.vtp`` with VTK).
+TRIMESH_SUFFIXES = (".stl", ".obj", ".ply", ".off")
 
 
 @dataclass(frozen=True)
@@ -55,6 +66,11 @@ def read_input(path: str | Path, units: str) -> InputMesh:
     path = Path(path)
     if not path.is_file():
         raise MeshInputError(f"mesh file {path} does not exist")
+    suffix = path.suffix.lower()
+    if suffix in TRIMESH_SUFFIXES:
+        return _read_surface(path, units)
+    if suffix == ".vtp":
+        return _read_vtp(path, units)
     try:
         mesh = meshio.read(str(path))
     # meshio raises many types (and its XDMF reader calls sys.exit): all mean "cannot read"
@@ -103,6 +119,62 @@ def read_input(path: str | Path, units: str) -> InputMesh:
     )
     check_finite(result, path)
     return result
+
+
+def _surface_mesh(points: np.ndarray, triangles: np.ndarray, units: str,
+                  path: Path) -> InputMesh:
+    if len(points) == 0 or len(triangles) == 0:
+        raise MeshInputError(f"{path} is empty: it holds no points or no cells")
+    mesh = InputMesh(
+        points=np.asarray(points, dtype=float)[:, :3] * UNITS[units],
+        tets=np.empty((0, 4), dtype=np.int64),
+        triangles=np.asarray(triangles, dtype=np.int64),
+        triangle_groups=np.full(len(triangles), -1, dtype=np.int64),
+        group_names={},
+    )
+    check_finite(mesh, path)
+    return mesh
+
+
+def _read_surface(path: Path, units: str) -> InputMesh:
+    """A surface file as modelling and scanning tools write it, with trimesh.
+
+    Texture coordinates, normals, colours and materials are read past; every object and group
+    of the file is kept (one surface); quads and polygons become triangles. Vertices split at
+    texture seams are merged again by the import.
+    """
+    import trimesh
+
+    try:
+        mesh = trimesh.load(str(path), force="mesh", process=False)
+    except Exception as err:  # trimesh raises many types for a broken file
+        raise MeshInputError(f"cannot read {path}: {type(err).__name__}: {err}") from err
+    if not isinstance(mesh, trimesh.Trimesh):
+        raise MeshInputError(f"{path} holds no triangles (read as {type(mesh).__name__})")
+    return _surface_mesh(np.asarray(mesh.vertices), np.asarray(mesh.faces), units, path)
+
+
+def _read_vtp(path: Path, units: str) -> InputMesh:
+    """VTK's XML polygon data, with VTK's reader; polygons become triangles."""
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+    from vtkmodules.vtkFiltersCore import vtkTriangleFilter
+    from vtkmodules.vtkIOXML import vtkXMLPolyDataReader
+
+    reader = vtkXMLPolyDataReader()
+    if not reader.CanReadFile(str(path)):
+        raise MeshInputError(f"cannot read {path}: not a VTK XML PolyData file")
+    reader.SetFileName(str(path))
+    triangles = vtkTriangleFilter()
+    triangles.SetInputConnection(reader.GetOutputPort())
+    triangles.PassLinesOff()
+    triangles.PassVertsOff()
+    triangles.Update()
+    data = triangles.GetOutput()
+    if data.GetNumberOfPoints() == 0 or data.GetNumberOfPolys() == 0:
+        raise MeshInputError(f"{path} is empty: it holds no points or no polygons")
+    points = vtk_to_numpy(data.GetPoints().GetData())
+    cells = vtk_to_numpy(data.GetPolys().GetConnectivityArray()).reshape(-1, 3)
+    return _surface_mesh(points, cells, units, path)
 
 
 def check_finite(mesh: InputMesh, path: str | Path) -> None:

@@ -83,7 +83,7 @@ def test_an_imported_anatomy_lands_posterior_in_the_project_frame(
 @pytest.mark.unit
 def test_a_remeshed_import_below_the_dihedral_floor_names_its_worst_cells(tmp_path: Path) -> None:
     """Cells below the floor: a remeshed surface names the worst; a kept surface warns."""
-    from meshes.importing import check_dihedral_floor
+    from meshes.remesh import check_dihedral_floor
 
     x = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0.3, 0.3, 0.01], [0, 0, 1.0]]) * 0.05
     tets = np.array([[0, 1, 2, 3], [0, 1, 2, 4]])

@@ -202,10 +202,14 @@ def test_rules_that_overlap_are_refused(tmp_path: Path) -> None:
 
 
 def test_surface_not_closed(tmp_path: Path) -> None:
+    """A hole too large to fill (a whole face of the box) is refused with its size and place."""
     x, tris = box_mesh(2)
-    stl = write_surface(tmp_path / "open.stl", x, tris[2:])  # two triangles missing: a hole
+    on_face = np.abs(x[tris][:, :, 0]).max(axis=1) < 1e-9  # the face x = 0: 300 cm²
+    stl = write_surface(tmp_path / "open.stl", x, tris[~on_face])
     with pytest.raises(
-        SurfaceNotClosedError, match=r"not a closed surface: \d+ edge\(s\) belong to one triangle"
+        SurfaceNotClosedError,
+        match=r"not a closed surface: 1 hole\(s\), the largest 300 cm² \(46 % of the surface; "
+              r"rim 700 mm in \d+ edges\) centred at \(0\.0, 100\.0, 75\.0\) mm",
     ):
         write_imported_mesh(spec(stl), SIZE, tmp_path / "m.xdmf")
     assert not (tmp_path / "m.xdmf").exists()
@@ -307,7 +311,8 @@ def test_unreadable_or_unsupported_input(tmp_path: Path) -> None:
         write_imported_mesh(spec(tmp_path / "missing.stl"), SIZE, tmp_path / "m.xdmf")
     garbage = tmp_path / "garbage.stl"
     garbage.write_bytes(b"solid nothing\n  facet normal oops\n")
-    with pytest.raises(MeshInputError, match="cannot read"):
+    # trimesh reads past the broken facet and finds nothing
+    with pytest.raises(MeshInputError, match="garbage.stl is empty: it holds no points"):
         write_imported_mesh(spec(garbage), SIZE, tmp_path / "m.xdmf")
     with pytest.raises(GeometryError, match="rule for the rib"):
         ImportSpec.from_mapping({"path": "a.stl", "surfaces": {"cranial": RIB_PLANE}})
