@@ -12,6 +12,7 @@ from typing import Any
 
 from meshes.configfile import ConfigFileError, read_config_file
 from meshes.exceptions import GeometryError
+from meshes.image import ImageSpec
 from meshes.importing import ImportSpec, write_imported_mesh
 from meshes.parametric import BreastGeometry
 from meshes.sizing import MeshSize
@@ -19,7 +20,7 @@ from meshes.tags import Boundary
 
 log = logging.getLogger(__name__)
 
-SOURCES = ("parametric", "file")
+SOURCES = ("parametric", "file", "image")
 
 
 @dataclass(frozen=True, slots=True)
@@ -27,23 +28,33 @@ class MeshConfig:
     """Where the geometry comes from and how it is meshed.
 
     Attributes:
-        source: ``parametric`` (the OCC breast of :class:`BreastGeometry`) or ``file``
-            (a user's surface or volume mesh, :class:`ImportSpec`).
-        geometry: parameters of the parametric breast (ignored for ``file``).
+        source: ``parametric`` (the OCC breast of :class:`BreastGeometry`), ``file``
+            (a user's surface or volume mesh, :class:`ImportSpec`) or ``image`` (a
+            segmentation's label volume, :class:`meshes.image.ImageSpec`).
+        geometry: parameters of the parametric breast (ignored for an import).
         size: element sizes and order.
         file: what to import (required for ``file``).
+        image: what to mesh (required for ``image``).
     """
 
     source: str = "parametric"
     geometry: BreastGeometry = field(default_factory=BreastGeometry)
     size: MeshSize = field(default_factory=MeshSize)
     file: ImportSpec | None = None
+    image: ImageSpec | None = None
 
     def __post_init__(self) -> None:
         if self.source not in SOURCES:
             raise GeometryError(f"mesh.source must be one of {SOURCES}, got {self.source!r}")
         if self.source == "file" and self.file is None:
             raise GeometryError("mesh.source is 'file' but mesh.file is missing")
+        if self.source == "image" and self.image is None:
+            raise GeometryError("mesh.source is 'image' but mesh.image is missing")
+
+    @property
+    def imported(self) -> ImportSpec | ImageSpec | None:
+        """What the geometry is imported from (``file`` or ``image``), or None (parametric)."""
+        return {"file": self.file, "image": self.image}.get(self.source)
 
     @classmethod
     def from_mapping(cls, values: dict[str, Any]) -> MeshConfig:
@@ -52,7 +63,7 @@ class MeshConfig:
         ``mesh.fixed`` is the solver's (``fem.parameters.FixedBoundaries``) and is not
         read here; any other unknown key is rejected by name.
         """
-        known = {"source", "geometry", "size", "file", "fixed"}
+        known = {"source", "geometry", "size", "file", "image", "fixed"}
         unknown = sorted(set(values) - known)
         if unknown:
             raise GeometryError(f"unknown mesh key(s): {', '.join(unknown)}")
@@ -64,27 +75,29 @@ class MeshConfig:
             size=MeshSize.from_mapping(size_for_source(source, values.get("size") or {})),
             # the file section may stay in the config while the parametric source is used
             file=ImportSpec.from_mapping(file_values) if file_values and source == "file" else None,
+            image=(ImageSpec.from_mapping(values["image"])
+                   if values.get("image") and source == "image" else None),
         )
-        if config.file is not None:
+        if config.imported is not None:
             # An imported mesh names only the surfaces its rules select (the rest is skin):
             # clamping a surface no rule names would fail in every solve, so stop here.
             unnamed = [
                 name
                 for name, spec in (values.get("fixed") or {}).items()
                 if spec != "none"
-                and Boundary.from_label(name) not in config.file.surfaces
+                and Boundary.from_label(name) not in config.imported.rules()
                 and Boundary.from_label(name) != Boundary.SKIN
             ]
             if unnamed:
                 raise GeometryError(
-                    f"mesh.fixed clamps {', '.join(unnamed)}, but mesh.file.surfaces has no rule "
-                    "that names it: add a rule (group, plane or surface) for it"
+                    f"mesh.fixed clamps {', '.join(unnamed)}, but mesh.{source}.surfaces has no "
+                    "rule that names it: add a rule (group, plane or surface) for it"
                 )
         return config
 
     def input_files(self) -> list[str]:
         """Files the mesh is built from (none for the parametric source)."""
-        return self.file.input_files() if self.source == "file" and self.file else []
+        return self.imported.input_files() if self.imported is not None else []
 
 
 def size_for_source(source: str, values: Mapping[str, Any]) -> dict[str, Any]:
@@ -95,7 +108,7 @@ def size_for_source(source: str, values: Mapping[str, Any]) -> dict[str, Any]:
     writes it for an image-resolution surface, is no error about a mound the file has not.
     """
     values = dict(values)
-    if source != "file":
+    if source not in ("file", "image"):
         return values
     default = MeshSize()
     mound = values.get("mound_size", default.mound_size)
@@ -117,8 +130,8 @@ def make_mesh(
 
         report = write_parametric_mesh(config.geometry, config.size, xdmf_path, png_path)
     else:
-        assert config.file is not None  # __post_init__ guarantees it
-        report = write_imported_mesh(config.file, config.size, xdmf_path, png_path)
+        assert config.imported is not None  # __post_init__ guarantees it
+        report = write_imported_mesh(config.imported, config.size, xdmf_path, png_path)
     target = Path(quality_path)
     target.parent.mkdir(parents=True, exist_ok=True)
     tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")  # renamed into place

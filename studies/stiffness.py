@@ -197,7 +197,7 @@ def estimate_file(observation: Path, reference: Path, model_folder: Path, phi: f
     from meshes.config import MeshConfig
     from meshes.points import read_points
 
-    spec = MeshConfig.from_mapping(dict(mesh_section or {})).file
+    spec = MeshConfig.from_mapping(dict(mesh_section or {})).imported
     _, points = read_points(observation)
     if spec is not None:
         points = spec.to_project_frame(points)

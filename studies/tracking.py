@@ -232,7 +232,7 @@ def track_file(points_csv: Path, imaged: Path, reference: Path, model_folder: Pa
     from surrogate.exceptions import ExtrapolationWarning
     from surrogate.predict import Surrogate
 
-    spec = MeshConfig.from_mapping(dict(mesh_section or {})).file
+    spec = MeshConfig.from_mapping(dict(mesh_section or {})).imported
     names, points = read_points(points_csv)
     if spec is not None:
         points = spec.to_project_frame(points)

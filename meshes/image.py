@@ -1,0 +1,424 @@
+"""Mesh a segmented image directly: a label volume from 3D Slicer, ITK-SNAP or a scanner's tools.
+
+    mesh:
+      source: image
+      image:
+        path: patient_labels.nii.gz   # NIfTI, NRRD (.nrrd, .nhdr) or MetaImage (.mha, .mhd)
+        breast_labels: [1, 2]         # the labels that make up the breast (fat, gland, tumour)
+        chest_label: 3                # optional: pectoral muscle or rib cage; its boundary
+                                      # with the breast becomes the rib
+        side: left                    # optional where the image tells it
+
+The image is read with SimpleITK, which gives every format's voxels in the scanner's physical
+space in ITK's LPS convention (NIfTI's RAS sform/qform is converted on reading): the map from a
+voxel index to millimetres is the header's origin, direction cosines and spacing, so no axes
+need declaring. A breast's side is taken from the image where it can tell (the breast labelled
+off the centre of a torso's field of view), and asked for where it cannot (a dedicated breast
+image, centred on the breast).
+
+Meshing (see docs/geometry.md for the measurement behind the choice): the breast's labels are
+cropped to the breast, averaged in blocks onto a working grid of about
+``global_size / 6`` (at most :data:`WORKING_SPACING_M`), the largest connected piece kept and
+its inner holes filled; lightly smoothed, the 0.5 level set is the surface (scikit-image's
+marching cubes), filled with tetrahedra by :func:`meshes.remesh.fill_surface` (fTetWild within
+a working voxel of it, remeshed to ``global_size``, to the quality floor). Facets within
+a working voxel and a half of the chest label form the file group ``chest_wall``, which the
+rib rule selects; without a chest label the rib comes from a rule in ``surfaces`` (a posterior
+rule, in LPS millimetres).
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from meshes.boundary_rules import POSTERIOR, BoundaryRule
+from meshes.checks import (
+    UNITS,
+    check_closed,
+    check_plausible_size,
+    check_plausible_volume,
+    check_tetrahedra,
+    check_triangles,
+    enclosed_volume,
+)
+from meshes.exceptions import GeometryError, MeshInputError
+from meshes.importing import InputVolume
+from meshes.orientation import Orientation
+from meshes.quality import exterior_faces, tet_volumes
+from meshes.remesh import check_dihedral_floor, fill_surface
+from meshes.repair import repair_surface
+from meshes.sizing import MeshSize
+from meshes.tags import Boundary
+
+log = logging.getLogger(__name__)
+
+IMAGE_SUFFIXES = (".nii", ".nii.gz", ".nrrd", ".nhdr", ".mha", ".mhd")
+
+#: The coarsest working grid the surface is taken from, m (finer for a finer global_size).
+WORKING_SPACING_M = 0.002
+
+#: A breast labelled this far off the centre of the image's field of view (m, left-right) is on
+#: that side of a torso's image; nearer the centre the image cannot tell.
+SIDE_OFFSET_M = 0.03
+
+#: The file group of the facets next to the chest label, which the rib rule selects.
+CHEST_GROUP = "chest_wall"
+
+
+def image_suffix(path: str | Path) -> str:
+    """The image suffix of ``path`` (``.nii.gz`` counts as one), or ``""``."""
+    name = str(path).lower()
+    return next((s for s in sorted(IMAGE_SUFFIXES, key=len, reverse=True)
+                 if name.endswith(s)), "")
+
+
+@dataclass(frozen=True)
+class Grid:
+    """The header's map from voxel indices (i, j, k) to the scanner's LPS millimetres."""
+
+    origin: np.ndarray
+    spacing: np.ndarray
+    direction: np.ndarray
+    shape: tuple[int, int, int]
+
+    def to_physical(self, index: np.ndarray) -> np.ndarray:
+        """Continuous voxel indices (..., 3) to LPS millimetres."""
+        return self.origin + (np.asarray(index, dtype=float) * self.spacing) @ self.direction.T
+
+    def to_index(self, physical: np.ndarray) -> np.ndarray:
+        """LPS millimetres (..., 3) to continuous voxel indices."""
+        return ((np.asarray(physical, dtype=float) - self.origin) @ self.direction) / self.spacing
+
+
+def read_header(path: str | Path) -> Grid:
+    """The voxel-to-millimetre map of an image, from its header alone."""
+    import SimpleITK as sitk
+
+    reader = sitk.ImageFileReader()
+    reader.SetFileName(str(path))
+    try:
+        reader.ReadImageInformation()
+    except RuntimeError as err:
+        raise MeshInputError(f"cannot read the image {path}: {_first_line(err)}") from None
+    return _grid(reader)
+
+
+def _grid(image: Any) -> Grid:
+    return Grid(np.array(image.GetOrigin(), dtype=float), np.array(image.GetSpacing(), dtype=float),
+                np.array(image.GetDirection(), dtype=float).reshape(3, 3),
+                tuple(int(n) for n in image.GetSize()))
+
+
+def _first_line(err: Exception) -> str:
+    lines = [line.strip() for line in str(err).splitlines() if line.strip()]
+    described = [line for line in lines if "Description" in line or "ERROR" in line.upper()]
+    return (described or lines or [type(err).__name__])[-1]
+
+
+def read_labels(path: str | Path) -> tuple[np.ndarray, Grid]:
+    """The label volume, indexed ``[i, j, k]`` as the header's indices, and its grid.
+
+    Raises:
+        MeshInputError: for a missing or unreadable file, or an image that is not a label
+            volume (not 3D, or non-integer values).
+    """
+    import SimpleITK as sitk
+
+    path = Path(path)
+    if not path.is_file():
+        raise MeshInputError(f"image file {path} does not exist")
+    try:
+        image = sitk.ReadImage(str(path))
+    except RuntimeError as err:
+        raise MeshInputError(f"cannot read the image {path}: {_first_line(err)}") from None
+    if image.GetDimension() != 3 or image.GetNumberOfComponentsPerPixel() != 1:
+        raise MeshInputError(f"{path} is not a 3D label volume: {image.GetDimension()}D with "
+                             f"{image.GetNumberOfComponentsPerPixel()} component(s) per voxel")
+    labels = sitk.GetArrayViewFromImage(image)  # [k, j, i]
+    if not np.issubdtype(labels.dtype, np.integer):
+        if not np.array_equal(labels, np.round(labels)):
+            raise MeshInputError(f"{path} holds non-integer values ({labels.dtype}): a label "
+                                 "volume (segmentation) holds one integer label per voxel")
+        labels = labels.astype(np.int32)
+    return np.array(labels).transpose(2, 1, 0), _grid(image)
+
+
+def label_counts(labels: np.ndarray) -> dict[int, int]:
+    """Voxels per label (0, the background, included)."""
+    values, counts = np.unique(labels, return_counts=True)
+    return {int(v): int(c) for v, c in zip(values, counts, strict=True)}
+
+
+@functools.lru_cache(maxsize=4)
+def _side_from_image(path: str, mtime: float, breast_labels: tuple[int, ...]) -> str | None:
+    labels, grid = read_labels(path)
+    breast = np.argwhere(np.isin(labels, breast_labels))
+    if len(breast) == 0:
+        return None
+    centre = grid.to_physical(breast.mean(axis=0))
+    corners = np.array([[i, j, k] for i in (0, grid.shape[0] - 1) for j in (0, grid.shape[1] - 1)
+                        for k in (0, grid.shape[2] - 1)])
+    fov = grid.to_physical(corners)[:, 0]
+    offset = 1e-3 * (centre[0] - 0.5 * (fov.min() + fov.max()))  # +x of LPS: patient's left
+    if abs(offset) < SIDE_OFFSET_M:
+        return None
+    return "left" if offset > 0 else "right"
+
+
+@dataclass(frozen=True, slots=True)
+class ImageSpec:
+    """What to mesh from a label volume (the ``mesh.image`` config section).
+
+    Attributes:
+        path: the label volume.
+        breast_labels: the labels that make up the breast.
+        chest_label: the chest wall's label (its boundary with the breast is the rib), or None.
+        side: ``left`` or ``right``, or None to take it from the image.
+        surfaces: rules for named boundaries, in LPS millimetres (the rib's, without a
+            chest label).
+    """
+
+    path: str
+    breast_labels: tuple[int, ...]
+    chest_label: int | None = None
+    side: str | None = None
+    surfaces: dict[Boundary, BoundaryRule] = field(default_factory=dict)
+
+    #: The scanner's millimetres: positions and rules are in them.
+    units = "mm"
+    #: The surface is always remeshed.
+    remesh = True
+
+    def __post_init__(self) -> None:
+        if not image_suffix(self.path):
+            raise MeshInputError(f"mesh.image.path {self.path!r}: not a label volume; expected "
+                                 f"one of {', '.join(IMAGE_SUFFIXES)}")
+        if not self.breast_labels:
+            raise GeometryError("mesh.image.breast_labels must name at least one label")
+        if self.chest_label is not None and self.chest_label in self.breast_labels:
+            raise GeometryError(f"mesh.image.chest_label {self.chest_label} is also a breast label")
+        if self.side is not None and self.side not in ("left", "right"):
+            raise GeometryError("mesh.image.side must be left or right")
+        if self.chest_label is None and Boundary.RIB not in self.surfaces:
+            raise GeometryError(
+                "mesh.image needs the rib: a chest_label (the pectoral muscle or rib cage "
+                "whose boundary with the breast is fixed), or a rule in mesh.image.surfaces "
+                "(e.g. rib: {posterior: {angle: 60, band: 25}})")
+        if self.chest_label is not None and Boundary.RIB in self.surfaces:
+            raise GeometryError("mesh.image: the rib comes from chest_label; drop the rib rule "
+                                "from mesh.image.surfaces (or the chest_label)")
+
+    @classmethod
+    def from_mapping(cls, values: dict[str, Any]) -> ImageSpec:
+        """Build from the ``mesh.image`` config mapping."""
+        known = {"path", "breast_labels", "chest_label", "side", "surfaces"}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise GeometryError(f"unknown mesh.image key(s): {', '.join(unknown)}")
+        if "path" not in values or "breast_labels" not in values:
+            raise GeometryError("mesh.image needs path and breast_labels")
+        labels = values["breast_labels"]
+        labels = [labels] if isinstance(labels, int) else list(labels)
+        chest = values.get("chest_label")
+        return cls(
+            path=str(values["path"]),
+            breast_labels=tuple(int(v) for v in labels),
+            chest_label=None if chest is None else int(chest),
+            side=values.get("side"),
+            surfaces={Boundary.from_label(name): BoundaryRule.from_mapping(rule, cls.units)
+                      for name, rule in (values.get("surfaces") or {}).items()},
+        )
+
+    def rules(self) -> dict[Boundary, BoundaryRule]:
+        """Every boundary rule: the chest label's group as the rib, and ``surfaces``."""
+        if self.chest_label is None:
+            return dict(self.surfaces)
+        return {Boundary.RIB: BoundaryRule(group=CHEST_GROUP), **self.surfaces}
+
+    @property
+    def orientation(self) -> Orientation:
+        """LPS, the breast's side given or taken from the image.
+
+        Raises:
+            GeometryError: where the side is not given and the image cannot tell it.
+        """
+        side = self.side
+        if side is None:
+            path = Path(self.path)
+            side = _side_from_image(str(path), path.stat().st_mtime if path.exists() else 0.0,
+                                    self.breast_labels)
+            if side is None:
+                raise GeometryError(
+                    f"{self.path}: the image does not tell the breast's side (it is labelled "
+                    f"within {1e3 * SIDE_OFFSET_M:g} mm of the field of view's centre, as in a "
+                    "dedicated breast image): give mesh.image.side (left or right)")
+        return Orientation("LPS", side)
+
+    def input_files(self) -> list[str]:
+        """Every file the mesh is made from (for the workflow's dependencies)."""
+        files = [self.path]
+        if self.path.lower().endswith((".nhdr", ".mhd")):
+            files += _detached_data(Path(self.path))
+        return files + [r.surface for r in self.surfaces.values() if r.surface is not None]
+
+    def to_project_frame(self, values: np.ndarray) -> np.ndarray:
+        """Positions or displacements in LPS millimetres into the project's frame (m)."""
+        return self.orientation.to_project(np.asarray(values, dtype=float) * UNITS[self.units])
+
+    def to_file_frame(self, values: np.ndarray) -> np.ndarray:
+        """Positions or displacements (m, project's frame) in LPS millimetres."""
+        return self.orientation.to_file(values) / UNITS[self.units]
+
+    def voxels_to_file_frame(self, index: np.ndarray) -> np.ndarray:
+        """Voxel indices (i, j, k; continuous) to LPS millimetres, by the header."""
+        return read_header(self.path).to_physical(index)
+
+    def file_frame_to_voxels(self, physical: np.ndarray) -> np.ndarray:
+        """LPS millimetres to voxel indices, by the header."""
+        return read_header(self.path).to_index(physical)
+
+    def select_posterior(self) -> np.ndarray:
+        """The patient's posterior in LPS (for a posterior rule)."""
+        return self.orientation.to_file(POSTERIOR)
+
+    def read_volume(self, size: MeshSize) -> InputVolume:
+        """The breast meshed from the image (see the module's docstring)."""
+        return image_volume(self, size)
+
+
+def _detached_data(header: Path) -> list[str]:
+    """The data file a detached header (``.nhdr``, ``.mhd``) names, where it names one."""
+    key = "data file:" if header.suffix.lower() == ".nhdr" else "elementdatafile"
+    for line in header.read_text(errors="replace").splitlines() if header.exists() else []:
+        name, _, value = line.partition("=" if key == "elementdatafile" else ":")
+        if name.strip().lower() + ("" if key == "elementdatafile" else ":") == key:
+            value = value.strip()
+            if value and value.upper() not in ("LOCAL", "LIST"):
+                return [str(header.parent / value)]
+    return []
+
+
+def breast_surface(labels: np.ndarray, grid: Grid, spec: ImageSpec,
+                   size: MeshSize) -> tuple[np.ndarray, np.ndarray, dict[str, Any], Any]:
+    """The breast's surface (LPS, metres) from the label volume, and the chest's distance.
+
+    Returns:
+        ``(points, triangles, info, chest_distance)``: ``chest_distance(points_m)`` gives the
+        distance (m) of LPS points from the chest label (None without one).
+    """
+    from scipy import ndimage
+    from skimage.measure import block_reduce, marching_cubes
+
+    counts = label_counts(labels)
+    missing = [v for v in spec.breast_labels if v not in counts]
+    if missing or (spec.chest_label is not None and spec.chest_label not in counts):
+        absent = missing + ([spec.chest_label] if spec.chest_label not in counts else [])
+        raise MeshInputError(
+            f"{spec.path}: label(s) {', '.join(map(str, absent))} do not occur in the image; its "
+            "labels (voxels): " + ", ".join(f"{v} ({n})" for v, n in counts.items()))
+    breast = np.isin(labels, spec.breast_labels)
+    inside = np.argwhere(breast)
+    lo = np.maximum(inside.min(axis=0) - 2, 0)
+    hi = np.minimum(inside.max(axis=0) + 3, labels.shape)
+    crop = tuple(slice(a, b) for a, b in zip(lo, hi, strict=True))
+    spacing_m = 1e-3 * grid.spacing
+    target = min(size.global_size / 6.0, WORKING_SPACING_M)
+    factor = tuple(int(max(1, round(target / s))) for s in spacing_m)
+    fraction = block_reduce(breast[crop].astype(np.float32), factor, np.mean, cval=0.0)
+    solid = fraction >= 0.5
+    pieces, n = ndimage.label(solid)
+    if n == 0:
+        raise MeshInputError(f"{spec.path}: the breast labels cover less than half of every "
+                             f"working voxel ({1e3 * target:.2g} mm): the breast is too small")
+    sizes = np.bincount(pieces.ravel())[1:]
+    kept = pieces == 1 + int(np.argmax(sizes))
+    filled = ndimage.binary_fill_holes(kept)
+    fraction = np.where(ndimage.binary_dilation(kept), fraction, 0.0)
+    fraction[filled & ~kept] = 1.0
+    working = spacing_m * np.array(factor)
+    fraction = ndimage.gaussian_filter(fraction, sigma=0.7)
+    fraction = np.pad(fraction, 2)
+    verts, tris, _, _ = marching_cubes(fraction, level=0.5, allow_degenerate=False)
+    index = (verts - 2) * np.array(factor) + (np.array(factor) - 1) / 2.0 + lo
+    points = 1e-3 * grid.to_physical(index)
+    tris = np.asarray(tris, dtype=np.int64)
+    a, b, c = (points[tris[:, i]] for i in range(3))
+    if float(np.einsum("ij,ij->", a, np.cross(b, c))) < 0:  # outward, whatever the header
+        tris = tris[:, [0, 2, 1]]
+    voxel_ml = 1e6 * float(np.prod(spacing_m))
+    info = {
+        "labels": {str(v): n for v, n in counts.items()},
+        "breast_labels": list(spec.breast_labels), "chest_label": spec.chest_label,
+        "voxel_size_mm": grid.spacing.tolist(), "image_shape": list(grid.shape),
+        "working_voxel_mm": (1e3 * working).tolist(),
+        "labelled_volume_ml": voxel_ml * float(breast.sum()),
+        "pieces_dropped": int(n - 1),
+        "dropped_volume_ml": 1e6 * float(np.prod(working)) * float(sizes.sum() - sizes.max()),
+        "holes_filled_ml": 1e6 * float(np.prod(working)) * float((filled & ~kept).sum()),
+    }
+    chest_distance = None
+    if spec.chest_label is not None:
+        chest = block_reduce((labels[crop] == spec.chest_label), factor, np.max, cval=False)
+        if not chest.any():
+            raise MeshInputError(f"{spec.path}: the chest label {spec.chest_label} does not "
+                                 "touch the breast (none of it lies in the breast's box)")
+        distance = ndimage.distance_transform_edt(~chest, sampling=working)
+
+        def chest_distance(physical_m: np.ndarray) -> np.ndarray:
+            at = (grid.to_index(1e3 * physical_m) - lo - (np.array(factor) - 1) / 2.0) / factor
+            return ndimage.map_coordinates(distance, at.T, order=1, mode="nearest")
+
+    return points, tris, info, chest_distance
+
+
+def image_volume(spec: ImageSpec, size: MeshSize) -> InputVolume:
+    """Read the label volume, take the breast's surface, fill it with tetrahedra, group the rib.
+
+    Raises:
+        MeshInputError: (a subclass naming the problem) for an unreadable image, absent labels,
+            or a surface that cannot be meshed.
+    """
+    what = f"the breast of {spec.path}"
+    start = time.perf_counter()
+    labels, grid = read_labels(spec.path)
+    read_s = time.perf_counter() - start
+    x, tris, info, chest_distance = breast_surface(labels, grid, spec, size)
+    del labels
+    surface_s = time.perf_counter() - start - read_s
+    info.update({"path": spec.path, "units": spec.units, "kind": "label volume",
+                 "surface_triangles": int(len(tris))})
+    info["extent_m"] = check_plausible_size(x, spec.units, what)
+    check_triangles(x, tris, what)
+    x, tris, info["repair"] = repair_surface(x, tris, what)
+    check_closed(x, tris, what)
+    info["volume_ml"] = check_plausible_volume(enclosed_volume(x, tris), spec.units, what)
+    # fTetWild within a working voxel of the surface (the surface's own precision), then two,
+    # then four; gmsh's reparametrisation is not tried: every voxel step is an edge to it
+    voxel = 1e-3 * float(np.max(info["working_voxel_mm"])) / info["extent_m"]
+    filled = fill_surface(x, tris, size, remesh=True, reparametrise=False,
+                          envelopes=(voxel, 2 * voxel, 4 * voxel))
+    info["fill"] = filled.describe()
+    tets = check_tetrahedra(filled.x, filled.tets, what)
+    x = filled.x
+    info["quality_floor"] = check_dihedral_floor(x, tets, what + " (remeshed)", strict=True)
+    info["meshed_volume_ml"] = 1e6 * float(np.abs(tet_volumes(x, tets)).sum())
+    info["volume_kept"] = info["meshed_volume_ml"] / info["labelled_volume_ml"]
+    faces = exterior_faces(tets)
+    groups = np.full(len(faces), -1, dtype=np.int64)
+    names: dict[str, int] = {}
+    if chest_distance is not None:
+        reach = 1.5 * 1e-3 * float(np.max(info["working_voxel_mm"]))
+        near = chest_distance(x[faces].mean(axis=1)) <= reach
+        groups[near] = 1
+        names[CHEST_GROUP] = 1
+        info["chest_facets"] = int(near.sum())
+    info["seconds"] = {"read": round(read_s, 3), "surface": round(surface_s, 3),
+                       "fill": round(time.perf_counter() - start - read_s - surface_s, 3)}
+    return InputVolume(x, tets, faces, groups, names, info)
