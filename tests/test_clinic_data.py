@@ -391,3 +391,23 @@ def test_the_clinical_cases_solve_on_an_image_mesh(tmp_path: Path) -> None:
         summary = json.loads((out / "summary.json").read_text())
         assert summary["status"] == "converged"
         assert summary["max_disp_mm"] > 0.5
+
+
+@pytest.mark.workflow
+def test_the_workflow_meshes_a_label_volume(tmp_path: Path) -> None:
+    """The mesh rule builds from the image (its input), as for any other source."""
+    image = phantom(tmp_path)
+    config = yaml.safe_load((REPO / "tests" / "config.yaml").read_text())
+    config["mesh"] = {**image_section(image.relative_to(tmp_path), side="left"),
+                      "fixed": {"rib": "all"}}
+    config["fe"]["contact"] = {"obstacle": {"plane": {"point": [1.0, 0, 0],
+                                                      "normal": [-1.0, 0, 0]}}}
+    (tmp_path / "image.yaml").write_text(yaml.safe_dump(config))
+    cmd = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-d", str(tmp_path),
+           "--configfile", str(tmp_path / "image.yaml"), "-j1", "results/mesh/mesh.xdmf"]
+    done = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr[-3000:]
+    quality = json.loads((tmp_path / "results/mesh/quality.json").read_text())
+    assert quality["source"] == "image"
+    assert quality["input"]["quality_floor"]["cells_below_floor"] == 0
+    assert "phantom.nii.gz" in done.stderr  # the image is the rule's input
