@@ -295,13 +295,14 @@ class ImageSpec:
 
 def _detached_data(header: Path) -> list[str]:
     """The data file a detached header (``.nhdr``, ``.mhd``) names, where it names one."""
-    key = "data file:" if header.suffix.lower() == ".nhdr" else "elementdatafile"
-    for line in header.read_text(errors="replace").splitlines() if header.exists() else []:
-        name, _, value = line.partition("=" if key == "elementdatafile" else ":")
-        if name.strip().lower() + ("" if key == "elementdatafile" else ":") == key:
-            value = value.strip()
-            if value and value.upper() not in ("LOCAL", "LIST"):
-                return [str(header.parent / value)]
+    key, separator = (("data file", ":") if header.suffix.lower() == ".nhdr"
+                      else ("elementdatafile", "="))
+    lines = header.read_text(errors="replace").splitlines() if header.exists() else []
+    for line in lines:
+        name, _, value = line.partition(separator)
+        value = value.strip()
+        if name.strip().lower() == key and value and value.upper() not in ("LOCAL", "LIST"):
+            return [str(header.parent / value)]
     return []
 
 

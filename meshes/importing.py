@@ -1,11 +1,15 @@
 """Import a person's own geometry: a closed surface or a volume mesh, with named boundaries.
 
-Accepted inputs (read with meshio):
+Accepted inputs (read by :mod:`meshes.reading`):
 
-* a **closed triangulated surface** (``.stl``, ``.obj``, ``.ply``, or a ``.msh``/``.vtu``
-  holding only triangles), which gmsh fills with tetrahedra (keeping the surface
+* a **closed triangulated surface** (``.stl``, ``.obj``, ``.ply``, ``.off``, ``.vtp``, or a
+  ``.vtk``/``.msh``/``.vtu`` holding only triangles), repaired where the repair is small
+  (:mod:`meshes.repair`) and filled with tetrahedra (:mod:`meshes.remesh`: keeping the surface
   triangles, or remeshing the surface to ``mesh.size`` with ``remesh: true``);
-* a **tetrahedral volume mesh** (``.msh``, ``.vtu``, ``.xdmf``), used as it is.
+* a **tetrahedral volume mesh** (``.msh``, ``.vtu``, ``.vtk``, ``.xdmf``), used as it is.
+
+A label volume (``mesh.source: image``) is meshed by :mod:`meshes.image` and named by the same
+rules.
 
 The boundary is then named by rules (:class:`meshes.boundary_rules.BoundaryRule`): the
 rib surface (the fixed chest wall) must be selected, by a physical-group name or number of

@@ -411,3 +411,12 @@ def test_the_workflow_meshes_a_label_volume(tmp_path: Path) -> None:
     assert quality["source"] == "image"
     assert quality["input"]["quality_floor"]["cells_below_floor"] == 0
     assert "phantom.nii.gz" in done.stderr  # the image is the rule's input
+
+
+@pytest.mark.parametrize("suffix", [".nhdr", ".mhd"])
+def test_a_detached_header_names_its_data_file_as_an_input(tmp_path: Path, suffix: str) -> None:
+    """Editing the voxels of a detached header's data file rebuilds the mesh too."""
+    image = write_phantom(tmp_path / f"labels{suffix}", (20, 20, 10), (5.0, 5.0, 5.0))
+    spec = ImageSpec.from_mapping({"path": str(image), "breast_labels": [1], "chest_label": 3})
+    files = spec.input_files()
+    assert files[0] == str(image) and len(files) == 2 and Path(files[1]).is_file()
