@@ -229,7 +229,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="a surrogate trained on the sweep from the reference")
     parser.add_argument("--phi", type=angle_deg, default=0.0, help="the observation's Φ (deg)")
     parser.add_argument("--theta", type=angle_deg, default=0.0, help="the observation's θ (deg)")
-    parser.add_argument("--config", type=Path, help="config: solver settings and mesh.file")
+    parser.add_argument("--config", type=Path,
+                        help="config: solver settings and mesh.file or mesh.image")
     parser.add_argument("--out", type=output_folder, help="folder to write")
     parser.add_argument("--no-fe", action="store_true", help="the surrogate's estimate alone")
     parser.add_argument("--c1", type=c1_kpa, nargs="+", default=[1.5, 3.5],

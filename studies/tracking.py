@@ -5,8 +5,9 @@
         --out results/tracking/tumour.csv
 
 A point seen in the image (a tumour's centre, its margin: a ``name,x,y,z`` CSV, in the imported
-file's own axes and units when the config's ``mesh.source`` is ``file``, else in the project's
-frame in m) is carried to the target posture two ways:
+file's own axes and units when the config's ``mesh.source`` is ``file``, in the scanner's LPS
+millimetres when it is ``image``, else in the project's frame in m) is carried to the target
+posture two ways:
 
 * **FE** (:func:`fem.tracking.track`): located in its cell of the imaged mesh, carried to the
   reference by the same local coordinates, then moved by the target posture's solve on the
@@ -277,7 +278,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--c1", type=c1_kpa, required=True, help="C1 in kPa")
     parser.add_argument("--phi", type=angle_deg, required=True, help="target posture's Φ (deg)")
     parser.add_argument("--theta", type=angle_deg, default=0.0, help="target posture's θ (deg)")
-    parser.add_argument("--config", type=Path, help="config: solver settings and mesh.file")
+    parser.add_argument("--config", type=Path,
+                        help="config: solver settings and mesh.file or mesh.image")
     parser.add_argument("--out", type=output_file, required=True, help="CSV to write")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="%(message)s")

@@ -389,8 +389,9 @@ def test_the_clinical_cases_solve_on_an_image_mesh(tmp_path: Path) -> None:
                               capture_output=True, text=True)
         assert done.returncode == 0, done.stderr[-2000:]
         summary = json.loads((out / "summary.json").read_text())
-        assert summary["status"] == "converged"
-        assert summary["max_disp_mm"] > 0.5
+        quality = json.loads((tmp_path / "q.json").read_text())
+        assert summary["status"] == "converged", (summary["reason"], quality["input"]["fill"])
+        assert summary["max_disp_mm"] > 0.5, quality["input"]["fill"]
 
 
 @pytest.mark.workflow
