@@ -156,13 +156,28 @@ def label_counts(labels: np.ndarray) -> dict[int, int]:
     return {int(v): int(c) for v, c in zip(values, counts, strict=True)}
 
 
+def _bounds(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The first and last index of ``mask``'s True voxels along each axis (it has some)."""
+    spans = [np.flatnonzero(mask.any(axis=tuple(a for a in range(3) if a != axis)))
+             for axis in range(3)]
+    return np.array([s[0] for s in spans]), np.array([s[-1] for s in spans])
+
+
+def _centroid(mask: np.ndarray) -> np.ndarray:
+    """The mean index of ``mask``'s True voxels (without listing them)."""
+    total = float(mask.sum())
+    return np.array([
+        float(mask.sum(axis=tuple(a for a in range(3) if a != axis)) @ np.arange(mask.shape[axis]))
+        / total for axis in range(3)])
+
+
 @functools.lru_cache(maxsize=4)
 def _side_from_image(path: str, mtime: float, breast_labels: tuple[int, ...]) -> str | None:
     labels, grid = read_labels(path)
-    breast = np.argwhere(np.isin(labels, breast_labels))
-    if len(breast) == 0:
+    breast = np.isin(labels, breast_labels)
+    if not breast.any():
         return None
-    centre = grid.to_physical(breast.mean(axis=0))
+    centre = grid.to_physical(_centroid(breast))
     corners = np.array([[i, j, k] for i in (0, grid.shape[0] - 1) for j in (0, grid.shape[1] - 1)
                         for k in (0, grid.shape[2] - 1)])
     fov = grid.to_physical(corners)[:, 0]
@@ -320,14 +335,15 @@ def breast_surface(labels: np.ndarray, grid: Grid, spec: ImageSpec,
     counts = label_counts(labels)
     missing = [v for v in spec.breast_labels if v not in counts]
     if missing or (spec.chest_label is not None and spec.chest_label not in counts):
-        absent = missing + ([spec.chest_label] if spec.chest_label not in counts else [])
+        absent = missing + ([] if spec.chest_label is None or spec.chest_label in counts
+                            else [spec.chest_label])
         raise MeshInputError(
             f"{spec.path}: label(s) {', '.join(map(str, absent))} do not occur in the image; its "
             "labels (voxels): " + ", ".join(f"{v} ({n})" for v, n in counts.items()))
     breast = np.isin(labels, spec.breast_labels)
-    inside = np.argwhere(breast)
-    lo = np.maximum(inside.min(axis=0) - 2, 0)
-    hi = np.minimum(inside.max(axis=0) + 3, labels.shape)
+    first, last = _bounds(breast)
+    lo = np.maximum(first - 2, 0)
+    hi = np.minimum(last + 3, labels.shape)
     crop = tuple(slice(a, b) for a, b in zip(lo, hi, strict=True))
     spacing_m = 1e-3 * grid.spacing
     target = min(size.global_size / 6.0, WORKING_SPACING_M)
