@@ -380,6 +380,7 @@ def test_the_schema_accepts_an_image_source() -> None:
 
 @pytest.mark.solve
 def test_the_clinical_cases_solve_on_an_image_mesh(tmp_path: Path) -> None:
+    """Prone and supine solve on the image's mesh, and its unloaded reference is found."""
     config = MeshConfig.from_mapping(image_section(phantom(tmp_path), side="left"))
     make_mesh(config, tmp_path / "mesh.xdmf", tmp_path / "q.json", tmp_path / "m.png")
     for phi in (180.0, 0.0):
@@ -392,6 +393,12 @@ def test_the_clinical_cases_solve_on_an_image_mesh(tmp_path: Path) -> None:
         quality = json.loads((tmp_path / "q.json").read_text())
         assert summary["status"] == "converged", (summary["reason"], quality["input"]["fill"])
         assert summary["max_disp_mm"] > 0.5, quality["input"]["fill"]
+    done = subprocess.run([sys.executable, "-m", "fem.reference", str(tmp_path / "mesh.xdmf"),
+                           "--c1", "1.0", "--phi", "180", "--out", str(tmp_path / "reference")],
+                          cwd=REPO, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-2000:]
+    reference = json.loads((tmp_path / "reference" / "reference.json").read_text())
+    assert reference["converged"] and reference["misfit_mm"][-1] < 0.01
 
 
 @pytest.mark.workflow
