@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from meshes.checks import enclosed_volume
 from meshes.exceptions import InvalidElementsError, MeshInputError
 from meshes.quality import dihedral_angles, exterior_faces, tet_volumes
 from meshes.sizing import MeshSize
@@ -130,7 +131,7 @@ def fill_surface(points: np.ndarray, tris: np.ndarray, size: MeshSize, remesh: b
             log.info("remesh by %s failed: %s", name, err)
             continue
         worst = worst_dihedral(x, tets)
-        kept = float(np.abs(tet_volumes(x, tets)).sum() / _enclosed(points, tris))
+        kept = float(np.abs(tet_volumes(x, tets)).sum() / enclosed_volume(points, tris))
         attempts.append({"method": name, "outcome": "done", "cells": int(len(tets)),
                          "min_dihedral_deg": round(worst, 3), "volume_kept": round(kept, 5),
                          "seconds": round(time.perf_counter() - start, 3)})
@@ -147,11 +148,6 @@ def fill_surface(points: np.ndarray, tris: np.ndarray, size: MeshSize, remesh: b
             + ": check the surface (meshes.preview), or import a volume mesh instead"
         )
     return FilledSurface(best.x, best.tets, best.method, attempts)
-
-
-def _enclosed(points: np.ndarray, tris: np.ndarray) -> float:
-    a, b, c = (points[tris[:, i]] for i in range(3))
-    return abs(float(np.einsum("ij,ij->", a, np.cross(b, c)))) / 6.0
 
 
 def _gmsh_fill(points: np.ndarray, tris: np.ndarray, size: MeshSize,
