@@ -41,19 +41,11 @@ import numpy as np
 from meshes.boundary_rules import POSTERIOR, BoundaryRule
 from meshes.checks import (
     UNITS,
-    check_closed,
-    check_plausible_size,
-    check_plausible_volume,
-    check_tetrahedra,
-    check_triangles,
-    enclosed_volume,
 )
 from meshes.exceptions import GeometryError, MeshInputError
-from meshes.importing import InputVolume
+from meshes.importing import InputVolume, fill_checked_surface
 from meshes.orientation import Orientation
 from meshes.quality import exterior_faces, tet_volumes
-from meshes.remesh import check_dihedral_floor, fill_surface
-from meshes.repair import repair_surface
 from meshes.sizing import MeshSize
 from meshes.tags import Boundary
 
@@ -409,22 +401,15 @@ def image_volume(spec: ImageSpec, size: MeshSize) -> InputVolume:
     x, tris, info, chest_distance = breast_surface(labels, grid, spec, size)
     del labels
     surface_s = time.perf_counter() - start - read_s
-    info.update({"path": spec.path, "units": spec.units, "kind": "label volume",
-                 "surface_triangles": int(len(tris))})
-    info["extent_m"] = check_plausible_size(x, spec.units, what)
-    check_triangles(x, tris, what)
-    x, tris, info["repair"] = repair_surface(x, tris, what)
-    check_closed(x, tris, what)
-    info["volume_ml"] = check_plausible_volume(enclosed_volume(x, tris), spec.units, what)
+    info.update({"path": spec.path, "units": spec.units, "kind": "label volume"})
     # fTetWild within a working voxel of the surface (the surface's own precision), then two,
-    # then four; gmsh's reparametrisation is not tried: every voxel step is an edge to it
-    voxel = 1e-3 * float(np.max(info["working_voxel_mm"])) / info["extent_m"]
-    filled = fill_surface(x, tris, size, remesh=True, reparametrise=False,
-                          envelopes=(voxel, 2 * voxel, 4 * voxel))
-    info["fill"] = filled.describe()
-    tets = check_tetrahedra(filled.x, filled.tets, what)
-    x = filled.x
-    info["quality_floor"] = check_dihedral_floor(x, tets, what + " (remeshed)", strict=True)
+    # then four, relative to its diagonal; gmsh's reparametrisation is not tried: every voxel
+    # step is an edge to it
+    voxel = 1e-3 * float(np.max(info["working_voxel_mm"])) / float(
+        np.linalg.norm(np.ptp(x, axis=0)))
+    x, tets = fill_checked_surface(x, tris, size, spec.units, what, what, info, remesh=True,
+                                   crossings=False, reparametrise=False,
+                                   envelopes=(voxel, 2 * voxel, 4 * voxel))
     info["meshed_volume_ml"] = 1e6 * float(np.abs(tet_volumes(x, tets)).sum())
     info["volume_kept"] = info["meshed_volume_ml"] / info["labelled_volume_ml"]
     faces = exterior_faces(tets)

@@ -61,7 +61,7 @@ from meshes.exceptions import (
 from meshes.orientation import Orientation, check_chest_wall_posterior
 from meshes.quality import exterior_faces, tet_volumes
 from meshes.reading import SURFACE_SUFFIXES, VOLUME_SUFFIXES, InputMesh, read_input
-from meshes.remesh import check_dihedral_floor, compact, fill_surface
+from meshes.remesh import check_dihedral_floor, fill_surface
 from meshes.repair import repair_surface
 from meshes.sizing import MeshSize
 from meshes.tags import Boundary
@@ -238,7 +238,8 @@ def read_volume(spec: ImportSpec, size: MeshSize) -> InputVolume:
         used = np.unique(mesh.tets)
         remap = np.full(len(mesh.points), -1, dtype=np.int64)
         remap[used] = np.arange(len(used))
-        x, tets = compact(mesh.points, mesh.tets)
+        x = mesh.points[used]
+        tets = remap[mesh.tets]
         tris = remap[mesh.triangles] if len(mesh.triangles) else mesh.triangles
         mesh = InputMesh(x, tets, tris, mesh.triangle_groups, mesh.group_names)
         info["extent_m"] = check_plausible_size(x, spec.units, what)
@@ -255,33 +256,58 @@ def read_volume(spec: ImportSpec, size: MeshSize) -> InputVolume:
     else:
         extent = float(np.linalg.norm(np.ptp(mesh.points, axis=0)))
         x, tris = merge_duplicate_points(mesh.points, mesh.triangles, 1e-9 * max(extent, 1e-12))
-        info["extent_m"] = check_plausible_size(x, spec.units, what)
-        check_triangles(x, tris, what)
-        x, tris, info["repair"] = repair_surface(x, tris, what)
-        check_closed(x, tris, what)
-        info["volume_ml"] = check_plausible_volume(enclosed_volume(x, tris), spec.units, what)
-        check_no_self_intersections(x, tris, what)
         info["kind"] = "closed surface"
-        info["surface_triangles"] = int(len(tris))
         info["remeshed"] = spec.remesh
-        filled = fill_surface(x, tris, size, spec.remesh)
-        info["fill"] = filled.describe()
-        tets = check_tetrahedra(filled.x, filled.tets, "the tetrahedralised surface")
-        x = filled.x
-        # a remeshed surface is the import's own work: it must meet the floor; kept triangles
-        # bound what the optimisers can do, so there the import warns
-        info["quality_floor"] = check_dihedral_floor(
-            x, tets, "the tetrahedralised surface" + (" (remeshed)" if spec.remesh else ""),
-            strict=spec.remesh,
-        )
+        x, tets = fill_checked_surface(x, tris, size, spec.units, what,
+                                       "the tetrahedralised surface", info, remesh=spec.remesh)
         faces = exterior_faces(tets)
         groups = None
     return InputVolume(x, tets, faces, groups, mesh.group_names, info)
 
 
+def fill_checked_surface(x: np.ndarray, tris: np.ndarray, size: MeshSize, units: str, what: str,
+                         filled: str, info: dict[str, Any], remesh: bool,
+                         crossings: bool = True, **fill: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Check a surface, repair it where the repair is small, fill it with tetrahedra, check them.
+
+    The one path of a surface file and of a label volume's surface. Records ``extent_m``,
+    ``repair``, ``volume_ml``, ``surface_triangles``, ``fill`` and ``quality_floor`` in ``info``.
+
+    Args:
+        x: the surface's points (duplicates merged), metres.
+        tris: its triangles.
+        size: ``global_size`` bounds the tetrahedra.
+        units: the input's declared units (for the plausibility messages).
+        what: the surface, for messages.
+        filled: the tetrahedra, for messages.
+        info: the quality report's input record, filled in.
+        remesh: remesh the surface (the floor is then strict: a remesh is the import's own
+            work; kept triangles bound what the optimisers can do, so there it warns).
+        crossings: check that no two triangles cross (a marching-cubes surface cannot).
+        **fill: passed to :func:`meshes.remesh.fill_surface` (envelopes, reparametrise).
+
+    Returns:
+        ``(points, tets)`` of the volume mesh.
+    """
+    info["extent_m"] = check_plausible_size(x, units, what)
+    check_triangles(x, tris, what)
+    x, tris, info["repair"] = repair_surface(x, tris, what)
+    check_closed(x, tris, what)
+    info["volume_ml"] = check_plausible_volume(enclosed_volume(x, tris), units, what)
+    if crossings:
+        check_no_self_intersections(x, tris, what)
+    info["surface_triangles"] = int(len(tris))
+    result = fill_surface(x, tris, size, remesh, **fill)
+    info["fill"] = result.describe()
+    tets = check_tetrahedra(result.x, result.tets, filled)
+    info["quality_floor"] = check_dihedral_floor(
+        result.x, tets, filled + (" (remeshed)" if remesh else ""), strict=remesh)
+    return result.x, tets
+
+
 def preview_rules(
     spec: Any, size: MeshSize, png_path: str | Path | None = None
-) -> tuple[dict[str, dict[str, float]], str | None]:
+) -> tuple[dict[str, dict[str, float]], str | None, dict[str, Any]]:
     """What each boundary rule selects, without meshing for the solver or solving.
 
     Returns:
