@@ -18,14 +18,12 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 #: The image axes of a prone dedicated breast CT in LPS: i left, j inferior, k anterior.
 BREAST_CT_AXES = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, -1.0, 0.0]]).T
@@ -33,31 +31,19 @@ BREAST_CT_AXES = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, -1.0, 0.0]])
 CLINICAL = ((1.0, 180.0), (5.0, 180.0), (1.0, 0.0), (5.0, 0.0))
 
 
-def measured(cmd: list[str]) -> tuple[float, float, str]:
-    """Run ``cmd`` in a child process; its wall time (s), peak RSS (GB) and stdout."""
-    start = time.perf_counter()
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    out = proc.stdout.read()
-    err = proc.stderr.read()
-    _, status, usage = os.wait4(proc.pid, 0)
-    wall = time.perf_counter() - start
-    if os.waitstatus_to_exitcode(status) != 0:
-        raise RuntimeError(f"{' '.join(cmd[:4])} ... failed: {err[-2000:]}")
-    return wall, usage.ru_maxrss * 1024 / 1e9, out
-
-
 MESH_SCRIPT = """
 import json, sys
 from meshes.config import MeshConfig, make_mesh
 section = json.loads(sys.argv[1])
 folder = sys.argv[2]
-report = make_mesh(MeshConfig.from_mapping(section), folder + "/mesh.xdmf",
-                   folder + "/quality.json", folder + "/mesh.png")
+make_mesh(MeshConfig.from_mapping(section), folder + "/mesh.xdmf",
+          folder + "/quality.json", folder + "/mesh.png")
 """
 
 
 def main(argv: list[str] | None = None) -> int:
     """Write the phantom, mesh it in a child process, solve the clinical cases; print."""
+    from benchmarks.child import run_measured
     from meshes.phantom import BREAST_LABELS, PECTORAL, write_phantom
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -79,8 +65,8 @@ def main(argv: list[str] | None = None) -> int:
         section = {"source": "image", "size": {"global_size": args.size},
                    "image": {"path": str(image), "breast_labels": list(BREAST_LABELS),
                              "chest_label": PECTORAL, "side": "left"}}
-        wall, rss, _ = measured([sys.executable, "-c", MESH_SCRIPT, json.dumps(section),
-                                 str(folder)])
+        wall, rss = run_measured([sys.executable, "-c", MESH_SCRIPT, json.dumps(section),
+                                  str(folder)], folder / "mesh.log")
         quality = json.loads((folder / "quality.json").read_text())
         info = quality["input"]
         print(f"meshed at global_size {args.size:g} m: {wall:.1f} s wall, {rss:.2f} GB peak "
@@ -90,13 +76,11 @@ def main(argv: list[str] | None = None) -> int:
               f"({100 * info['volume_kept']:.1f} %), {info['fill']['method']}; rib "
               f"{1e4 * quality['area_m2']['rib']:.0f} cm²")
         if not args.no_solve:
-            config = folder / "config.yaml"
-            config.write_text(yaml.safe_dump({"mesh": {"source": "image"}}))
             for c1, phi in CLINICAL:
                 out = folder / f"case_{c1:g}_{phi:g}"
-                wall, rss, _ = measured([sys.executable, "-m", "fem.cli",
-                                         str(folder / "mesh.xdmf"), "--c1", str(c1), "--phi",
-                                         str(phi), "--out", str(out)])
+                wall, rss = run_measured([sys.executable, "-m", "fem.cli",
+                                          str(folder / "mesh.xdmf"), "--c1", str(c1), "--phi",
+                                          str(phi), "--out", str(out)], folder / f"{out.name}.log")
                 summary = json.loads((out / "summary.json").read_text())
                 print(f"C1 = {c1:g} kPa, Φ = {phi:g}°: {summary['status']}, "
                       f"max |u| {summary['max_disp_mm']:.1f} mm, Newton "

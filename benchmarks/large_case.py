@@ -17,15 +17,14 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 import yaml
 
+from benchmarks.child import run_measured
 from fem.case_files import read_points
 
 #: The two paths: the preset's own choice, and full rank forced.
@@ -50,15 +49,10 @@ def run_path(mesh: Path, c1: float, phi: float, options: dict, folder: Path) -> 
     out = folder / "case"
     cmd = [sys.executable, "-m", "fem.cli", str(mesh), "--c1", str(c1), "--phi", str(phi),
            "--out", str(out), "--config", str(config)]
-    start = time.perf_counter()
-    child = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    _, status, usage = os.wait4(child.pid, 0)
-    wall = time.perf_counter() - start
-    if os.waitstatus_to_exitcode(status) != 0:
-        raise RuntimeError(f"{' '.join(cmd)} failed: {child.stderr.read()[-2000:]}")
+    wall, peak_gb = run_measured(cmd, folder / "solve.log")
     summary = json.loads((out / "summary.json").read_text())
     summary["process_wall_s"] = wall
-    summary["peak_rss_gb"] = usage.ru_maxrss * 1024 / 1e9  # Linux reports kilobytes
+    summary["peak_rss_gb"] = peak_gb
     return summary
 
 
