@@ -2,7 +2,8 @@
 
 Gravity is applied as a load fraction λ that goes from 0 to 1. The scheme tries
 a large step first (by default the whole load); when Newton fails or an element
-inverts (det F ≤ 0) it restores the last converged state and cuts the step;
+inverts (det F ≤ 0) it restores the last converged state and cuts the step (onto
+``min_step`` where halving would pass it);
 after an easy step it grows the step; each step starts from a linear
 extrapolation of the last two converged states (quadratic, through three, at the start of a
 path through known states). When the step has been cut below
@@ -256,8 +257,8 @@ def solve_incrementally(
         if loading.fixed_steps:
             result.reason = f"fixed step at λ={target:.4f} failed: {reason}"
             break
-        step *= loading.cutback
-        if step < (loading.rescue_min_step if newton else loading.min_step):
+        step = _cut(step, loading.cutback, loading.rescue_min_step if newton else loading.min_step)
+        if step is None:
             if loading.rescue and newton is None and (
                     not path or loading.rescue_after_neighbours):
                 # From the stalled state the creasing fold does not let Newton through; from
@@ -392,10 +393,23 @@ def _walk_back(
                 step *= loading.growth
             continue
         state[:] = history[-1][1]
-        step *= loading.cutback
-        if step < loading.min_step:
+        step = _cut(step, loading.cutback, loading.min_step)
+        if step is None:
             return False
     return True
+
+
+def _cut(step: float, cutback: float, floor: float) -> float | None:
+    """The step after a failed one: cut back, but the floor itself is tried before giving up.
+
+    A path from rest halves 1 → 1/64 onto the floor; a path from a neighbour's state at λ = 0.8
+    halves 0.2 → 0.025 → 0.0125, past it: without the clamp such a path would be given up one
+    cut sooner than a path from rest. None: the floor itself (or less) has failed.
+    """
+    cut = step * cutback
+    if cut >= floor:
+        return cut
+    return floor if step > floor * (1 + 1e-9) else None
 
 
 def _solve_from_guess(

@@ -199,9 +199,10 @@ class Loading:
 
     Attributes:
         initial_step: first load increment as a fraction of full gravity.
-        min_step: smallest increment before the case is declared failed. No case of
-            the sweep on the default breast converged with an increment below 1/8 of
-            the load; a case that needs 1/64 is at its limit point, and cutting on to
+        min_step: smallest increment before the case is declared failed; where halving
+            passes it, it is itself tried once (:func:`fem.loading.solve_incrementally`).
+            No case of the sweep on the default breast converged with an increment below
+            1/8 of the load; a case that needs 1/64 is at its limit point, and cutting on to
             1/1024 only gained it up to 1.5 % of the load at 9-15 min a case (README
             "Stability").
         max_steps: cap on accepted plus rejected increments.

@@ -199,6 +199,32 @@ def test_the_last_resort_stops_at_its_own_floor(coarse_mesh: Path) -> None:
         Loading(rescue_min_step=0.0)
 
 
+def test_a_path_from_a_neighbour_tries_the_floor_itself(coarse_mesh: Path) -> None:
+    """From λ = 0.8 the halvings 0.2, 0.1, 0.05 pass ``min_step`` = 0.0625: it is tried anyway.
+
+    A path from rest halves onto the floor (1, 1/2, ... 1/16); one from a neighbour's state
+    would otherwise be given up a cut sooner, as the default sweep's last three failures were
+    (0.025, then 0.0125 below 1/64).
+    """
+    from fem.case import CaseRunner
+    from fem.chain import Neighbours
+
+    case, stiffer = Case(1.0, 180.0), Case(1.25, 180.0)
+    with CaseRunner(coarse_mesh) as runner:
+        assert runner.solve(stiffer)[0].converged
+        neighbours = Neighbours(runner.problem.pressure_dofs)
+        neighbours.add(stiffer, runner.problem.w.x.array)
+        (fraction, state), = neighbours.path(case)[0]
+    assert fraction == pytest.approx(0.8)
+    # one Newton iteration converges no step: every cut is tried, down to the floor, and fails
+    settings = SolverSettings(petsc_options={"snes_max_it": 1},
+                              loading=Loading(min_step=0.0625, rescue=False))
+    with CaseRunner(coarse_mesh, settings) as runner:
+        result, _ = runner.solve(case, path=[(fraction, state)])
+    assert [a.step for a in result.attempts] == pytest.approx([0.2, 0.1, 0.0625])
+    assert not result.converged and "min_step=0.0625 at λ=0.8000" in result.reason
+
+
 def _half_load_state(runner, case: Case) -> np.ndarray:
     """``case`` at half its load: the case of twice its C1 at the full load (fem.chain)."""
     from fem.chain import Neighbours
