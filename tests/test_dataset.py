@@ -150,6 +150,9 @@ def test_report_says_whether_the_sweep_had_contact() -> None:
     assert "solved without contact" in without
     assert "1 case ends passing through itself" in without
     assert "C1 = 0.8 kPa at Φ = -90° (2, failed)" in without
+    assert "in no split" not in without  # the one that passes through itself failed
+    converged = _sweep_contact_and_overlap(columns, np.zeros(3, dtype=bool))
+    assert "holds none of them: the one that converged is in no split" in converged
     force = np.array([np.nan, 0.48, 0.0])  # the failed case has no force
     with_contact = _sweep_contact_and_overlap({**columns, "contact_force_N": force}, failed)
     assert "Solved with contact of the skin with the chest: 1 case ends in contact" in with_contact

@@ -186,6 +186,12 @@ def sweep_contact_and_overlap(columns: dict[str, np.ndarray], failed: np.ndarray
                        "inside another cell: the fold's skin creasing into itself), "
                        + ", ".join(f"{case(i)} ({overlap[i]}{', failed' if failed[i] else ''})"
                                    for i in through) + ".")
+            converged = int(np.sum(~np.asarray(failed, dtype=bool)[through]))
+            if converged:
+                which = ("the one that converged is" if converged == 1
+                         else f"the {converged} that converged are")
+                out.append(f"The data the surrogate learns from and is judged on holds none of "
+                           f"them: {which} in no split.")
         else:
             out.append("No case ends passing through itself.")
     return para(" ".join(out), "caption") if out else ""
