@@ -4,8 +4,11 @@ The cases where the skin rests on itself are those that failed, or passed throug
 before :mod:`fem.self_contact`. For each chosen case this study solves it twice on the
 sweep's mesh, with the config's self-contact and without any
 (:func:`studies.self_contact_benchmark.solve_pairs`), and cuts both deformed states, and the
-reference, by one sagittal plane (y fixed: anterior-posterior against inferior-superior)
-through the node that carries the largest self-contact pressure. The cut is a material one:
+reference, by one plane through the node that carries the largest self-contact pressure: the
+sagittal plane (y fixed: anterior-posterior against inferior-superior) where gravity leans
+more towards the feet or the head than to the side, else the transverse plane (z fixed:
+anterior-posterior against medial-lateral), so that the plane holds the way the mound rolls
+over its fold (:func:`cut_axis`). The cut is a material one:
 the boundary's triangles are intersected with the plane in the reference configuration and
 the points carried to where each state moves them, so the same skin is drawn in both states.
 A state that passes through itself shows the skin below the fold crossing the mound's
@@ -40,7 +43,7 @@ from studies.self_contact_benchmark import case_arguments, settings_of, solve_pa
 log = logging.getLogger(__name__)
 
 __all__ = ["FoldCase", "FoldSections", "FoldState", "boundary_triangles", "choose_cases",
-           "section_segments", "fold_sections"]
+           "cut_axis", "section_segments", "fold_sections"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -55,7 +58,8 @@ class FoldState(Record):
         self_overlap: boundary vertices inside another cell (:func:`fem.overlap.self_overlap`).
         self_contact_force_N: the self-contact's force (None without self-contact).
         wall_s: the solve's wall time.
-        segments_mm: the cut, as segments ``[[x0, z0], [x1, z1]]`` of the deformed boundary (mm).
+        segments_mm: the cut, as segments ``[[x0, a0], [x1, a1]]`` of the deformed boundary
+            (mm), ``a`` the plane's other axis (z in a sagittal cut, y in a transverse one).
     """
 
     setting: str
@@ -75,8 +79,9 @@ class FoldCase(Record):
     Attributes:
         case: the case id (:attr:`fem.sweep.Case.id`).
         C1, phi, theta: the case (kPa, degrees).
-        plane_y_mm: where the sagittal plane cuts the reference configuration.
-        focus_mm: where the node the plane passes through lies with self-contact ([x, z], mm):
+        plane_axis: the axis the plane is normal to: ``y`` (sagittal) or ``z`` (transverse).
+        plane_at_mm: where the plane cuts that axis in the reference configuration.
+        focus_mm: where the node the plane passes through lies with self-contact ([x, a], mm):
             the node of the largest self-contact pressure, else of the largest difference
             between the two states.
         reference_mm: the cut of the reference configuration (segments, mm).
@@ -87,7 +92,8 @@ class FoldCase(Record):
     C1: float
     phi: float
     theta: float
-    plane_y_mm: float
+    plane_axis: str
+    plane_at_mm: float
     focus_mm: list[float]
     reference_mm: list[list[list[float]]]
     states: list[FoldState]
@@ -141,21 +147,39 @@ def boundary_triangles(mesh: Any) -> np.ndarray:
     return entities_to_geometry(mesh._mesh, tdim - 1, facets, False)[:, :3]
 
 
+#: The axes a cut may be normal to, and the index of each.
+_AXES = {"y": 1, "z": 2}
+
+
+def cut_axis(gravity: np.ndarray) -> str:
+    """The axis the fold's cut is normal to: the plane holds gravity's larger component of y, z.
+
+    Gravity along the body (Φ off the plane θ = 0, towards the feet or the head) rolls the
+    mound over its caudal or cranial fold, seen in a sagittal cut (y fixed); gravity to the
+    side (lying on the side, Φ = ±90° in the plane) rolls it over its lateral or medial fold,
+    seen in a transverse cut (z fixed).
+    """
+    g = np.asarray(gravity, dtype=float)
+    sideways = abs(g[1]) - abs(g[2]) > 1e-9 * np.linalg.norm(g)  # not rounding's residue
+    return "z" if sideways else "y"
+
+
 def section_segments(X: np.ndarray, u: np.ndarray, triangles: np.ndarray,
-                     y: float) -> np.ndarray:
-    """The triangles cut by the plane ``Y = y`` of the reference, carried by ``u``.
+                     at: float, axis: str = "y") -> np.ndarray:
+    """The triangles cut by the plane ``X[axis] = at`` of the reference, carried by ``u``.
 
     Args:
         X: reference coordinates of the nodes (n, 3).
         u: displacement of the nodes (n, 3).
         triangles: corner indices (t, 3).
-        y: the plane's position in the reference configuration.
+        at: the plane's position in the reference configuration.
+        axis: the axis the plane is normal to, ``y`` or ``z``.
 
     Returns:
         Segments (k, 2, 3): where each cut triangle's two crossing points are in the
         deformed configuration (a point on an edge moves with the edge's linear interpolation).
     """
-    d = X[triangles, 1] - y  # (t, 3)
+    d = X[triangles, _AXES[axis]] - at  # (t, 3)
     d = np.where(d == 0.0, 1e-12, d)  # a corner on the plane counts as above it
     points = []
     for a, b in ((0, 1), (1, 2), (2, 0)):
@@ -176,9 +200,14 @@ def section_segments(X: np.ndarray, u: np.ndarray, triangles: np.ndarray,
     return segments
 
 
-def _in_plane_mm(segments: np.ndarray) -> list[list[list[float]]]:
-    """Segments (k, 2, 3) in metres as [[x, z], [x, z]] in millimetres, rounded to a micrometre."""
-    return np.round(1e3 * segments[:, :, [0, 2]], 3).tolist()
+def _in_plane(axis: str) -> list[int]:
+    """The coordinates a cut normal to ``axis`` is drawn in: x and the other of y, z."""
+    return [0, 3 - _AXES[axis]]
+
+
+def _in_plane_mm(segments: np.ndarray, axis: str) -> list[list[list[float]]]:
+    """Segments (k, 2, 3) in metres as [[x, a], [x, a]] in mm (a: the plane's other axis)."""
+    return np.round(1e3 * segments[:, :, _in_plane(axis)], 3).tolist()
 
 
 def fold_sections(mesh_path: str | Path, settings: SolverSettings,
@@ -198,7 +227,8 @@ def fold_sections(mesh_path: str | Path, settings: SolverSettings,
         peak = (on.get("self_contact") or {}).get("max_pressure_at_m")
         node = int(np.argmin(np.linalg.norm(X - np.asarray(peak), axis=1))) if peak is not None \
             else int(np.argmax(np.linalg.norm(u_on - u_off, axis=1)))
-        y, moved = float(X[node, 1]), X[node] + u_on[node]
+        axis = cut_axis(case.gravity().vector)
+        at, moved = float(X[node, _AXES[axis]]), X[node] + u_on[node]
         states = []
         for setting, summary, u in (("self-contact", on, u_on), ("none", off, u_off)):
             sc = summary.get("self_contact") or {}
@@ -206,12 +236,13 @@ def fold_sections(mesh_path: str | Path, settings: SolverSettings,
                 setting, summary["status"], summary["load_fraction"], summary["max_disp_mm"],
                 (summary.get("self_overlap") or {}).get("overlapping_vertices"),
                 sc.get("force_N"), summary["wall_s"]["solve"],
-                _in_plane_mm(section_segments(X, u, triangles, y))))
+                _in_plane_mm(section_segments(X, u, triangles, at, axis), axis)))
         records.append(FoldCase(
-            case.id, case.C1, case.phi, case.theta, 1e3 * y,
-            [1e3 * float(moved[0]), 1e3 * float(moved[2])],
-            _in_plane_mm(section_segments(X, np.zeros_like(X), triangles, y)), states))
-        log.info("%s: cut at y = %.1f mm", case.id, 1e3 * y)
+            case.id, case.C1, case.phi, case.theta, axis, 1e3 * at,
+            [1e3 * float(v) for v in moved[_in_plane(axis)]],
+            _in_plane_mm(section_segments(X, np.zeros_like(X), triangles, at, axis), axis),
+            states))
+        log.info("%s: cut at %s = %.1f mm", case.id, axis, 1e3 * at)
     return FoldSections(str(mesh_path), records, time.perf_counter() - start)
 
 

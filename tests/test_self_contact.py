@@ -299,6 +299,24 @@ def test_the_fold_section_cuts_the_boundary_where_each_state_moves_it() -> None:
     moved = section_segments(X, shear, tri, 0.5)
     assert np.allclose(moved[..., 0], cut[..., 0] + cut[..., 2])
     assert _crossings(cut[:, :, [0, 2]]) == 0
+    # a transverse cut, z = 0.25: the same square's perimeter, at that height
+    across = section_segments(X, np.zeros_like(X), tri, 0.25, "z")
+    assert np.allclose(across[:, :, 2], 0.25)
+    assert np.linalg.norm(across[:, 1] - across[:, 0], axis=1).sum() == pytest.approx(4.0)
+
+
+@pytest.mark.unit
+def test_the_fold_is_cut_in_the_plane_the_mound_rolls_in() -> None:
+    """Lying on the side: a transverse cut; gravity towards the feet or supine: sagittal."""
+    from fem.sweep import Case
+    from studies.fold_section import cut_axis
+
+    def axis(phi: float, theta: float = 0.0) -> str:
+        return cut_axis(Case(0.8, phi, theta).gravity().vector)
+
+    assert axis(-90.0) == axis(-120.0) == axis(35.0) == "z"  # in the plane θ = 0: sideways
+    assert axis(58.4, -97.8) == "y"  # mostly towards the feet
+    assert axis(0.0) == axis(180.0) == "y"  # no sideways component: the sagittal cut
 
 
 @pytest.mark.unit

@@ -19,8 +19,10 @@ def fold_section_section(ctx: Context) -> str:
                     "sweep has no self-contact force to choose by).", "note")
     out = [para(
         "What the skin's self-contact (fe.self_contact) changes where the breast folds onto "
-        "itself: each case solved with it and without it on the sweep's mesh, and cut by the "
-        "sagittal plane through the skin node that carries the largest self-contact pressure. "
+        "itself: each case solved with it and without it on the sweep's mesh, and cut through "
+        "the skin node that carries the largest self-contact pressure by the plane that holds "
+        "the way the mound rolls: sagittal (y fixed) where gravity leans towards the feet or "
+        "the head, transverse (z fixed) where it leans to the side. "
         "The cut is material: the same skin, drawn where each state carries it (a failed "
         "solve shows the last load it reached). Without self-contact the mound's underside "
         "can cross the skin below the fold, a state no breast takes; with it the two sides "

@@ -419,6 +419,9 @@ def plot_fold_section(cases: Sequence[Mapping[str, Any]], path: str | Path,
             layers.append((state["setting"], state["segments_mm"],
                            f":\nmax |u| {state['max_disp_mm']:.1f} mm{outcome}{crossing}"))
         focus = np.asarray(case["focus_mm"], dtype=float)
+        plane = case["plane_axis"]
+        vertical = {"y": "z, inferior → superior (mm)",  # a sagittal view, superior up
+                    "z": "y, medial → lateral (mm)"}[plane]  # a transverse view
         for ax in row:
             for name, segments, note in layers:
                 colour, width, label = styles[name]
@@ -428,12 +431,12 @@ def plot_fold_section(cases: Sequence[Mapping[str, Any]], path: str | Path,
                                                      label=label + note))
             ax.set_aspect("equal")
             ax.autoscale_view()
-            ax.set_xlabel("x, anterior → posterior (mm)")  # a sagittal view, superior up
-            ax.set_ylabel("z, inferior → superior (mm)")
+            ax.set_xlabel("x, anterior → posterior (mm)")
+            ax.set_ylabel(vertical)
             ax.grid(True, alpha=0.3)
         row[1].set_xlim(focus[0] - zoom_mm, focus[0] + zoom_mm)
         row[1].set_ylim(focus[1] - zoom_mm, focus[1] + zoom_mm)
-        row[0].set_title(f"the cut at y = {case['plane_y_mm']:.1f} mm (reference)")
+        row[0].set_title(f"the cut at {plane} = {case['plane_at_mm']:.1f} mm (reference)")
         row[1].set_title(f"the fold, ±{zoom_mm:g} mm")
         key.axis("off")  # the row's legend: what each line is, its max |u| and outcome
         key.legend(*row[0].get_legend_handles_labels(), loc="center left", fontsize=8,
