@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from meshes.checks import UNITS, point_surface_distance
-from meshes.exceptions import GeometryError, NoRibFacetsError, SurfaceRuleError
+from meshes.exceptions import GeometryError, NoRibFacetsError, SurfaceRuleError, reject_unknown
 from meshes.quality import triangle_areas
 from meshes.reading import InputMesh, read_surface
 from meshes.tags import Boundary
@@ -81,10 +81,8 @@ class BoundaryRule:
         Forms: ``{group: rib}``, ``{plane: {point: [x, y, z], normal: [nx, ny, nz]},
         distance: d}``, ``{surface: path.stl, distance: d}``.
         """
-        known = {"group", "plane", "surface", "posterior", "distance"}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise GeometryError(f"unknown boundary-rule key(s): {', '.join(unknown)}")
+        reject_unknown(values, {"group", "plane", "surface", "posterior", "distance"},
+                       "boundary-rule key(s)")
         scale = UNITS[units]
         plane = None
         if values.get("plane") is not None:

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from meshes.configfile import ConfigFileError, read_config_file
-from meshes.exceptions import GeometryError
+from meshes.exceptions import GeometryError, reject_unknown
 from meshes.image import ImageSpec
 from meshes.importing import ImportSpec, write_imported_mesh
 from meshes.parametric import BreastGeometry
@@ -63,10 +63,8 @@ class MeshConfig:
         ``mesh.fixed`` is the solver's (``fem.parameters.FixedBoundaries``) and is not
         read here; any other unknown key is rejected by name.
         """
-        known = {"source", "geometry", "size", "file", "image", "fixed"}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise GeometryError(f"unknown mesh key(s): {', '.join(unknown)}")
+        reject_unknown(values, {"source", "geometry", "size", "file", "image", "fixed"},
+                       "mesh key(s)")
         source = values.get("source", "parametric")
         file_values = values.get("file")
         config = cls(

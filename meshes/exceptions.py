@@ -8,9 +8,22 @@ tools that react to one kind catch the subclass.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
 
 class GeometryError(ValueError):
     """A geometry or meshing parameter is out of range or the parameters are inconsistent."""
+
+
+def reject_unknown(values: Mapping[str, Any], known: set[str], what: str) -> None:
+    """Raise :class:`GeometryError` naming the keys of ``values`` not in ``known``.
+
+    ``what`` names them in the message, e.g. ``mesh.size parameter(s)``.
+    """
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise GeometryError(f"unknown {what}: {', '.join(unknown)}")
 
 
 class MeshInputError(ValueError):

@@ -42,7 +42,7 @@ from meshes.boundary_rules import POSTERIOR, BoundaryRule
 from meshes.checks import (
     UNITS,
 )
-from meshes.exceptions import GeometryError, MeshInputError
+from meshes.exceptions import GeometryError, MeshInputError, reject_unknown
 from meshes.importing import InputVolume, fill_checked_surface
 from meshes.orientation import Orientation
 from meshes.quality import exterior_faces, tet_volumes
@@ -225,10 +225,8 @@ class ImageSpec:
     @classmethod
     def from_mapping(cls, values: dict[str, Any]) -> ImageSpec:
         """Build from the ``mesh.image`` config mapping."""
-        known = {"path", "breast_labels", "chest_label", "side", "surfaces"}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise GeometryError(f"unknown mesh.image key(s): {', '.join(unknown)}")
+        reject_unknown(values, {"path", "breast_labels", "chest_label", "side", "surfaces"},
+                       "mesh.image key(s)")
         if "path" not in values or "breast_labels" not in values:
             raise GeometryError("mesh.image needs path and breast_labels")
         labels = values["breast_labels"]

@@ -57,6 +57,7 @@ from meshes.exceptions import (
     GeometryError,
     MeshInputError,
     SurfaceRuleError,
+    reject_unknown,
 )
 from meshes.orientation import Orientation, check_chest_wall_posterior
 from meshes.quality import exterior_faces, tet_volumes
@@ -109,10 +110,8 @@ class ImportSpec:
     @classmethod
     def from_mapping(cls, values: dict[str, Any]) -> ImportSpec:
         """Build from the ``mesh.file`` config mapping (boundary names as in :class:`Boundary`)."""
-        known = {"path", "units", "surfaces", "remesh", "orientation"}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise GeometryError(f"unknown mesh.file key(s): {', '.join(unknown)}")
+        reject_unknown(values, {"path", "units", "surfaces", "remesh", "orientation"},
+                       "mesh.file key(s)")
         if "path" not in values:
             raise GeometryError("mesh.file.path is required when mesh.source is 'file'")
         units = values.get("units", "m")

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from meshes.exceptions import GeometryError
+from meshes.exceptions import GeometryError, reject_unknown
 
 #: Patient directions in one fixed basis (Left, Posterior, Superior).
 DIRECTIONS = {
@@ -72,9 +72,7 @@ class Orientation:
     def from_mapping(cls, values: dict[str, Any] | None) -> Orientation:
         """Build from the ``mesh.file.orientation`` mapping (None: the project's frame)."""
         values = dict(values or {})
-        unknown = sorted(set(values) - {"axes", "side"})
-        if unknown:
-            raise GeometryError(f"unknown mesh.file.orientation key(s): {', '.join(unknown)}")
+        reject_unknown(values, {"axes", "side"}, "mesh.file.orientation key(s)")
         return cls(axes=values.get("axes", PROJECT), side=values.get("side"))
 
     @property

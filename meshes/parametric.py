@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from meshes.exceptions import GeometryError
+from meshes.exceptions import GeometryError, reject_unknown
 
 __all__ = [
     "BreastGeometry",
@@ -148,10 +148,7 @@ class BreastGeometry:
     @classmethod
     def from_mapping(cls, values: dict[str, Any]) -> BreastGeometry:
         """Build from a config mapping, rejecting unknown keys by name."""
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise GeometryError(f"unknown geometry parameter(s): {', '.join(unknown)}")
+        reject_unknown(values, {f.name for f in fields(cls)}, "geometry parameter(s)")
         return cls(**{k: float(v) for k, v in values.items()})
 
     def as_dict(self) -> dict[str, float]:

@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from meshes.exceptions import GeometryError
+from meshes.exceptions import GeometryError, reject_unknown
 from meshes.parametric import BreastGeometry
 
 
@@ -86,9 +86,7 @@ class MeshSize:
     def from_mapping(cls, values: dict[str, Any]) -> MeshSize:
         """Build from the ``mesh.size`` config mapping, rejecting unknown keys by name."""
         known = {"global_size", "mound_size", "order", "grading", "rib_size", "fold_size"}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise GeometryError(f"unknown mesh.size parameter(s): {', '.join(unknown)}")
+        reject_unknown(values, known, "mesh.size parameter(s)")
         return cls(**values)
 
     def as_dict(self) -> dict[str, Any]:
