@@ -6,7 +6,8 @@ runs by architecture, gives mean ± SD of validation error, training time and
 epochs, selects the architecture with the lowest mean validation error (the
 paper's rule; optionally only among those that predict within a time budget),
 and within it the run with the lowest validation error, which becomes the model
-used downstream.
+used downstream. :func:`plan_repeats` decides, from every architecture's first run,
+which of them train their repeats: those between which the choice is close.
 """
 
 from __future__ import annotations
@@ -70,7 +71,12 @@ class RunSummary(Record):
 
 @dataclass(frozen=True, slots=True)
 class ArchitectureTable(Result):
-    """``results/surrogate/study/table2.json``: the paper's Table 2 and the selection."""
+    """``results/surrogate/study/table2.json``: the paper's Table 2 and the selection.
+
+    ``repeats`` and ``repeat_within`` are the study's settings: each row's ``runs`` is
+    ``repeats``, or one where ``repeat_within`` left an architecture unrepeated
+    (:func:`plan_repeats`).
+    """
 
     rows: dict[str, RunSummary]
     paper_selected_architecture: str
@@ -80,6 +86,8 @@ class ArchitectureTable(Result):
     rule: str
     prediction_budget_ms: float | None = None
     timing: dict[str, Any] | None = None
+    repeats: int | None = None
+    repeat_within: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -93,6 +101,56 @@ class VariantComparison(Result):
 
 class StudyError(ValueError):
     """The study's runs are missing or inconsistent."""
+
+
+@dataclass(frozen=True, slots=True)
+class RepeatPlan(Result):
+    """``results/surrogate/study/repeats.json``: the runs each architecture trains.
+
+    Every architecture trains once; the repeats beyond the first (``repeats`` runs in all)
+    only where its first run's validation error is within ``within`` (a fraction) of the best
+    first run's: the architectures between which the choice is close. ``within`` None
+    repeats every architecture (the paper's protocol).
+    """
+
+    repeats: int
+    within: float | None
+    first_error_mm: dict[str, float]
+    runs: dict[str, int]
+
+    def folders(self, study_dir: str, name: str) -> list[str]:
+        """File ``name`` of every planned run, ``<study_dir>/<arch>/r<repeat>/<name>``."""
+        return [f"{study_dir}/{arch}/r{r}/{name}"
+                for arch, n in self.runs.items() for r in range(n)]
+
+
+def plan_repeats(first_runs: Iterable[dict[str, Any]], repeats: int,
+                 within: float | None) -> RepeatPlan:
+    """The runs each architecture of the study trains, from each one's first run.
+
+    ``first_runs`` are :func:`read_run` records, one per architecture (in the study's order);
+    an architecture whose first run's validation error is at most ``(1 + within)`` times the
+    lowest trains ``repeats`` runs, any other one its first run only.
+
+    Raises:
+        StudyError: if there are no runs, an architecture has two, a validation error is not
+            finite, or ``within`` or ``repeats`` is out of range.
+    """
+    if repeats < 1 or (within is not None and not within >= 0):
+        raise StudyError(f"repeats must be >= 1 and within >= 0 or None, got {repeats}, {within}")
+    errors: dict[str, float] = {}
+    for run in first_runs:
+        arch, error = run["architecture"], run["validation_error_mm"]
+        if arch in errors:
+            raise StudyError(f"two first runs of {arch}: {run['folder']}")
+        if error is None or not np.isfinite(error):
+            raise StudyError(f"run {run['folder']} has a non-finite validation error")
+        errors[arch] = float(error)
+    if not errors:
+        raise StudyError("the architecture study has no runs")
+    bound = (1.0 + within) * min(errors.values()) if within is not None else np.inf
+    runs = {arch: repeats if error <= bound else 1 for arch, error in errors.items()}
+    return RepeatPlan(repeats=repeats, within=within, first_error_mm=errors, runs=runs)
 
 
 def read_run(folder: str | Path) -> dict[str, Any]:

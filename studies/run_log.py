@@ -33,7 +33,7 @@ STAGES: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("mesh", ("mesh", "reference_state")),
     ("sweep", ("solve", "solve_chain", "solve_refine_chain*")),
     ("dataset", ("aggregate",)),
-    ("surrogate", ("train_study_run", "architecture_study", "select_model")),
+    ("surrogate", ("train_study_run", "study_repeats", "architecture_study", "select_model")),
     ("surrogate studies", ("train_variant_run", "variants", "train_held_out", "held_out",
                            "clinical", "extrapolation", "postures", "off_grid",
                            "warning_coverage", "surrogate_benchmark", "solve_outside")),

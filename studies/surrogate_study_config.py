@@ -101,6 +101,9 @@ class SurrogateStudyConfig:
     Attributes:
         architectures: the architectures trained, ``<layers>x<width>``, each once.
         repeats: trainings per architecture and per variant.
+        repeat_within: the architectures that train their repeats beyond the first: those
+            whose first run's validation error is within this fraction of the best first
+            run's (:func:`studies.architecture.plan_repeats`); None, every architecture.
         variants: the named variants, in the config's (sorted) order.
         extrapolation: the FE cases of its extrapolation blocks that the sweep lacks, sorted.
         timing_repeats: timed predictions per model.
@@ -121,6 +124,7 @@ class SurrogateStudyConfig:
     postures: tuple[Posture, ...] = ()
     off_grid: tuple[Case, ...] = ()
     refit: bool = True
+    repeat_within: float | None = None
 
     @classmethod
     def from_sections(
@@ -154,6 +158,7 @@ class SurrogateStudyConfig:
             postures=postures_of(study.get("postures") or {}, sweep),
             off_grid=off_grid_cases(study.get("off_grid") or {}, sweep),
             refit=bool(study.get("refit", True)),
+            repeat_within=study.get("repeat_within"),
         )
 
     def variant(self, name: str) -> SurrogateVariant:

@@ -500,6 +500,32 @@ def test_selection_takes_the_most_accurate_architecture_within_the_prediction_bu
         select_architecture(table, 0.5)
 
 
+def test_the_repeats_train_only_where_the_first_runs_are_close(tmp_path: Path) -> None:
+    """surrogate_study.repeat_within: repeats for the architectures near the best first run."""
+    from studies.architecture import RepeatPlan, StudyError, plan_repeats
+
+    first = [{"folder": f"{a}/r0", "architecture": a, "validation_error_mm": e}
+             for a, e in (("2x32", 0.0045), ("3x128", 0.00274), ("4x64", 0.00276),
+                          ("4x128", 0.0025))]
+    plan = plan_repeats(first, 3, 0.1)  # the bound is 0.00275 mm
+    assert plan.runs == {"2x32": 1, "3x128": 3, "4x64": 1, "4x128": 3}
+    assert plan.folders("S", "model.json") == [
+        "S/2x32/r0/model.json", "S/3x128/r0/model.json", "S/3x128/r1/model.json",
+        "S/3x128/r2/model.json", "S/4x64/r0/model.json", "S/4x128/r0/model.json",
+        "S/4x128/r1/model.json", "S/4x128/r2/model.json"]
+    assert set(plan_repeats(first, 3, None).runs.values()) == {3}  # the paper's protocol
+    assert plan_repeats(first, 3, 0.0).runs == {"2x32": 1, "3x128": 1, "4x64": 1, "4x128": 3}
+    plan.write(tmp_path / "repeats.json")
+    assert RepeatPlan.read(tmp_path / "repeats.json") == plan
+    with pytest.raises(StudyError, match="non-finite"):
+        plan_repeats([*first, {"folder": "x", "architecture": "5x5",
+                               "validation_error_mm": float("nan")}], 2, 0.1)
+    with pytest.raises(StudyError, match="two first runs of 2x32"):
+        plan_repeats([*first, first[0]], 2, 0.1)
+    with pytest.raises(StudyError, match="no runs"):
+        plan_repeats([], 2, 0.1)
+
+
 def test_train_command_line_trains_saves_and_names_bad_settings(
     dataset_path: Path,
     tmp_path: Path,

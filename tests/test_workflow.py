@@ -405,6 +405,31 @@ def test_small_sweep_report(small_run: Path) -> None:
             assert f"<td>{per_phi['all_phi']:g}</td>" in lowest
 
 
+def test_the_study_repeats_only_the_architectures_close_to_the_best(small_run: Path) -> None:
+    """Only the best first run's architecture trains its repeat; Table 2 counts what ran.
+
+    tests/config.yaml sets surrogate_study.repeat_within to 0.
+    """
+    from studies.architecture import ArchitectureTable, RepeatPlan, read_run
+
+    study = small_run / "results/surrogate/study"
+    plan = RepeatPlan.read(study / "repeats.json")
+    first = {a: read_run(study / a / "r0")["validation_error_mm"] for a in ("1x16", "2x32")}
+    assert plan.first_error_mm == first
+    best = min(first, key=first.get)
+    assert plan.runs == {a: 2 if a == best else 1 for a in first}
+    trained = sorted(str(p.parent.relative_to(study)) for p in study.glob("*/r*/model.json"))
+    assert trained == sorted(f"{a}/r{r}" for a, n in plan.runs.items() for r in range(n))
+    table = ArchitectureTable.read(study / "table2.json")
+    assert {a: row.runs for a, row in table.rows.items()} == plan.runs
+    assert (table.repeats, table.repeat_within) == (2, 0.0)
+    page = (small_run / "results/report/index.html").read_text()
+    assert "(surrogate_study.repeat_within)" in page  # Table 2's caption says why
+    once = next(a for a, n in plan.runs.items() if n == 1)
+    row = re.search(rf"<tr[^>]*><td>{once}</td>(.*?)</tr>", html_table(page, "table2"), re.S)
+    assert row and "±" not in row[1].split("</td>")[2]  # one run: its error without an SD
+
+
 def test_the_model_used_downstream_is_the_selected_run_trained_again(small_run: Path) -> None:
     """surrogate_study.refit (default): the selected run's config trained on its validation too.
 

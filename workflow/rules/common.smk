@@ -6,6 +6,7 @@ from collections import namedtuple
 from snakemake.exceptions import WorkflowError
 from snakemake.logging import logger
 
+from studies.architecture import RepeatPlan
 from studies.config import ConfigError, WorkflowConfig
 from studies.fe_variants import MESH_ID_PATTERN, VARIANT_ID_PATTERN, Variant
 from studies.workdir import RunLock, age_refused
@@ -180,11 +181,30 @@ def clinical_ids():
     return [case.id for case in CONFIG.clinical]
 
 
+STUDY_REPEATS = f"{STUDY_DIR}/repeats.json"
+
+
+def first_study_runs(name="model.json"):
+    """File ``name`` of every architecture's first run."""
+    return expand(f"{STUDY_DIR}/{{arch}}/r0/{name}", arch=CONFIG.surrogate_study.architectures)
+
+
 def study_runs(name="model.json"):
-    """File ``name`` of every run of the architecture study."""
+    """File ``name`` of every run of the architecture study.
+
+    Every repeat of every architecture; with ``repeat_within``, an input function giving the
+    runs that the checkpoint ``study_repeats`` planned from the first runs.
+    """
     study = CONFIG.surrogate_study
-    return expand(f"{STUDY_DIR}/{{arch}}/r{{repeat}}/{name}", arch=study.architectures,
-                  repeat=range(study.repeats))
+    if study.repeat_within is None:
+        return expand(f"{STUDY_DIR}/{{arch}}/r{{repeat}}/{name}", arch=study.architectures,
+                      repeat=range(study.repeats))
+
+    def planned(wildcards):
+        plan = RepeatPlan.read(checkpoints.study_repeats.get().output[0])
+        return plan.folders(STUDY_DIR, name)
+
+    return planned
 
 
 def variant_runs(name="model.json"):

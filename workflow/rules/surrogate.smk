@@ -34,6 +34,28 @@ rule train_study_run:
         "../scripts/train_run.py"
 
 
+# With surrogate_study.repeat_within: which architectures train their repeats, those whose first
+# run is close to the best first run (the study's other runs wait for this plan).
+checkpoint study_repeats:
+    input:
+        runs=first_study_runs(),
+    output:
+        STUDY_REPEATS,
+    params:
+        repeats=CONFIG.surrogate_study.repeats,
+        within=CONFIG.surrogate_study.repeat_within,
+    log:
+        "results/logs/surrogate/study_repeats.log",
+    priority: 40
+    threads: 1
+    resources:
+        mem_mb=500,
+    conda:
+        ENV
+    script:
+        "../scripts/study_repeats.py"
+
+
 # Table 2 and the selection (within surrogate_study.prediction_budget_ms); times each
 # architecture's best model on one pinned core (two threads reserved so that no other job of
 # the workflow runs beside the timing).
@@ -46,6 +68,8 @@ rule architecture_study:
         clinical=CONFIG.section("clinical"),
         repeats=CONFIG.surrogate_study.timing_repeats,
         budget_ms=CONFIG.surrogate_study.prediction_budget_ms,
+        study_repeats=CONFIG.surrogate_study.repeats,
+        within=CONFIG.surrogate_study.repeat_within,
     log:
         "results/logs/surrogate/architecture_study.log",
     priority: 40

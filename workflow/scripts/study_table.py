@@ -24,6 +24,7 @@ for arch, folder in best_runs.items():
     table["rows"][arch]["predict_one_core"] = timing["models"][folder]
 table["timing"] = {k: v for k, v in timing.items() if k != "models"}
 select_architecture(table, snakemake.params.budget_ms)
+table.update(repeats=snakemake.params.study_repeats, repeat_within=snakemake.params.within)
 ArchitectureTable.from_json(table).write(snakemake.output.table)
 for arch, row in table["rows"].items():
     log.info(
