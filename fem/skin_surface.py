@@ -20,6 +20,8 @@ __all__ = ["SkinSurface"]
 # Per facet of the reference tetrahedron (dolfinx / basix numbering: facet i is opposite
 # vertex i), its vertices in order.
 _FACET_VERTICES = ((1, 2, 3), (0, 2, 3), (0, 1, 3), (0, 1, 2))
+#: The reference tetrahedron's edges by their local number (basix's, as dolfinx numbers them).
+_TET_EDGES = ((2, 3), (1, 3), (1, 2), (0, 3), (0, 2), (0, 1))
 
 
 @dataclass
@@ -69,6 +71,7 @@ class SkinSurface:
         closure = [np.asarray(layout.entity_closure_dofs(2, i)) for i in range(4)]
         degree = int(round((np.sqrt(8 * len(closure[0]) + 1) - 3) / 2))  # (k+1)(k+2)/2 nodes
         lattice = _lattice_triangles(degree)
+        entity_dof = _vertex_and_edge_dofs(layout) if degree <= 2 else {}
 
         triangles = []
         for f in np.asarray(facets, dtype=np.int64):
@@ -80,13 +83,19 @@ class SkinSurface:
             va, vb, vc, vo = (coords[dofs[vertex_dof[i]]] for i in (a, b, c, local))
             if np.dot(np.cross(vb - va, vc - va), vo - va) > 0:
                 b, c, vb, vc = c, b, vc, vb
-            # the facet's nodes on their lattice: (k λ_b, k λ_c) in the straight triangle
-            nodes = dofs[closure[local]]
-            lam = barycentric(coords[nodes], *(np.broadcast_to(v, (len(nodes), 3))
-                                               for v in (va, vb, vc)))
-            ij = np.rint(degree * lam[:, 1:]).astype(np.int64)
             index = np.full((degree + 1, degree + 1), -1, dtype=np.int64)
-            index[ij[:, 0], ij[:, 1]] = nodes
+            if degree <= 2:  # by the element's numbering: corners, then the edges' midpoints
+                at = {(0, 0): (a,), (degree, 0): (b,), (0, degree): (c,)}
+                if degree == 2:
+                    at.update({(1, 0): (a, b), (0, 1): (a, c), (1, 1): (b, c)})
+                for (i, j), entity in at.items():
+                    index[i, j] = dofs[entity_dof[frozenset(entity)]]
+            else:  # the facet's nodes on their lattice: (k λ_b, k λ_c) in the straight triangle
+                nodes = dofs[closure[local]]
+                lam = barycentric(coords[nodes], *(np.broadcast_to(v, (len(nodes), 3))
+                                                   for v in (va, vb, vc)))
+                ij = np.rint(degree * lam[:, 1:]).astype(np.int64)
+                index[ij[:, 0], ij[:, 1]] = nodes
             if np.any(index[lattice[..., 0], lattice[..., 1]] < 0):
                 raise RuntimeError(f"skin facet {f}: its nodes do not form a degree-{degree} "
                                    "lattice")
@@ -99,6 +108,20 @@ class SkinSurface:
                                              X[tri[:, 2]] - X[tri[:, 0]]), axis=1)
         weights = np.bincount(tri.ravel(), np.repeat(area / 3.0, 3), minlength=len(nodes))
         return cls(X, to_state[nodes], tri, weights, _own_triangles(tri, len(nodes)))
+
+
+def _vertex_and_edge_dofs(layout: Any) -> dict[frozenset[int], int]:
+    """A P1 or P2 tetrahedron's local dof at each vertex ({v}) and edge midpoint ({v, w}).
+
+    By the element's own numbering rather than by where the nodes sit: on a curved (quadratic)
+    mesh a facet's midside nodes lie off its straight triangle, on a strongly curved skin (a
+    tight fold) too far to be told apart by position.
+    """
+    out = {frozenset((v,)): int(layout.entity_dofs(0, v)[0]) for v in range(4)}
+    if layout.num_entity_dofs(1):
+        for e, edge in enumerate(_TET_EDGES):
+            out[frozenset(edge)] = int(layout.entity_dofs(1, e)[0])
+    return out
 
 
 def triangle_radii(corners: np.ndarray) -> np.ndarray:

@@ -9,6 +9,7 @@
   self-contact it passes through itself; with it, it converges with no boundary vertex
   inside another cell;
 * where nothing touches (the breast prone), self-contact changes nothing;
+* a curved (quadratic) skin's facets split into the same triangles as a straight one's;
 * bad settings are refused by name.
 """
 
@@ -381,3 +382,55 @@ def test_the_inertia_is_counted_when_the_contact_adds_entries_to_the_tangent() -
     touching = tangent_inertia(problem)
     assert touching.stable and touching.pressure_dofs == apart.pressure_dofs
     solver.destroy()
+
+
+def _quadratic_box(shift: float) -> tuple:
+    """A cube of 2 cells a side as 10-node (quadratic) tetrahedra, its skin tagged.
+
+    Each edge node sits at the edge's midpoint, moved along the edge by ``shift`` times its
+    length where the edge lies on the cube's faces: a strongly curved skin's nodes.
+    """
+    cells, x = _box(1.0, 2)
+    pairs = ((2, 3), (1, 3), (1, 2), (0, 3), (0, 2), (0, 1))  # the reference edges' order
+    edges = np.sort(cells[:, pairs].reshape(-1, 2), axis=1)
+    unique, which = np.unique(edges, axis=0, return_inverse=True)
+    a, b = x[unique[:, 0]], x[unique[:, 1]]
+    on_face = np.any(np.isclose(a, 0.0) & np.isclose(b, 0.0)
+                     | np.isclose(a, 1.0) & np.isclose(b, 1.0), axis=1)
+    mid = 0.5 * (a + b) + shift * on_face[:, None] * (b - a)
+    nodes = np.vstack([x, mid])
+    cells10 = np.hstack([cells, len(x) + which.reshape(-1, 6)])
+    domain = ufl.Mesh(ufl.VectorElement("Lagrange", "tetrahedron", 2))
+    mesh = dmesh.create_mesh(MPI.COMM_SELF, cells10, nodes, domain)
+    mesh.topology.create_connectivity(2, 3)
+    exterior = dmesh.exterior_facet_indices(mesh.topology)
+    return mesh, exterior
+
+
+def test_a_curved_skins_facets_are_split_by_the_elements_numbering() -> None:
+    """A tight fold's curved facets split into the straight mesh's four triangles each.
+
+    On a quadratic mesh whose skin nodes lie far from their edges' midpoints, the triangles are
+    found by the element's numbering, not by where the nodes sit (which failed: "do not form a
+    degree-2 lattice", the corpus's small anatomy).
+    """
+    from dolfinx import fem as dfem
+
+    from fem.skin_surface import SkinSurface
+
+    surfaces, coords = [], []
+    for shift in (0.0, 0.3):
+        mesh, facets = _quadratic_box(shift)
+        V = dfem.VectorFunctionSpace(mesh, ("Lagrange", 2))
+        surfaces.append(SkinSurface.from_problem(V, False, mesh, facets))
+        coords.append(V.tabulate_dof_coordinates())
+    straight, curved = surfaces
+    assert len(straight.triangles) == 4 * 8 * 6  # 8 facets a face, each of 4 triangles
+    assert np.array_equal(straight.triangles, curved.triangles)
+    assert np.array_equal(straight.dofs, curved.dofs)
+    moved = np.linalg.norm(curved.X - straight.X, axis=1) > 1e-9
+    assert moved.any() and not moved.all()  # the edge nodes moved, the corners did not
+    # on the straight mesh the lattice is the facets' own: total area that of the cube
+    tri = straight.X[straight.triangles]
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    assert np.isclose(area.sum(), 6.0)
