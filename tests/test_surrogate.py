@@ -761,3 +761,15 @@ def test_the_epoch_loop_keeps_the_best_epoch_by_its_figure_and_stops_on_patience
 
     with pytest.raises(ValueError, match="select"):
         _scripted_run(figures, "train_loss")
+
+
+def test_the_patience_benchmark_replays_the_epoch_loops_rule() -> None:
+    """``benchmarks.patience`` on a whole run's figures stops where the loop itself would."""
+    from benchmarks.patience import replay
+
+    rng = np.random.default_rng(0)
+    errors = list(np.exp(-np.linspace(0, 3, 60)) * (1 + 0.3 * rng.random(60)))
+    figures = [(1.0, 1.0, e) for e in errors]
+    for patience in (1, 3, 5, 8, 100):
+        run = _scripted_run(figures, "validation_error_mm", max_epochs=60, patience=patience)
+        assert replay(errors, patience) == (len(run.history), run.best_epoch)
