@@ -164,6 +164,7 @@ def fe_variant_mesh(wildcards):
 SURROGATE_DIR = "results/surrogate"
 STUDY_DIR = f"{SURROGATE_DIR}/study"
 STUDY_TABLE = f"{STUDY_DIR}/table2.json"
+STUDY_REPEATS = f"{STUDY_DIR}/repeats.json"
 VARIANT_DIR = f"{SURROGATE_DIR}/variants"
 MODEL_BY_CASE = f"{SURROGATE_DIR}/model_by_case/model.json"
 CLINICAL_JSON = f"{SURROGATE_DIR}/clinical.json"
@@ -179,9 +180,6 @@ WARNING_COVERAGE_JSON = f"{SURROGATE_DIR}/warning_coverage.json"
 def clinical_ids():
     """Case folder names of the clinical cases."""
     return [case.id for case in CONFIG.clinical]
-
-
-STUDY_REPEATS = f"{STUDY_DIR}/repeats.json"
 
 
 def first_study_runs(name="model.json"):
