@@ -51,11 +51,12 @@ def _table2(ctx: Context) -> str:
                          "; ".join(mark)])
             continue
         predict = predict_s(row)
-        sd = (lambda x: x) if row.runs > 1 else (lambda x: None)  # one run: no SD to show
+        once = row.runs == 1  # one run: no SD to show
         rows.append([name, fmt(row.parameters, "d"), fmt(row.runs, "d"),
-                     pm(row.validation_error_mm.mean, sd(row.validation_error_mm.sd)),  # 3 digits
+                     pm(row.validation_error_mm.mean,
+                        None if once else row.validation_error_mm.sd),  # 3 digits
                      pm(*p_err, ".2f") if p_err else "n/a",
-                     pm(row.train_s.mean, sd(row.train_s.sd), ".3g"),
+                     pm(row.train_s.mean, None if once else row.train_s.sd, ".3g"),
                      pm(*p_train, ".0f") if p_train else "n/a",
                      fmt(row.epochs.mean, ".0f"),
                      fmt(1e3 * predict if predict is not None else None, ".3g"),
