@@ -56,13 +56,17 @@ class StabilityAuditConfig:
 
     Attributes:
         softest: how many of the sweep's C1 values to audit, softest first (0: none).
+        jobs: how many one-core jobs share the audit's cases, side by side.
     """
 
     softest: int
+    jobs: int = 2
 
     def __post_init__(self) -> None:
         if self.softest < 0:
             raise ValueError(f"softest must be 0 or more, got {self.softest}")
+        if self.jobs < 1:
+            raise ValueError(f"jobs must be 1 or more, got {self.jobs}")
 
 
 @dataclass(frozen=True, slots=True)
@@ -140,7 +144,8 @@ class FEStudyConfig:
             failure_edges = FailureEdgesConfig(edges["n"], edges["step_deg"],
                                                edges["resolution_deg"])
         with config_section("fe_study.stability_audit"):
-            audit = StabilityAuditConfig(study["stability_audit"]["softest"])
+            audit = StabilityAuditConfig(study["stability_audit"]["softest"],
+                                         study["stability_audit"]["jobs"])
         with config_section("fe_study.fold_section"):
             fold = FoldSectionConfig.from_mapping(study["fold_section"])
         with config_section("mesh.size"):

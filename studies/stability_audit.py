@@ -31,6 +31,7 @@ import argparse
 import logging
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -113,6 +114,26 @@ class StabilityAudit(Result):
         """The cases whose state could not be polished."""
         return [c for c in self.cases if c.stable is None]
 
+    @classmethod
+    def merge(cls, parts: Sequence[StabilityAudit]) -> StabilityAudit:
+        """One audit from its parts (:func:`audit_sweep`'s ``part``), the cases in its order.
+
+        ``seconds`` is the parts' summed time (their cases on one core); the settings are the
+        first part's.
+
+        Raises:
+            InvalidParameterError: if there are no parts, or they audited other C1 values.
+        """
+        if not parts:
+            raise InvalidParameterError("no audit parts to merge")
+        if any(p.C1 != parts[0].C1 for p in parts):
+            raise InvalidParameterError(
+                f"the audit's parts audited other C1 values: {[p.C1 for p in parts]}")
+        cases = sorted((c for p in parts for c in p.cases),
+                       key=lambda c: _order(c.C1, c.phi, c.theta))
+        return cls(C1=list(parts[0].C1), cases=cases, seconds=sum(p.seconds for p in parts),
+                   settings=parts[0].settings, machine=parts[0].machine)
+
     def at(self, c1: float) -> list[AuditedCase]:
         """The cases audited at C1 = ``c1`` (kPa)."""
         return [c for c in self.cases if abs(c.C1 - c1) < 1e-9]
@@ -122,6 +143,11 @@ class StabilityAudit(Result):
         cases = self.at(c1)
         return (cases, sum(c.stable is not None for c in cases),
                 [c for c in cases if c.stable is False])
+
+
+def _order(c1: float, phi: float, theta: float) -> tuple:
+    """The audit's order of cases: softest first, each C1's meridian (θ = 0) first, then by Φ, θ."""
+    return (float(c1), float(theta) != 0.0, float(phi), float(theta))
 
 
 def state_from_points(
@@ -223,19 +249,25 @@ def audit_case(runner: Any, case: Case, points_x: np.ndarray, u_mm: np.ndarray) 
 
 
 def audit_sweep(
-    mesh: str | Path, dataset: str | Path, settings: SolverSettings, c1_values: list[float]
+    mesh: str | Path, dataset: str | Path, settings: SolverSettings, c1_values: list[float],
+    part: int = 0, parts: int = 1,
 ) -> StabilityAudit:
     """Judge every converged case of ``dataset`` at the C1 values ``c1_values`` (one runner).
 
+    With ``parts`` > 1, only part ``part`` (from 0) of them: every ``parts``-th case in the
+    audit's order, so that parts run side by side and :meth:`StabilityAudit.merge` joins them.
+
     Raises:
-        InvalidParameterError: if no C1 value is given, one is not in the dataset, or the
-            dataset's points are not the mesh's.
+        InvalidParameterError: if no C1 value is given, one is not in the dataset, the
+            dataset's points are not the mesh's, or ``part`` is not one of ``parts``.
     """
     from fem.case import CaseRunner
     from fem.dataset import read_dataset
 
     if not c1_values:
         raise InvalidParameterError("name the C1 values to audit (--c1)")
+    if not 0 <= part < parts:
+        raise InvalidParameterError(f"part {part} of {parts}: parts are numbered 0 to {parts - 1}")
     clock = time.perf_counter()
     ds = read_dataset(dataset, nodes=True)
     c1 = np.asarray(ds.C1, dtype=float)
@@ -248,10 +280,10 @@ def audit_sweep(
         (ds.nodes.X, ds.nodes.displacement)
     chosen = [i for i in np.flatnonzero(np.asarray(ds.converged, dtype=bool))
               if np.any(np.isclose(c1[i], c1_values, rtol=0, atol=1e-9))]
-    chosen.sort(key=lambda i: (c1[i], ds.theta[i] != 0.0, ds.phi[i], ds.theta[i]))
+    chosen.sort(key=lambda i: _order(c1[i], ds.phi[i], ds.theta[i]))
     audited = []
     with CaseRunner(mesh, settings) as runner:
-        for i in chosen:
+        for i in chosen[part::parts]:
             case = Case(float(c1[i]), float(ds.phi[i]), float(ds.theta[i]))
             audited.append(row := audit_case(runner, case, points_x, fields[i]))
             log.info("%s: %s", row.case, "stable" if row.stable else

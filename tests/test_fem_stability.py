@@ -352,3 +352,27 @@ def test_the_audit_is_written_read_and_shown(tmp_path: Path) -> None:
     assert "not judged: Newton from the dataset&#x27;s state" in page
     assert "softest is 0" in stability_audit_section(StabilityAudit(C1=[], cases=[]))
     assert "was not found" in stability_audit_section(None)
+
+
+@pytest.mark.unit
+def test_the_audits_parts_join_in_the_audits_order() -> None:
+    """Parts run side by side (every n-th case) join into the record one job would write."""
+    from fem.exceptions import InvalidParameterError
+    from fem.parameters import SolverSettings
+    from studies.stability_audit import AuditedCase, StabilityAudit, audit_sweep
+
+    with pytest.raises(InvalidParameterError, match="part 2 of 2: parts are numbered 0 to 1"):
+        audit_sweep("mesh.xdmf", "dataset.h5", SolverSettings(), [1.0], part=2, parts=2)
+    cases = [AuditedCase(f"case{i}", c1, phi, theta, True) for i, (c1, phi, theta) in enumerate(
+        [(0.8, -90.0, 0.0), (0.8, 0.0, 0.0), (0.8, 30.0, -40.0), (1.0, -90.0, 0.0),
+         (1.0, 45.0, 20.0)])]
+    whole = StabilityAudit(C1=[0.8, 1.0], cases=cases, seconds=10.0, settings={"a": 1})
+    parts = [StabilityAudit(C1=[0.8, 1.0], cases=cases[k::2], seconds=5.0 + k,
+                            settings={"a": 1}) for k in (1, 0)]
+    joined = StabilityAudit.merge(parts)
+    assert [c.case for c in joined.cases] == [c.case for c in whole.cases]
+    assert (joined.C1, joined.seconds, joined.settings) == ([0.8, 1.0], 11.0, {"a": 1})
+    with pytest.raises(InvalidParameterError, match="other C1 values"):
+        StabilityAudit.merge([parts[0], StabilityAudit(C1=[0.8], cases=[])])
+    with pytest.raises(InvalidParameterError, match="no audit parts"):
+        StabilityAudit.merge([])

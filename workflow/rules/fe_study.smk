@@ -7,6 +7,7 @@
 wildcard_constraints:
     fe_mesh=MESH_ID_PATTERN,
     fe_variant=VARIANT_ID_PATTERN,
+    part=r"[0-9]+",
 
 
 rule fe_study:
@@ -164,17 +165,23 @@ rule fe_failure_edges:
         "../scripts/fe_failure_edges.py"
 
 
-rule fe_stability_audit:
+# Every training waits for the audit, so its cases are shared by fe_study.stability_audit.jobs
+# one-core jobs side by side (each every jobs-th case), joined into one record.
+rule fe_stability_audit_part:
     input:
         mesh=MESH,
         dataset=DATASET,
     output:
-        FE_STABILITY_AUDIT_JSON,
+        temp(f"{FE_STUDY_DIR}/stability_audit/part{{part}}.json"),
     params:
         config=CONFIG.sections_of("fe", "material", "mesh"),
         softest=CONFIG.fe_study.stability_audit.softest,
+        parts=CONFIG.fe_study.stability_audit.jobs,
     log:
-        "results/logs/fe_study/stability_audit.log",
+        "results/logs/fe_study/stability_audit_part{part}.log",
+    benchmark:
+        "results/benchmarks/fe_study/stability_audit_part{part}.tsv"
+    priority: 50
     threads: 1
     resources:
         mem_mb=4000,
@@ -182,6 +189,24 @@ rule fe_stability_audit:
         ENV
     script:
         "../scripts/fe_stability_audit.py"
+
+
+rule fe_stability_audit:
+    input:
+        expand(f"{FE_STUDY_DIR}/stability_audit/part{{part}}.json",
+               part=range(CONFIG.fe_study.stability_audit.jobs)),
+    output:
+        FE_STABILITY_AUDIT_JSON,
+    log:
+        "results/logs/fe_study/stability_audit.log",
+    priority: 50
+    threads: 1
+    resources:
+        mem_mb=500,
+    conda:
+        ENV
+    script:
+        "../scripts/fe_stability_audit_merge.py"
 
 
 # The fold with and without the skin's self-contact (studies.fold_section): the named cases and

@@ -1,0 +1,9 @@
+"""Snakemake adapter: the audit's parts joined into one record (studies.stability_audit)."""
+
+from studies.joblog import job_log
+from studies.stability_audit import StabilityAudit
+
+job_log(snakemake.log[0])
+
+StabilityAudit.merge([StabilityAudit.read(path) for path in snakemake.input]).write(
+    snakemake.output[0])
