@@ -34,6 +34,7 @@ include: "workflow/rules/report.smk"
 rule all:
     default_target: True
     input:
+        FIRST_REPORT,
         REPORT,
         SURROGATE_RESULTS,
         imaged_results(),

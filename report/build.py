@@ -47,6 +47,17 @@ INTRO = (
     "paper's (Babarenda Gamage et al.). Every number comes from the workflow's result files."
 )
 
+#: The first report's sections (ids): what the first results a run writes show (the mesh, the
+#: dataset, the selected model and Table 2, the run so far).
+FIRST_SECTIONS = ("mesh", "surrogate-speed-accuracy", "paper", "sweep-cost", "run-time",
+                  "training")
+FIRST_NOTE = (
+    "This is the run's first report, written as soon as the dataset, the selected model and "
+    "the 3D view exist. The studies that take longest (the FE study, the variants, held-out "
+    "models and postures, stability, the corpus of anatomies, the reference state) follow; "
+    "the full report, {full}, has every section when the run ends."
+)
+
 #: (id, heading, builder) of every section, in page order.
 SECTIONS: tuple[tuple[str, str, Callable[[Context], str]], ...] = (
     ("mesh", "Mesh", mesh_section),
@@ -66,7 +77,9 @@ SECTIONS: tuple[tuple[str, str, Callable[[Context], str]], ...] = (
 )
 
 
-def render_page(sections: Sequence[Mapping[str, str]], viewer: str | None = None) -> str:
+def render_page(
+    sections: Sequence[Mapping[str, str]], viewer: str | None = None, intro: str = INTRO
+) -> str:
     """The page's HTML from the template; each section is ``{id, title, html}``.
 
     ``viewer`` is the interactive view's address relative to the page, linked from the top.
@@ -77,12 +90,13 @@ def render_page(sections: Sequence[Mapping[str, str]], viewer: str | None = None
         undefined=jinja2.StrictUndefined,
     )
     return env.get_template("page.html.j2").render(
-        title=TITLE, intro=INTRO, sections=sections, viewer=viewer
+        title=TITLE, intro=intro, sections=sections, viewer=viewer
     )
 
 
 def build_report(
-    inputs: Mapping[str, Any], html_path: str | Path, clinical: Sequence[Mapping[str, Any]]
+    inputs: Mapping[str, Any], html_path: str | Path, clinical: Sequence[Mapping[str, Any]],
+    first: bool = False,
 ) -> Path:
     """Write the report page and its figures.
 
@@ -93,6 +107,8 @@ def build_report(
             (``.../{by_sample,by_case}/<case>.xdmf`` with their ``.h5``).
         html_path: the page to write; the PNG figures are written beside it.
         clinical: the config's ``clinical`` entries (``C1``, ``phi``, ``theta``, ``label``).
+        first: the run's first report: only :data:`FIRST_SECTIONS`, and the intro says that
+            the full report (``../index.html`` from the page) follows.
 
     Returns:
         The page's path.
@@ -110,6 +126,8 @@ def build_report(
     ctx = Context.load(inputs, out_dir, clinical)
     sections = []
     for section_id, title, builder in SECTIONS:
+        if first and section_id not in FIRST_SECTIONS:
+            continue
         try:
             content = builder(ctx)
         except (KeyError, TypeError, ValueError, IndexError, OSError) as err:
@@ -121,9 +139,12 @@ def build_report(
     viewer = inputs.get("viewer")
     if viewer:
         viewer = Path(os.path.relpath(Path(str(viewer)).resolve(), out_dir.resolve())).as_posix()
-    html_path.write_text(render_page(sections, viewer or None))
+    intro = INTRO
+    if first:
+        intro += " " + FIRST_NOTE.format(full=(out_dir.parent / "index.html").as_posix())
+    html_path.write_text(render_page(sections, viewer or None, intro))
     log.info("wrote %s with %d sections", html_path, len(sections))
     return html_path
 
 
-__all__ = ["SECTIONS", "build_report", "render_page"]
+__all__ = ["FIRST_SECTIONS", "SECTIONS", "build_report", "render_page"]

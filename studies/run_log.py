@@ -40,12 +40,13 @@ STAGES: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("FE study", ("fe_*",)),
     ("reference and tracking", ("reference_roundtrip", "tracking", "stiffness")),
     ("corpus", ("corpus_*",)),
-    ("report and 3D view", ("report", "viewer")),
+    ("report and 3D view", ("first_report", "report", "viewer")),
 )
 
 #: The rules whose end a user waits for, in words.
 MILESTONES = {"aggregate": "the dataset", "select_model": "the selected model",
-              "report": "the report", "viewer": "the 3D view"}
+              "first_report": "the first report", "report": "the report",
+              "viewer": "the 3D view"}
 
 _DATE = re.compile(r"^\[(\w{3} \w{3} +\d+ \d\d:\d\d:\d\d \d{4})\]$")
 _START = re.compile(r"^(?:local)?(?:rule|checkpoint) (\w+):$")

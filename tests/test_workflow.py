@@ -405,6 +405,35 @@ def test_small_sweep_report(small_run: Path) -> None:
             assert f"<td>{per_phi['all_phi']:g}</td>" in lowest
 
 
+def section_html(page: str, section_id: str) -> str:
+    """The HTML of the report's section with this id."""
+    match = re.search(rf'<section id="{section_id}">(.*?)</section>', page, re.S)
+    assert match, f"the report has no section {section_id!r}"
+    return match[1]
+
+
+def test_the_first_report_shows_the_first_results_as_the_full_one_does(small_run: Path) -> None:
+    """The first report: its sections only, the full report named, the 3D view linked.
+
+    Sections that read only the first report's inputs are the full report's, word for word.
+    """
+    from report.build import FIRST_SECTIONS
+
+    report = small_run / "results/report"
+    first, full = (report / "first/index.html").read_text(), (report / "index.html").read_text()
+    assert re.findall(r'<section id="([^"]+)">', first) == [
+        s for s in re.findall(r'<section id="([^"]+)">', full) if s in FIRST_SECTIONS]
+    assert "first report" in first and "results/report/index.html" in first
+    assert "could not be built" not in first
+    link = re.search(r'<p class="viewer"><a href="([^"]+)">', first)
+    assert link and (report / "first" / link[1]).resolve() == (
+        small_run / "results/viewer/index.html").resolve()
+    for section in ("mesh", "sweep-cost", "training"):
+        assert section_html(first, section) == section_html(full, section), section
+    for img in re.findall(r'<img[^>]*src="([^"]+)"', first):
+        assert (report / "first" / img).stat().st_size > 5000, img
+
+
 def test_the_study_repeats_only_the_architectures_close_to_the_best(small_run: Path) -> None:
     """Only the best first run's architecture trains its repeat; Table 2 counts what ran.
 
@@ -584,6 +613,11 @@ def test_fe_study_rules_run_end_to_end(small_run: Path) -> None:
     audit = StabilityAudit.read(study / "stability_audit.json")
     columns = read_case_columns(small_run / "results/dataset/dataset.h5")
     assert audit.C1 == [1.0, 5.0] and len(audit.cases) == int(columns["converged"].sum())
+    # in the audit's order, though shared by fe_study.stability_audit.jobs jobs side by side
+    order = [(c.C1, c.theta != 0.0, c.phi, c.theta) for c in audit.cases]
+    assert order == sorted(order)
+    assert all((small_run / f"results/logs/fe_study/stability_audit_part{k}.log").is_file()
+               for k in range(2))
     assert all(c.stable is not None and c.moved_mm < 1e-3 for c in audit.cases), audit.cases
     assert "Are the sweep&#x27;s converged states stable?" in page
     assert 'id="stability-audit"' in page

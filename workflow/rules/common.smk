@@ -51,6 +51,7 @@ MESH = "results/mesh/mesh.xdmf"
 DATASET = "results/dataset/dataset.h5"
 MODEL = "results/surrogate/model/model.json"
 REPORT = "results/report/index.html"
+FIRST_REPORT = "results/report/first/index.html"
 VIEWER = "results/viewer/index.html"
 
 

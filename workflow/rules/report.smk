@@ -37,8 +37,38 @@ rule report:
         html=REPORT,
     params:
         clinical=CONFIG.section("clinical"),
+        first=False,
     log:
         "results/logs/report.log",
+    threads: 1
+    resources:
+        mem_mb=4000,
+    conda:
+        ENV
+    script:
+        "../scripts/report.py"
+
+
+# The first report: the same page from the results a user looks at first (the mesh, the dataset,
+# the selected model, its training and Table 2, the 3D view), written as soon as they exist,
+# before the long studies (the FE study among them); the full report follows them.
+rule first_report:
+    input:
+        dataset=DATASET,
+        quality="results/mesh/quality.json",
+        mesh_png="results/mesh/mesh.png",
+        model=MODEL,
+        history=f"{SURROGATE_DIR}/model/history.json",
+        table2=STUDY_TABLE,
+        viewer=VIEWER,
+    output:
+        html=FIRST_REPORT,
+    params:
+        clinical=CONFIG.section("clinical"),
+        first=True,
+    log:
+        "results/logs/first_report.log",
+    priority: 40
     threads: 1
     resources:
         mem_mb=4000,

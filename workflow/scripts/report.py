@@ -10,4 +10,5 @@ try:  # this run's own log, up to this job: its time by stage (not an input: it 
     inputs["run_log"] = newest_log(".")
 except FileNotFoundError:
     pass
-build_report(inputs, snakemake.output.html, snakemake.params.clinical)
+build_report(inputs, snakemake.output.html, snakemake.params.clinical,
+             first=snakemake.params.first)
