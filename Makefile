@@ -68,11 +68,21 @@ test: setup lint
 # the run. Every run of the Snakefile holds the working directory's run lock (studies.workdir):
 # a second run there is refused, and the Snakemake locks a killed run left are cleared, so
 # finished cases are kept and interrupted ones are redone without --unlock.
+#
+# Without SNAKEMAKE_ARGS, two Snakemake runs back to back (one run in the report's time): the
+# first report's jobs (the sweep, the dataset, the selected model, the 3D view), then the rest.
+# Snakemake does not stop a running job for a more urgent one, so in one run a long study that
+# took a free core would hold it while the first results wait. The second runs even if the
+# first failed (a failed job is kept going past), and either's failure fails the target; an
+# interrupt (Ctrl-C) stops both.
+FIRST_RESULTS := results/report/first/index.html
 reproduce: setup
 	@if [ -e "$(WORKDIR)" ] && [ ! -d "$(WORKDIR)" ]; then \
 		echo "error: WORKDIR=$(WORKDIR) is a file, not a folder to work in" >&2; exit 2; fi
 	$(PY) -m studies.config $(abspath $(CONFIG))
-	$(SNAKEMAKE) -j$(JOBS) $(SNAKEMAKE_ARGS) $(PRESET_ARGS)
+	$(if $(SNAKEMAKE_ARGS),$(SNAKEMAKE) -j$(JOBS) $(SNAKEMAKE_ARGS) $(PRESET_ARGS),\
+		trap 'exit 130' INT TERM; $(SNAKEMAKE) -j$(JOBS) $(PRESET_ARGS) $(FIRST_RESULTS); first=$$?; \
+		$(SNAKEMAKE) -j$(JOBS) $(PRESET_ARGS); rest=$$?; exit $$(( first || rest )))
 
 # ruff (with the docstring rules of pyproject.toml), the import-linter contracts (the layers
 # import downward only) and Snakemake's own lint of the workflow.

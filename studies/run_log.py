@@ -11,6 +11,12 @@ for. A job still running (or failed) has no end. While a run goes on, the time l
 estimated from the jobs it planned (its job stats) that have not ended, each at the mean time
 of its rule's ended jobs (else its stage's, else every ended job's), on the run's cores.
 
+A run may be several Snakemake runs back to back: ``make reproduce`` asks for the first
+report first and for everything else after it (Snakemake does not stop a running job for a more
+urgent one, so a long study started on a free core would otherwise hold it while the first
+results wait). A log that starts within :data:`CHAIN_GAP_S` of the end of the log before it
+continues that log's run (:func:`chained_logs`), and the run's time counts from the first.
+
 ``python -m studies.run_log [LOG] [--json OUT]`` prints the table for a log (by default the
 newest under ``.snakemake/log`` of the working directory).
 """
@@ -21,7 +27,7 @@ import argparse
 import re
 import sys
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from datetime import datetime
 from pathlib import Path
 
@@ -47,6 +53,10 @@ STAGES: tuple[tuple[str, tuple[str, ...]], ...] = (
 MILESTONES = {"aggregate": "the dataset", "select_model": "the selected model",
               "first_report": "the first report", "report": "the report",
               "viewer": "the 3D view"}
+
+#: The longest pause (s) between the end of one Snakemake run and the first job of the next for
+#: the two to be one run (:func:`chained_logs`).
+CHAIN_GAP_S = 60.0
 
 _DATE = re.compile(r"^\[(\w{3} \w{3} +\d+ \d\d:\d\d:\d\d \d{4})\]$")
 _START = re.compile(r"^(?:local)?(?:rule|checkpoint) (\w+):$")
@@ -117,6 +127,7 @@ class RunTime(Result):
         left_s: the estimated time left (see the module docstring); None before any job ended.
         unseen: of the jobs left, those whose rule and stage have no ended job yet (counted at
             the mean of every ended job: the estimate is rough while there are any).
+        earlier: the logs of the runs this one continued, oldest first (:func:`chained_logs`).
     """
 
     log: str
@@ -129,6 +140,7 @@ class RunTime(Result):
     cores: int | None = None
     left_s: float | None = None
     unseen: int = 0
+    earlier: list[str] = field(default_factory=list)
 
 
 def read_plan(lines: Iterable[str]) -> tuple[dict[str, int], int | None]:
@@ -204,17 +216,65 @@ def read_jobs(lines: Iterable[str]) -> tuple[list[JobTime], datetime | None]:
     return jobs, origin
 
 
+def _first_date(path: Path) -> datetime | None:
+    """When a run log's first job started (its first date line), or None."""
+    with path.open(encoding="utf-8", errors="replace") as fh:
+        for line in fh:
+            if date := _DATE.match(line.rstrip("\n")):
+                return datetime.strptime(date.group(1), "%a %b %d %H:%M:%S %Y")
+    return None
+
+
+def chained_logs(log: str | Path) -> list[Path]:
+    """``log`` and the logs before it in its folder that it continues, oldest first.
+
+    A log continues the one before it (by name: Snakemake names them by their start) when its
+    first job started at most :data:`CHAIN_GAP_S` after that log was last written.
+    """
+    path = Path(log)
+    before = sorted(p for p in path.parent.glob("*.snakemake.log") if p.name < path.name)
+    chain = [path]
+    while before:
+        start = _first_date(chain[0])
+        previous = before.pop()
+        ended = datetime.fromtimestamp(previous.stat().st_mtime)
+        if start is None or (start - ended).total_seconds() > CHAIN_GAP_S:
+            break
+        chain.insert(0, previous)
+    return chain
+
+
 def run_time(log: str | Path) -> RunTime:
     """A run log's time by stage, and when each milestone was written.
 
+    With the logs it continues (:func:`chained_logs`): their jobs count from the first log's
+    start, their plans add up, and a job an earlier log left unended (its run was stopped and
+    the next redid it) is left out.
+
     Raises:
-        ValueError: if the log holds no job.
+        ValueError: if the logs hold no job.
     """
     path = Path(log)
-    with path.open(encoding="utf-8", errors="replace") as fh:
-        lines = fh.readlines()
-    jobs, origin = read_jobs(lines)
-    plan, cores = read_plan(lines)
+    chain = chained_logs(path)
+    jobs: list[JobTime] = []
+    plan: dict[str, int] = {}
+    origin: datetime | None = None
+    cores = None
+    for one in chain:
+        with one.open(encoding="utf-8", errors="replace") as fh:
+            lines = fh.readlines()
+        mine, start = read_jobs(lines)
+        planned, given = read_plan(lines)
+        cores = cores or given
+        for rule, count in planned.items():
+            plan[rule] = plan.get(rule, 0) + count
+        if start is None:
+            continue
+        origin = origin or start
+        shift = (start - origin).total_seconds()
+        jobs += [replace(job, start_s=job.start_s + shift,
+                         end_s=None if job.end_s is None else job.end_s + shift)
+                 for job in mine if job.end_s is not None or one == path]
     if origin is None:
         raise ValueError(f"{path}: no job in this Snakemake log")
     stages = []
@@ -237,7 +297,8 @@ def run_time(log: str | Path) -> RunTime:
     left, unseen = time_left(jobs, plan, cores)
     return RunTime(log=str(path), started=origin.isoformat(), planned=sum(plan.values()) or None,
                    finished=len(ends), span_s=max(ends, default=0.0), stages=stages,
-                   milestones=milestones, cores=cores, left_s=left, unseen=unseen)
+                   milestones=milestones, cores=cores, left_s=left, unseen=unseen,
+                   earlier=[str(p) for p in chain[:-1]])
 
 
 def newest_log(workdir: str | Path = ".") -> Path:
@@ -265,8 +326,9 @@ def duration(seconds: float | None) -> str:
 
 def table(run: RunTime) -> str:
     """The run's stages as a text table, then its milestones."""
-    lines = [f"{run.log}: started {run.started}, {run.finished} of {run.planned or '?'} jobs "
-             f"ended, {duration(run.span_s)} to the last",
+    after = f" (after {', '.join(Path(p).name for p in run.earlier)})" if run.earlier else ""
+    lines = [f"{run.log}{after}: started {run.started}, {run.finished} of {run.planned or '?'} "
+             f"jobs ended, {duration(run.span_s)} to the last",
              f"{'stage':<24} {'jobs':>9} {'job time':>10} {'from':>10} {'to':>10}"]
     for s in run.stages:
         lines.append(f"{s.stage:<24} {s.finished:>4} of {s.jobs:<2} {duration(s.job_s):>10} "

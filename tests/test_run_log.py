@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from studies.run_log import RunTime, main, read_jobs, read_plan, run_time, stage_of
+from studies.run_log import RunTime, main, read_jobs, read_plan, run_time, stage_of, table
 
 pytestmark = pytest.mark.unit
 
@@ -119,3 +119,52 @@ def test_the_report_shows_the_runs_time_by_stage(tmp_path: Path) -> None:
     assert "the dataset 3.6 min" in section
     page = build_report({}, tmp_path / "other" / "index.html", []).read_text()
     assert "No Snakemake run log was found" in page
+
+
+def test_runs_back_to_back_are_one_run(tmp_path: Path) -> None:
+    """The two Snakemake runs of make reproduce (the first report, then the rest) are one run.
+
+    The second log's jobs count from the first's start; a run started later is a run of its
+    own; a job the earlier run left unended is left out.
+    """
+    import os
+    from datetime import datetime
+
+    first = tmp_path / "2026-11-29T012950.000000.snakemake.log"
+    first.write_text(LOG.replace("[Sun Nov 29 01:33:31 2026]\nlocalrule report:\n    jobid: 1\n",
+                                 "[Sun Nov 29 01:33:31 2026]\nlocalrule select_model:\n"
+                                 "    jobid: 9\n"))
+    os.utime(first, (0, datetime(2026, 11, 29, 1, 33, 40).timestamp()))
+    second = tmp_path / "2026-11-29T013345.000000.snakemake.log"
+    second.write_text("""Building DAG of jobs...
+Provided cores: 2
+Job stats:
+job             count
+------------  -------
+select_model        1
+first_report        1
+total               2
+
+[Sun Nov 29 01:33:50 2026]
+localrule select_model:
+    jobid: 3
+[Sun Nov 29 01:35:50 2026]
+Finished jobid: 3 (Rule: select_model)
+[Sun Nov 29 01:35:51 2026]
+localrule first_report:
+    jobid: 1
+[Sun Nov 29 01:36:01 2026]
+Finished jobid: 1 (Rule: first_report)
+""")
+    run = run_time(second)
+    assert run.earlier == [str(first)] and run.planned == 7
+    assert run.milestones == {"the dataset": 219.0, "the selected model": 359.0,
+                              "the first report": 370.0}
+    assert [s.stage for s in run.stages] == ["mesh", "sweep", "dataset", "surrogate",
+                                             "report and 3D view"]
+    assert all(s.last_end_s is not None for s in run.stages)  # the unended job is left out
+    assert "(after 2026-11-29T012950.000000.snakemake.log)" in table(run)
+    os.utime(first, (0, datetime(2026, 11, 29, 1, 32, 40).timestamp()))  # 70 s before
+    alone = run_time(second)
+    assert alone.earlier == [] and alone.milestones == {"the selected model": 120.0,
+                                                        "the first report": 131.0}
