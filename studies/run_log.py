@@ -118,7 +118,8 @@ class RunTime(Result):
     Attributes:
         log: the run log read.
         started: when its first job started (ISO 8601, the log's local time).
-        planned: the jobs the run planned (its first job stats).
+        planned: the jobs the run planned (its first job stats, with the jobs a checkpoint
+            added).
         finished: the jobs that ended.
         span_s: from the first job's start to the last end read.
         stages: each stage that ran, in :data:`STAGES` order.
@@ -277,6 +278,9 @@ def run_time(log: str | Path) -> RunTime:
                  for job in mine if job.end_s is not None or one == path]
     if origin is None:
         raise ValueError(f"{path}: no job in this Snakemake log")
+    if plan:  # a checkpoint adds jobs its run's plan did not hold (the study's repeats)
+        for rule in {job.rule for job in jobs}:
+            plan[rule] = max(plan.get(rule, 0), sum(job.rule == rule for job in jobs))
     stages = []
     for stage, _ in (*STAGES, ("other", ())):
         mine = [job for job in jobs if stage_of(job.rule) == stage]

@@ -17,9 +17,10 @@ job           count
 ----------  -------
 mesh              1
 solve_chain       2
+solve_refine_chain_2 1
 aggregate         1
 report            1
-total             5
+total             6
 
 Select jobs to execute...
 [Sun Nov 29 01:29:51 2026]
@@ -53,7 +54,7 @@ localrule report:
 
 def test_a_run_log_gives_each_stage_its_jobs_and_times(tmp_path: Path) -> None:
     jobs, origin = read_jobs(LOG.splitlines(keepends=True))
-    assert sum(read_plan(LOG.splitlines())[0].values()) == 5
+    assert sum(read_plan(LOG.splitlines())[0].values()) == 6
     assert origin is not None and origin.minute == 29
     assert [(j.rule, j.jobid, j.start_s, j.end_s) for j in jobs] == [
         ("mesh", 4, 0.0, 3.0), ("solve_chain", 7, 3.0, 123.0),
@@ -69,18 +70,23 @@ def test_a_run_log_gives_each_stage_its_jobs_and_times(tmp_path: Path) -> None:
         == (2, 2, 300.0, 3.0, 184.0)
     assert by["report and 3D view"].last_end_s is None  # still running
     assert run.milestones == {"the dataset": 219.0} and run.span_s == 219.0
-    assert run.finished == 4 and run.planned == 5
+    assert run.finished == 4 and run.planned == 6
     # left: one more solve_chain planned (2 of them, 1 ended: 120 s) and the report (a stage
     # with no ended job: the mean of every ended job, (3 + 120 + 180 + 30) / 4), on 2 cores
     assert run.cores == 2 and run.unseen == 1
     assert run.left_s == pytest.approx((120.0 + 333.0 / 4) / 2)
     run.write(tmp_path / "run.json")
     assert RunTime.read(tmp_path / "run.json") == run
+    # a job that a checkpoint added after the plan was printed still counts as planned
+    added = tmp_path / "added.snakemake.log"
+    added.write_text(LOG.replace("solve_refine_chain_2 1\n", ""))
+    assert run_time(added).planned == 6
 
 
 def test_the_plan_is_the_first_job_stats_only() -> None:
     plan, cores = read_plan((LOG + "Job stats:\njob count\nreport 9\ntotal 9\n").splitlines())
-    assert plan == {"mesh": 1, "solve_chain": 2, "aggregate": 1, "report": 1} and cores == 2
+    assert plan == {"mesh": 1, "solve_chain": 2, "solve_refine_chain_2": 1, "aggregate": 1,
+                    "report": 1} and cores == 2
 
 
 def test_every_rule_of_the_workflow_has_a_stage() -> None:
@@ -100,7 +106,7 @@ def test_the_command_prints_the_table_or_names_a_log_without_jobs(
     path.write_text(LOG)
     assert main([str(path)]) == 0
     said = capsys.readouterr().out
-    assert "4 of 5 jobs ended" in said and "the dataset written after 3.6 min" in said
+    assert "4 of 6 jobs ended" in said and "the dataset written after 3.6 min" in said
     assert "min left" in said and "1 of the jobs left are of kinds not run yet" in said
     path.write_text("Building DAG of jobs...\n")
     assert main([str(path)]) == 2
@@ -114,7 +120,7 @@ def test_the_report_shows_the_runs_time_by_stage(tmp_path: Path) -> None:
     path.write_text(LOG)
     page = build_report({"run_log": path}, tmp_path / "report" / "index.html", []).read_text()
     section = page.split("<h2>The time of this run</h2>")[1].split("<h2>")[0]
-    assert "4 of 5 planned jobs" in section and "<td>sweep</td><td>2 of 2</td>" in section
+    assert "4 of 6 planned jobs" in section and "<td>sweep</td><td>2 of 2</td>" in section
     assert "<td>running</td>" in section  # the report's own job
     assert "the dataset 3.6 min" in section
     page = build_report({}, tmp_path / "other" / "index.html", []).read_text()
@@ -157,7 +163,7 @@ localrule first_report:
 Finished jobid: 1 (Rule: first_report)
 """)
     run = run_time(second)
-    assert run.earlier == [str(first)] and run.planned == 7
+    assert run.earlier == [str(first)] and run.planned == 8
     assert run.milestones == {"the dataset": 219.0, "the selected model": 359.0,
                               "the first report": 370.0}
     assert [s.stage for s in run.stages] == ["mesh", "sweep", "dataset", "surrogate",
