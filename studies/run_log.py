@@ -191,6 +191,12 @@ def time_left(jobs: list[JobTime], plan: dict[str, int],
     return left / max(cores or 1, 1), unseen
 
 
+def _date(line: str) -> datetime | None:
+    """The time of a run log's date line (``[Sun Nov 29 01:29:51 2026]``), else None."""
+    date = _DATE.match(line)
+    return datetime.strptime(date.group(1), "%a %b %d %H:%M:%S %Y") if date else None
+
+
 def read_jobs(lines: Iterable[str]) -> tuple[list[JobTime], datetime | None]:
     """The jobs of a run log's lines, and when its first job started (None: no job)."""
     when: datetime | None = None
@@ -199,8 +205,8 @@ def read_jobs(lines: Iterable[str]) -> tuple[list[JobTime], datetime | None]:
     ends: dict[int, datetime] = {}
     for line in lines:
         line = line.rstrip("\n")
-        if date := _DATE.match(line):
-            when = datetime.strptime(date.group(1), "%a %b %d %H:%M:%S %Y")
+        if date := _date(line):
+            when = date
         elif (rule := _START.match(line)) and when is not None:
             pending = (rule.group(1), when)
         elif (job := _JOBID.match(line)) and pending is not None:
@@ -221,8 +227,8 @@ def _first_date(path: Path) -> datetime | None:
     """When a run log's first job started (its first date line), or None."""
     with path.open(encoding="utf-8", errors="replace") as fh:
         for line in fh:
-            if date := _DATE.match(line.rstrip("\n")):
-                return datetime.strptime(date.group(1), "%a %b %d %H:%M:%S %Y")
+            if date := _date(line.rstrip("\n")):
+                return date
     return None
 
 
