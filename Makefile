@@ -75,7 +75,7 @@ test: setup lint
 # took a free core would hold it while the first results wait. The second runs even if the
 # first failed (a failed job is kept going past), and either's failure fails the target; an
 # interrupt (Ctrl-C) stops both.
-FIRST_RESULTS := results/report/first/index.html
+FIRST_RESULTS := first_report
 reproduce: setup
 	@if [ -e "$(WORKDIR)" ] && [ ! -d "$(WORKDIR)" ]; then \
 		echo "error: WORKDIR=$(WORKDIR) is a file, not a folder to work in" >&2; exit 2; fi

@@ -1,3 +1,16 @@
+# What the first report reads (rule first_report), which the full report reads too: its sections
+# from these inputs are the same on both pages.
+FIRST_REPORT_INPUTS = dict(
+    dataset=DATASET,
+    quality="results/mesh/quality.json",
+    mesh_png="results/mesh/mesh.png",
+    model=MODEL,
+    history=f"{SURROGATE_DIR}/model/history.json",
+    table2=STUDY_TABLE,
+    viewer=VIEWER,
+)
+
+
 # The report: one HTML page with its PNG figures beside it (report.build). It reads every
 # result of the workflow, so `rule all`, which asks for it, pulls in the FE sweep, the FE study
 # and the surrogate's study, models and benchmarks.
@@ -5,12 +18,7 @@
 
 rule report:
     input:
-        dataset=DATASET,
-        quality="results/mesh/quality.json",
-        mesh_png="results/mesh/mesh.png",
-        model=MODEL,
-        history=f"{SURROGATE_DIR}/model/history.json",
-        table2=STUDY_TABLE,
+        **FIRST_REPORT_INPUTS,
         variants=VARIANTS_JSON,
         clinical=CLINICAL_JSON,
         extrapolation=EXTRAPOLATION_JSON,
@@ -32,7 +40,6 @@ rule report:
         reference_record=[REFERENCE_RECORD] if IMAGED else [],
         tracking=TRACKING_JSON,
         stiffness=[STIFFNESS_JSON] if IMAGED and IMAGED.observation else [],
-        viewer=VIEWER,
     output:
         html=REPORT,
     params:
@@ -54,13 +61,7 @@ rule report:
 # before the long studies (the FE study among them); the full report follows them.
 rule first_report:
     input:
-        dataset=DATASET,
-        quality="results/mesh/quality.json",
-        mesh_png="results/mesh/mesh.png",
-        model=MODEL,
-        history=f"{SURROGATE_DIR}/model/history.json",
-        table2=STUDY_TABLE,
-        viewer=VIEWER,
+        **FIRST_REPORT_INPUTS,
     output:
         html=FIRST_REPORT,
     params:
