@@ -58,8 +58,11 @@ from fem.skin_surface import SkinSurface, triangle_radii
 
 log = logging.getLogger(__name__)
 
-__all__ = ["SelfContact", "SelfContactAssembler", "SelfContactState",
+__all__ = ["AT_REST", "RestPairs", "SelfContact", "SelfContactAssembler", "SelfContactState",
            "self_contact_from_mapping"]
+
+AT_REST = ("by_side", "exclude", "rest_gap", "none")
+"""What :class:`SelfContact` does with the pairs that face each other within reach at rest."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -81,6 +84,14 @@ class SelfContact:
         edge_taper: over how much of a triangle's barycentric coordinate, past its edge, a
             node's share in it fades out (so that the force is continuous across seams and
             at the surface's edge).
+        at_rest: what becomes of the pairs that already face each other within reach in the
+            reference configuration (:data:`AT_REST`): the two sides of a thin region or of a
+            sharp rim, whose nodes lie behind each other's skin, and the sides of a crease the
+            surface was made with, nearer than ``offset``. ``by_side`` (the default) leaves out
+            those behind and measures those in front from their rest gap; ``exclude`` leaves
+            out both; ``rest_gap`` measures both from their rest gap. Each way, nothing
+            touches at rest. ``none`` treats them as any other pair: they push from the start,
+            as two bodies pressed together in the reference configuration do.
     """
 
     stiffness: float = 1.0e4
@@ -88,6 +99,7 @@ class SelfContact:
     band: float = 0.01
     facing: float = 0.5
     edge_taper: float = 0.1
+    at_rest: str = "by_side"
 
     def __post_init__(self) -> None:
         checks = {
@@ -97,6 +109,11 @@ class SelfContact:
             "facing": (self.facing, -1.0, 1.0),
             "edge_taper": (self.edge_taper, 0.0, 1.0),
         }
+        if self.at_rest not in AT_REST:
+            raise InvalidParameterError(
+                f"fe.self_contact.at_rest must be one of {', '.join(AT_REST)}, "
+                f"got {self.at_rest!r}"
+            )
         for name, (value, low, high) in checks.items():
             closed = name == "offset"  # no offset is allowed: contact at touching
             if not (isinstance(value, (int, float)) and math.isfinite(value)
@@ -107,10 +124,10 @@ class SelfContact:
                     f"got {value!r}"
                 )
 
-    def as_mapping(self) -> dict[str, float]:
+    def as_mapping(self) -> dict[str, float | str]:
         """The ``fe.self_contact`` config entry (JSON-friendly)."""
         return {"stiffness": self.stiffness, "offset": self.offset, "band": self.band,
-                "facing": self.facing, "edge_taper": self.edge_taper}
+                "facing": self.facing, "edge_taper": self.edge_taper, "at_rest": self.at_rest}
 
 
 def self_contact_from_mapping(values: dict[str, Any]) -> SelfContact:
@@ -124,11 +141,14 @@ def self_contact_from_mapping(values: dict[str, Any]) -> SelfContact:
             f"unknown fe.self_contact parameter(s): {', '.join(unknown)}; "
             f"known: {', '.join(sorted(known))}"
         )
+    numbers = {k: v for k, v in values.items() if k != "at_rest"}
     try:
-        numbers = {k: float(v) for k, v in values.items()}
+        numbers = {k: float(v) for k, v in numbers.items()}
     except (TypeError, ValueError):
         raise InvalidParameterError(f"fe.self_contact values must be numbers, got {values}") \
             from None
+    if "at_rest" in values:
+        numbers["at_rest"] = values["at_rest"]
     return SelfContact(**numbers)
 
 
@@ -139,6 +159,32 @@ _MARGIN = 0.004
 _SLACK = 0.3
 #: A skin triangle stretched past this many times its reference size takes no part.
 _STRETCH = 2.0
+
+
+#: A pair faces at rest (:meth:`SelfContactAssembler._rest_treatment`) when its normals are
+#: more than 90° apart in the reference configuration: neighbours on a smooth skin, even a
+#: strongly curved one, are nearer parallel; the two sides of a thin region, a sharp rim or a
+#: crease are not.
+_REST_FACING = 0.0
+#: How near (in bands) a node lies to a triangle at rest for their pair to be one at rest: a
+#: node on the other side of a thin region may slide that far along it and stay left out.
+_REST_REACH = 2.0
+#: Nearer a triangle's plane at rest than this fraction of the offset, a node touches it.
+_TOUCHING = 1e-3
+
+
+def _normals(x: np.ndarray, tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit normals of the triangles and (area-weighted) of the nodes at ``x``."""
+    corners = x[tri]
+    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    length = np.linalg.norm(normal, axis=1)
+    normal = normal / np.where(length > 0, length, 1.0)[:, None]
+    weighted = np.repeat(normal * length[:, None], 3, axis=0)  # area-weighted, per corner
+    node_normal = np.column_stack([
+        np.bincount(tri.ravel(), weighted[:, k], minlength=len(x)) for k in range(3)
+    ])
+    node_normal /= np.maximum(np.linalg.norm(node_normal, axis=1), 1e-300)[:, None]
+    return normal, node_normal
 
 
 def _largest_turn(now: np.ndarray, before: np.ndarray) -> float:
@@ -152,6 +198,43 @@ def _smoothstep(s: np.ndarray) -> np.ndarray:
     return s * s * (3.0 - 2.0 * s)
 
 
+@dataclass(frozen=True, slots=True)
+class RestPairs:
+    """The skin's self-contact pairs in the reference configuration (at zero displacement).
+
+    Attributes:
+        treatment: ``settings.at_rest``, what became of them.
+        pairs: node–triangle pairs that would push at rest, without a treatment (their node
+            nearer a facing triangle's plane than the offset, or behind it within the band).
+        nodes: the skin nodes among them.
+        behind, in_front: of those pairs, the node behind the triangle (the other side of a
+            thin region or a sharp rim) or in front of it (a crease nearer than the offset).
+        deepest_mm: how far the deepest node lies behind a facing triangle (0 if none).
+        closest_gap_mm: the smallest gap in front (None if no pair lies in front).
+        deepest_at_m: reference position of the deepest node (None without pairs).
+        pairs_left: the pairs still pushing at rest after the treatment (0).
+    """
+
+    treatment: str
+    pairs: int
+    nodes: int
+    behind: int
+    in_front: int
+    deepest_mm: float
+    closest_gap_mm: float | None
+    deepest_at_m: list[float] | None
+    pairs_left: int
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON-friendly fields."""
+        return {name: getattr(self, name) for name in self.__slots__}
+
+    @classmethod
+    def from_json(cls, values: dict[str, Any]) -> RestPairs:
+        """Inverse of :meth:`to_json`."""
+        return cls(**values)
+
+
 @dataclass
 class SelfContactState:
     """The active pairs at one configuration and what they add.
@@ -163,6 +246,8 @@ class SelfContactState:
         gap: each pair's signed distance less the offset (m, negative).
         grad, hess: its first and second derivatives with respect to the pair's 12
             coordinates (:func:`fem.point_triangle.signed_distance_derivatives`).
+        offset: the distance from the triangle's plane (m) at which each pair starts to push:
+            ``settings.offset``, or a pair's rest gap (:meth:`SelfContactAssembler.pairs`).
     """
 
     slaves: np.ndarray
@@ -171,6 +256,7 @@ class SelfContactState:
     gap: np.ndarray
     grad: np.ndarray
     hess: np.ndarray
+    offset: np.ndarray
 
 
 @dataclass
@@ -199,6 +285,8 @@ class SelfContactAssembler:
 
     def __post_init__(self) -> None:
         self._radii = self.surface.radii
+        self._rest_normal, self._rest_node_normal = _normals(self.surface.X,
+                                                             self.surface.triangles)
         # triangles in classes of reference size, up to 1.5, 3 and more times the median, so
         # that the many small triangles of the fold are searched with their own short reach
         median = float(np.median(self._radii)) if len(self._radii) else 0.0
@@ -208,6 +296,8 @@ class SelfContactAssembler:
             members = np.flatnonzero(size_class == k)
             if len(members):
                 self._size_classes.append((members, float(self._radii[members].max())))
+        #: The skin's pairs at rest, as found and as left by the treatment (none).
+        self.rest = self._find_rest_pairs()
 
     def positions(self, state: np.ndarray) -> np.ndarray:
         """Deformed node positions for the state's local array."""
@@ -221,29 +311,12 @@ class SelfContactAssembler:
             return self._last  # the tangent at the residual's state
         start = time.perf_counter()
         tri = surf.triangles
-        corners = x[tri]  # (t, 3, 3)
-        normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-        length = np.linalg.norm(normal, axis=1)
-        normal = normal / np.where(length > 0, length, 1.0)[:, None]
-        # a triangle stretched past _STRETCH times its reference size belongs to an iterate
-        # no breast takes: it takes no part, and the search's reach stays the reference's
-        usable = triangle_radii(corners) <= _STRETCH * self._radii
-        weighted = np.repeat(normal * length[:, None], 3, axis=0)  # area-weighted, per corner
-        node_normal = np.column_stack([
-            np.bincount(tri.ravel(), weighted[:, k], minlength=len(x)) for k in range(3)
-        ])
-        node_normal /= np.maximum(np.linalg.norm(node_normal, axis=1), 1e-300)[:, None]
-
-        node, triangle = self._candidates(x, node_normal, normal)
-        facing = -np.einsum("ij,ij->i", node_normal[node], normal[triangle])
-        keep = (facing > s.facing) & usable[triangle]
-        node, triangle, facing = node[keep], triangle[keep], facing[keep]
-        gap = np.einsum("ij,ij->i", normal[triangle], x[node] - corners[triangle, 0])
-        near = np.abs(gap) <= s.band  # the cheap test first
-        node, triangle, gap, facing = node[near], triangle[near], gap[near], facing[near]
-        beta = barycentric(x[node], *(corners[triangle, k] for k in range(3))).min(axis=1)
-        near = beta > -s.edge_taper
-        node, triangle, gap, beta, facing = (a[near] for a in (node, triangle, gap, beta, facing))
+        node, triangle, beta, facing = self._facing(x)
+        # the pairs that faced each other within reach at rest: left out, or measured from
+        # their rest gap (settings.at_rest)
+        kept, offset = self._rest_treatment(node, triangle)
+        node, triangle, beta, facing, offset = (
+            a[kept] for a in (node, triangle, beta, facing, offset))
         # A node's candidates share it by a partition of unity over the triangles its
         # projection falls on, fading out over edge_taper past a triangle's edge and as the
         # normals turn from facing each other to the facing limit: the force is continuous
@@ -253,19 +326,107 @@ class SelfContactAssembler:
             * _smoothstep((facing - s.facing) / (0.5 * (1.0 - s.facing)))
         total = np.bincount(node, share, minlength=len(x))
         share = share / np.maximum(total[node], 1.0)
-        active = gap < s.offset
-        node, triangle, share = node[active], triangle[active], self._hold(
-            node[active] * len(tri) + triangle[active], share[active]
-        )
         g, grad, hess = signed_distance_derivatives(
             x[node], *(x[tri[triangle, k]] for k in range(3))
         )
-        g = g - s.offset
-        result = SelfContactState(node, triangle, share, g, grad, hess)
+        active = g < offset
+        node, triangle, offset = node[active], triangle[active], offset[active]
+        share = self._hold(node * len(tri) + triangle, share[active])
+        result = SelfContactState(node, triangle, share, g[active] - offset, grad[active],
+                                  hess[active], offset)
         self.seconds += time.perf_counter() - start
         self.evaluations += 1
         self._last, self._last_x = result, x
         return result
+
+    def _facing(self, x: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The node–triangle pairs of the skin at ``x`` that may touch, and how.
+
+        A node within ``band`` of a facing triangle's plane, its projection on the triangle or
+        within ``edge_taper`` past its edge. Returns ``(node, triangle, beta, facing)``: beta
+        the projection's smallest barycentric coordinate, facing −n_node · n_triangle.
+        """
+        s, surf = self.settings, self.surface
+        tri = surf.triangles
+        corners = x[tri]  # (t, 3, 3)
+        normal, node_normal = _normals(x, tri)
+        # a triangle stretched past _STRETCH times its reference size belongs to an iterate
+        # no breast takes: it takes no part, and the search's reach stays the reference's
+        usable = triangle_radii(corners) <= _STRETCH * self._radii
+        node, triangle = self._candidates(x, node_normal, normal)
+        facing = -np.einsum("ij,ij->i", node_normal[node], normal[triangle])
+        keep = (facing > s.facing) & usable[triangle]
+        node, triangle, facing = node[keep], triangle[keep], facing[keep]
+        gap = np.einsum("ij,ij->i", normal[triangle], x[node] - corners[triangle, 0])
+        near = np.abs(gap) <= s.band  # the cheap test first
+        node, triangle, facing = node[near], triangle[near], facing[near]
+        beta = barycentric(x[node], *(corners[triangle, k] for k in range(3))).min(axis=1)
+        near = beta > -s.edge_taper
+        return node[near], triangle[near], beta[near], facing[near]
+
+    def _rest_treatment(self, node: np.ndarray,
+                        triangle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Which pairs take part, and the offset each is measured from (m).
+
+        A pair is one *at rest* when, in the reference configuration, the node lies within
+        :data:`_REST_REACH` bands of the triangle, nearer its plane than ``offset`` (or behind
+        it), and their normals are more than 90° apart: the pair would push at rest, and no
+        smooth skin has such neighbours. The test is the pair's own, in reference
+        coordinates, so it is the same at every iterate: a node that slides along the other
+        side of a thin region stays left out. Behind the triangle at rest, the node is the
+        other side of the tissue (a thin region, a sharp rim), which no contact separates;
+        in front, the two sides of a crease that the surface was made with, which may close
+        no further than they are.
+        """
+        s, surf = self.settings, self.surface
+        offset = np.full(len(node), s.offset)
+        if not len(node) or s.at_rest == "none":
+            return np.ones(len(node), dtype=bool), offset
+        X, tri = surf.X, surf.triangles
+        rest_normal = self._rest_normal[triangle]
+        g0 = np.einsum("ij,ij->i", rest_normal, X[node] - X[tri[triangle, 0]])
+        facing0 = -np.einsum("ij,ij->i", self._rest_node_normal[node], rest_normal)
+        d0 = np.min(np.linalg.norm(X[tri[triangle]] - X[node][:, None], axis=2), axis=1)
+        at_rest = (g0 < s.offset) & (facing0 > _REST_FACING) & (d0 <= _REST_REACH * s.band)
+        # touching at rest (|g0| at rounding's scale, as two bodies of one mesh do) is in front
+        behind = at_rest & (g0 < -_TOUCHING * s.offset)
+        if s.at_rest == "exclude":
+            return ~at_rest, offset
+        measured = at_rest if s.at_rest == "rest_gap" else at_rest & ~behind
+        offset[measured] = g0[measured]
+        kept = np.ones(len(node), dtype=bool) if s.at_rest == "rest_gap" else ~behind
+        return kept, offset
+
+    def _find_rest_pairs(self) -> RestPairs:
+        """The pairs that would push at rest (the reference skin), and those left (none).
+
+        Those left are what :meth:`pairs` finds at zero displacement after
+        :meth:`_rest_treatment`; the search's counters start afresh afterwards.
+        """
+        s, surf = self.settings, self.surface
+        X, tri = surf.X, surf.triangles
+        node, triangle, _, _ = self._facing(X)
+        normal = self._rest_normal[triangle]
+        g0 = np.einsum("ij,ij->i", normal, X[node] - X[tri[triangle, 0]])
+        pushing = g0 < s.offset
+        node, g0 = node[pushing], g0[pushing]
+        left = self.pairs(np.zeros(int(surf.dofs.max()) + 1 if surf.dofs.size else 0))
+        self._last = self._last_x = self._verlet = None
+        self.begin_solve()
+        self.reset_counters()
+        behind = g0 < -_TOUCHING * s.offset
+        deepest = node[np.argmin(g0)] if len(g0) else None
+        return RestPairs(
+            treatment=s.at_rest,
+            pairs=int(len(node)),
+            nodes=int(len(np.unique(node))),
+            behind=int(behind.sum()),
+            in_front=int((~behind).sum()),
+            deepest_mm=1e3 * float(max(-g0.min(initial=0.0), 0.0)),
+            closest_gap_mm=1e3 * float(g0[~behind].min()) if np.any(~behind) else None,
+            deepest_at_m=None if deepest is None else X[deepest].tolist(),
+            pairs_left=int(len(left.slaves)),
+        )
 
     def _candidates(self, x: np.ndarray, node_normal: np.ndarray,
                     normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -402,13 +563,15 @@ class SelfContactAssembler:
         sides; ``max_penetration_mm``: how far the deepest node lies behind the skin it faces
         (zero while the offset holds); ``max_pressure_Pa`` and ``max_pressure_at_m``, the
         reference position of the node that carries it (None without contact); ``pairs``;
+        ``rest_pairs``, those found at rest and treated by ``settings.at_rest``;
         ``skin_nodes``; ``seconds``: all self-contact work (searches, kernel, assembly) over
         ``evaluations`` states, of which ``searches`` k-d tree searches took ``search_seconds``.
         """
         state = self.pairs(state_array)
         pressure = -self.settings.stiffness * C1 * state.gap
         weights = self.surface.weights[state.slaves] * state.share
-        penetration = -(state.gap + self.settings.offset)
+        # behind the triangle's plane, or deeper behind it than at rest
+        penetration = np.minimum(state.offset, 0.0) - (state.gap + state.offset)
         peak = self.surface.X[state.slaves[np.argmax(pressure)]].tolist() if len(pressure) \
             else None
         return {
@@ -418,6 +581,7 @@ class SelfContactAssembler:
             "max_pressure_Pa": float(pressure.max(initial=0.0)),
             "max_pressure_at_m": peak,
             "pairs": int(len(state.slaves)),
+            "rest_pairs": self.rest.pairs,
             "skin_nodes": int(len(self.surface.X)),
             "seconds": self.seconds,
             "evaluations": self.evaluations,
