@@ -184,6 +184,46 @@ def scan_surface(
     return x + shift[:, None] * normals, tris
 
 
+def rim_surface(
+    size: float = 0.004, chest: float = 0.14, semi_axes: tuple[float, float, float] = (
+        0.05, 0.085, 0.08), depth: float = 0.02,
+) -> tuple[np.ndarray, np.ndarray]:
+    """A breast cut from a torso: a closed surface whose skin meets the chest wall in a sharp rim.
+
+    A flat ellipsoid (``semi_axes`` along x / y / z), its centre ``depth`` posterior of a
+    chest wall that curves posteriorly away from the midline (a cylinder of radius ``chest``
+    along z), cut by it, as a surface exported from a torso model is: the skin meets the chest
+    wall at a shallow angle, so near the rim the tissue is a wedge a few millimetres thick. A
+    posterior rule that takes the chest wall's flatter middle leaves the wedge's underside as
+    skin, which then faces the skin above it across the tissue.
+    """
+    from meshes.build import gmsh_session
+
+    with gmsh_session("rim") as model:
+        dome = model.occ.addSphere(0, 0, 0, 1.0)
+        model.occ.dilate([(3, dome)], 0, 0, 0, *semi_axes)
+        model.occ.translate([(3, dome)], depth, 0, 0)
+        body = model.occ.addCylinder(chest, 0, -0.3, 0, 0, 0.6, chest)
+        model.occ.cut([(3, dome)], [(3, body)])
+        return _meshed_surface(model, size)
+
+
+def rim_section(path: str | Path, angle_deg: float = 30.0) -> dict[str, Any]:
+    """Write :func:`rim_surface` as an STL (mm) at ``path``; its ``mesh:`` section's ``file``.
+
+    Remeshed, its chest wall found by the posterior rule (``angle_deg``, a 50 mm band).
+    """
+    x, tris = rim_surface()
+    _write_stl(Path(path), 1e3 * x, tris)
+    return {
+        "path": str(path),
+        "units": "mm",
+        "remesh": True,
+        "orientation": {"axes": "project", "side": "left"},
+        "surfaces": {"rib": {"posterior": {"angle": angle_deg, "band": 50.0}}},
+    }
+
+
 def dome_volume_mesh(size: float = 0.007) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """An elliptic dome leaning caudally on a flat chest wall at x = 0, meshed with tetrahedra.
 
@@ -326,5 +366,5 @@ def write_anatomy(
     return {**section, "size": size, "fixed": {"rib": "all"}}
 
 
-__all__ = ["ANATOMIES", "Anatomy", "dome_volume_mesh", "hemisphere_surface", "scan_surface",
-           "write_anatomy"]
+__all__ = ["ANATOMIES", "Anatomy", "dome_volume_mesh", "hemisphere_surface", "rim_section",
+           "rim_surface", "scan_surface", "write_anatomy"]
