@@ -1,11 +1,12 @@
 """Benchmark: self-contact on a surface whose skin faces itself at rest, each way of treating it.
 
-``python -m benchmarks.self_contact_at_rest [--config config.yaml] [--angle 30] [--out DIR]
-[--limit-s 600]``
+``python -m benchmarks.self_contact_at_rest [--config config.yaml] [--angle 30] [--size M]
+[--out DIR] [--limit-s 600]``
 
 It writes the corpus's closed surface with a sharp chest-wall rim
-(:func:`meshes.corpus.rim_surface`), imports it remeshed at the config's ``mesh.size`` with
-the posterior rule, and prints the skin's pairs at rest (:class:`fem.self_contact.RestPairs`).
+(:func:`meshes.corpus.rim_surface`), imports it remeshed at the config's ``mesh.size`` (or at
+``--size`` metres everywhere) with the posterior rule, and prints the skin's pairs at rest
+(:class:`fem.self_contact.RestPairs`).
 Then it solves the config's clinical cases without self-contact (``off``) and with it under
 each ``fe.self_contact.at_rest`` (``none`` is the treatment-free model, whose pairs at rest
 push from the start), each setting in a fresh process one after the other (``--limit-s``
@@ -35,13 +36,17 @@ from fem.sweep import clinical_cases
 SETTINGS = ("off", *AT_REST)
 
 
-def import_rim(config: dict[str, Any], folder: Path, angle: float) -> Path:
+def import_rim(config: dict[str, Any], folder: Path, angle: float,
+               size: float | None = None) -> Path:
     """Write and import the rim surface into ``folder``; the mesh's XDMF."""
     from meshes.config import MeshConfig, make_mesh
     from meshes.corpus import rim_section
 
+    sizes = dict(config["mesh"]["size"])
+    if size is not None:
+        sizes.update(global_size=size, mound_size=size)
     section = {"source": "file", "file": rim_section(folder / "rim.stl", angle),
-               "size": config["mesh"]["size"], "fixed": {"rib": "all"}}
+               "size": sizes, "fixed": {"rib": "all"}}
     xdmf = folder / "mesh.xdmf"
     make_mesh(MeshConfig.from_mapping(section), xdmf, folder / "quality.json",
               folder / "mesh.png")
@@ -90,6 +95,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--config", type=Path, default=Path("config.yaml"))
     parser.add_argument("--angle", type=float, default=30.0,
                         help="the posterior rule's angle, degrees")
+    parser.add_argument("--size", type=float, help="element size everywhere, metres")
     parser.add_argument("--out", type=Path, help="working folder (a temporary one by default)")
     parser.add_argument("--limit-s", type=float, default=600.0,
                         help="seconds each setting may take")
@@ -101,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
         solve_setting(Path(args.child[0]), args.config, args.child[1], out)
         return 0
     config = read_config_file(args.config)
-    mesh = import_rim(config, out, args.angle)
+    mesh = import_rim(config, out, args.angle, args.size)
     quality = json.loads((out / "quality.json").read_text())
     print(f"rim surface: {quality['cells']} cells, min dihedral {quality['min_dihedral_deg']:.1f}°,"
           f" rib {1e4 * quality['area_m2']['rib']:.1f} cm², skin "

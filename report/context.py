@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from fem.dataset import read_case_columns, read_dataset
+from fem.self_contact_at_rest import MeshRestPairs
 from report.common import case_id
 from report.html import figure
 from studies.architecture import ArchitectureTable, VariantComparison
@@ -39,8 +40,8 @@ log = logging.getLogger(__name__)
 
 #: Input names :func:`build_report` reads (the report rule's named inputs).
 INPUT_NAMES = (
-    "dataset", "quality", "mesh_png", "model", "history", "table2", "variants", "clinical",
-    "extrapolation", "benchmark", "clinical_fields", "fe_clinical", "fe_speed_accuracy",
+    "dataset", "quality", "rest_pairs", "mesh_png", "model", "history", "table2", "variants",
+    "clinical", "extrapolation", "benchmark", "clinical_fields", "fe_clinical", "fe_speed_accuracy",
     "fe_stability", "corpus", "reference_roundtrip", "reference_record", "tracking", "stiffness",
     "viewer", "held_out", "postures", "off_grid", "fe_failure_edges", "fe_stability_audit",
     "fe_fold_section", "warning_coverage", "run_log",
@@ -51,6 +52,7 @@ INPUT_NAMES = (
 #: the training history are read by their owner, :mod:`surrogate.checkpoint`.
 RESULT_TYPES: dict[str, Callable[[Path], Any]] = {
     "quality": MeshQuality.read,
+    "rest_pairs": MeshRestPairs.read,
     "model": lambda path: read_model_card(path.parent),
     "history": lambda path: read_history(path.parent),
     "table2": ArchitectureTable.read,

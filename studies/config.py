@@ -271,6 +271,13 @@ class WorkflowConfig:
         return {name: self.section(name) for name in names}
 
     @property
+    def fe_self_contact(self) -> dict[str, Any]:
+        """The ``fe`` keys that the skin's pairs at rest depend on (self-contact, elements)."""
+        fe = self.sections["fe"]
+        return copy.deepcopy({"self_contact": fe.get("self_contact"),
+                              "discretisation": fe.get("discretisation", {})})
+
+    @property
     def chains(self) -> bool:
         """Whether the sweep's cases of one direction are solved as one chain (``fem.chain``)."""
         return bool(self.sections["sweep"]["chains"])

@@ -90,6 +90,9 @@ def test_the_kernel_on_a_unit_triangle() -> None:
         ({"offset": "a"}, "must be numbers"),
         ({"offset": -0.001}, "fe.self_contact.offset must be a number in [0, 0.01]"),
         ([1, 2], "must be a mapping"),
+        ({"at_rest": "ignore"}, "fe.self_contact.at_rest must be one of by_side, exclude, "
+                                "rest_gap, none, got 'ignore'"),
+        ({"at_rest": 1}, "fe.self_contact.at_rest must be one of"),
     ],
 )
 def test_bad_self_contact_settings_are_refused_by_name(values: object, words: str) -> None:

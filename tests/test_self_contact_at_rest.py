@@ -49,16 +49,16 @@ def test_no_pair_pushes_at_rest_on_a_corpus_anatomy(tmp_path: Path, name: str) -
     section = write_anatomy(name, tmp_path / "input", CONFIG["mesh"], import_size=0.015)
     make_mesh(MeshConfig.from_mapping(section), tmp_path / "mesh.xdmf",
               tmp_path / "quality.json", tmp_path / "mesh.png")
-    record = rest_pairs_of_mesh(tmp_path / "mesh.xdmf", SelfContact())
+    record = rest_pairs_of_mesh(tmp_path / "mesh.xdmf", SelfContact()).to_json()
     assert record["pairs_left"] == 0
-    untreated = rest_pairs_of_mesh(tmp_path / "mesh.xdmf", SelfContact(at_rest="none"))
+    untreated = rest_pairs_of_mesh(tmp_path / "mesh.xdmf", SelfContact(at_rest="none")).to_json()
     assert untreated["pairs_left"] == untreated["pairs"] == record["pairs"]
 
 
 @pytest.mark.unit
 def test_a_sharp_chest_wall_rim_faces_itself_at_rest_and_no_pair_pushes(rim_mesh: Path) -> None:
     """Below the rim's wedge the skin faces the skin above it, behind it across the tissue."""
-    untreated = rest_pairs_of_mesh(rim_mesh, SelfContact(at_rest="none"))
+    untreated = rest_pairs_of_mesh(rim_mesh, SelfContact(at_rest="none")).to_json()
     assert untreated["pairs"] > 20 and untreated["behind"] == untreated["pairs"]
     assert untreated["pairs_left"] == untreated["pairs"]  # they push without a treatment
     assert 1.0 < untreated["deepest_mm"] < 10.0
@@ -66,10 +66,13 @@ def test_a_sharp_chest_wall_rim_faces_itself_at_rest_and_no_pair_pushes(rim_mesh
     x, y, z = untreated["deepest_at_m"]
     assert np.hypot(y, z) > 0.05
     for treatment in ("by_side", "exclude", "rest_gap"):
-        record = rest_pairs_of_mesh(rim_mesh, SelfContact(at_rest=treatment))
+        record = rest_pairs_of_mesh(rim_mesh, SelfContact(at_rest=treatment)).to_json()
         assert record["pairs"] == untreated["pairs"] and record["pairs_left"] == 0, treatment
     off = rest_pairs_of_mesh(rim_mesh, None)
-    assert off["self_contact"] is False and off["pairs"] == untreated["pairs"]
+    assert off.self_contact is False and off.found.pairs == untreated["pairs"]
+    path = rim_mesh.parent / "self_contact_at_rest.json"
+    off.write(path)
+    assert type(off).read(path) == off
 
 
 @pytest.mark.solve

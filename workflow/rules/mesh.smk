@@ -25,3 +25,24 @@ rule mesh:
         ENV
     script:
         "../scripts/mesh.py"
+
+
+# The skin's pairs that face each other at rest on the mesh the cases solve on (a sharp
+# chest-wall rim, a thin region, a crease): what fe.self_contact.at_rest treats, so that
+# nothing touches at rest. The report's mesh section shows them beside the mesh's quality.
+rule self_contact_at_rest:
+    input:
+        mesh=MESH,
+    output:
+        json="results/mesh/self_contact_at_rest.json",
+    params:
+        fe=CONFIG.fe_self_contact,
+    log:
+        "results/logs/self_contact_at_rest.log",
+    threads: 1
+    resources:
+        mem_mb=2000,
+    conda:
+        ENV
+    script:
+        "../scripts/self_contact_at_rest.py"

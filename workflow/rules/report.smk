@@ -3,6 +3,7 @@
 FIRST_REPORT_INPUTS = dict(
     dataset=DATASET,
     quality="results/mesh/quality.json",
+    rest_pairs="results/mesh/self_contact_at_rest.json",
     mesh_png="results/mesh/mesh.png",
     model=MODEL,
     history=f"{SURROGATE_DIR}/model/history.json",
