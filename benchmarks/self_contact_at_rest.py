@@ -1,7 +1,7 @@
 """Benchmark: self-contact on a surface whose skin faces itself at rest, each way of treating it.
 
 ``python -m benchmarks.self_contact_at_rest [--config config.yaml] [--angle 30] [--size M]
-[--out DIR] [--limit-s 600]``
+[--out DIR] [--limit-s 600] [--settings off by_side ...] [--mesh MESH]``
 
 It writes the corpus's closed surface with a sharp chest-wall rim
 (:func:`meshes.corpus.rim_surface`), imports it remeshed at the config's ``mesh.size`` (or at
@@ -12,7 +12,9 @@ each ``fe.self_contact.at_rest`` (``none`` is the treatment-free model, whose pa
 push from the start), each setting in a fresh process one after the other (``--limit-s``
 seconds each, for a setting that stalls), and prints per case and setting the outcome, load
 steps, wall seconds, max |u|, and the displacement's largest difference from ``off`` with the
-ratio of the wall times. Run it with nothing else on the machine.
+ratio of the wall times. ``--settings`` runs only those (``off`` is always among them, the
+reference); ``--mesh`` solves on a mesh already imported instead. Run it with nothing else on
+the machine, and compare the times of settings measured in one run.
 """
 
 from __future__ import annotations
@@ -99,6 +101,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, help="working folder (a temporary one by default)")
     parser.add_argument("--limit-s", type=float, default=600.0,
                         help="seconds each setting may take")
+    parser.add_argument("--settings", nargs="+", choices=SETTINGS, default=list(SETTINGS),
+                        help="the settings to solve with (off is always solved)")
+    parser.add_argument("--mesh", type=Path, help="a mesh already imported (its XDMF)")
     parser.add_argument("--child", nargs=2, metavar=("MESH", "SETTING"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     out = args.out or Path(tempfile.mkdtemp(prefix="at_rest_"))
@@ -107,13 +112,15 @@ def main(argv: list[str] | None = None) -> int:
         solve_setting(Path(args.child[0]), args.config, args.child[1], out)
         return 0
     config = read_config_file(args.config)
-    mesh = import_rim(config, out, args.angle, args.size)
-    quality = json.loads((out / "quality.json").read_text())
-    print(f"rim surface: {quality['cells']} cells, min dihedral {quality['min_dihedral_deg']:.1f}°,"
-          f" rib {1e4 * quality['area_m2']['rib']:.1f} cm², skin "
-          f"{1e4 * quality['area_m2']['skin']:.1f} cm²")
+    mesh = args.mesh or import_rim(config, out, args.angle, args.size)
+    if args.mesh is None:
+        quality = json.loads((out / "quality.json").read_text())
+        print(f"rim surface: {quality['cells']} cells, min dihedral "
+              f"{quality['min_dihedral_deg']:.1f}°, rib {1e4 * quality['area_m2']['rib']:.1f} "
+              f"cm², skin {1e4 * quality['area_m2']['skin']:.1f} cm²")
+    settings = [s for s in SETTINGS if s == "off" or s in args.settings]
     results: dict[str, Any] = {}
-    for setting in SETTINGS:
+    for setting in settings:
         try:
             subprocess.run([sys.executable, "-m", "benchmarks.self_contact_at_rest", "--config",
                             str(args.config), "--out", str(out), "--child", str(mesh), setting],
@@ -129,7 +136,7 @@ def main(argv: list[str] | None = None) -> int:
     off = {r["case"]: r for r in results["off"]["rows"]}
     print(f"{'case':34} {'setting':9} {'status':10} {'steps':>5} {'wall s':>7} "
           f"{'max|u| mm':>9} {'Δu mm':>8} {'time ×':>6}")
-    for setting in SETTINGS:
+    for setting in settings:
         for r in results[setting]["rows"]:
             ref = off.get(r["case"])
             both = ref is not None and ref["status"] == r["status"] == "converged"

@@ -36,7 +36,7 @@ from studies.results import Record, Result
 #: The study's stages, in the order a run reaches them, each with the rules (names, or name
 #: prefixes ending in ``*``) that belong to it; a rule of none is ``other``.
 STAGES: tuple[tuple[str, tuple[str, ...]], ...] = (
-    ("mesh", ("mesh", "reference_state")),
+    ("mesh", ("mesh", "reference_state", "self_contact_at_rest")),
     ("sweep", ("solve", "solve_chain", "solve_refine_chain*")),
     ("dataset", ("aggregate",)),
     ("surrogate", ("train_study_run", "study_repeats", "architecture_study", "select_model")),
