@@ -69,7 +69,7 @@ class InverseMotionProblem(GravityProblem):
         j = ufl.det(f)
         self.J = 1.0 / j
         pressure = None if p is None else ufl.variable(p)
-        psi = strain_energy(F, pressure, self.C1, self.discretisation, self.kappa)
+        psi = strain_energy(F, pressure, self.local_C1, self.discretisation, self.kappa)
         if self.mixed:
             eta, q = ufl.split(self._test)
         else:
@@ -133,6 +133,7 @@ def solve_inverse_motion(
     settings: SolverSettings,
     material: Material,
     gravity: Gravity,
+    cell_tags: Any = None,
 ) -> InverseMotionResult:
     """Find the reference of the loaded ``mesh`` in one nonlinear solve (adaptive load path).
 
@@ -143,10 +144,11 @@ def solve_inverse_motion(
             Newton settings.
         material: C1 and density of the observation.
         gravity: the gravity the shape was under.
+        cell_tags: its tissues' tags (None: all fat); their ratios are ``settings.tissues``.
     """
     start = time.perf_counter()
     problem = InverseMotionProblem(mesh, facet_tags, settings.discretisation, settings.fixed,
-                                   settings.contact)
+                                   settings.contact, None, cell_tags, settings.tissues)
     solver = NewtonSolver(problem, settings.petsc_options, settings.solver)
     try:
         problem.set_case(material, gravity)

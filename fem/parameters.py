@@ -11,6 +11,7 @@ import numpy as np
 from fem.contact import Contact, contact_from_mapping, resolve_obstacle
 from fem.exceptions import InvalidParameterError
 from fem.self_contact import SelfContact, self_contact_from_mapping
+from fem.tissues import Tissues, tissues_from_mapping
 from meshes.tags import Boundary
 
 STANDARD_GRAVITY = 9.81  # m/s², the paper's |g|
@@ -311,6 +312,8 @@ class SolverSettings:
             (``direct``, ``direct-lu`` or ``iterative``).
         contact: penalty contact of the skin with a rigid obstacle (None: no contact).
         self_contact: the skin's contact with itself (None: it may pass through itself).
+        tissues: each tissue's stiffness over the fat's (``material.tissues``), for meshes
+            whose cells carry tissue tags.
     """
 
     discretisation: Discretisation = Discretisation()
@@ -322,6 +325,7 @@ class SolverSettings:
     solver: str = "direct"
     contact: Contact | None = None
     self_contact: SelfContact | None = None
+    tissues: Tissues = Tissues()
 
     def __post_init__(self) -> None:
         from fem.options import solver_options  # options imports exceptions only
@@ -350,6 +354,7 @@ class SolverSettings:
             contact=None if contact is None else contact_from_mapping(contact),
             self_contact=None if fe.get("self_contact") is None
             else self_contact_from_mapping(fe["self_contact"]),
+            tissues=tissues_from_mapping(material.get("tissues")),
         )
 
     def describe(self, defaults: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -368,4 +373,5 @@ class SolverSettings:
             "gravity": self.gravity,
             "contact": None if self.contact is None else self.contact.as_mapping(),
             "self_contact": None if self.self_contact is None else self.self_contact.as_mapping(),
+            "tissues": self.tissues.describe(),
         }

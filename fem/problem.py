@@ -31,8 +31,9 @@ from fem.material import Incompressible, NeoHookean, Penalty
 from fem.parameters import Discretisation, FixedBoundaries, Gravity, Material
 from fem.self_contact import SelfContact, SelfContactAssembler
 from fem.skin_surface import SkinSurface
+from fem.tissues import Tissues
 from meshes.io import boundary_facets, geometry_nodes
-from meshes.tags import Boundary
+from meshes.tags import Boundary, Tissue
 
 log = logging.getLogger(__name__)
 
@@ -91,6 +92,27 @@ def strain_energy(
     return psi + Penalty(ratio * C1).strain_energy(F)
 
 
+def _stiffness_ratio(mesh: Any, cell_tags: Any, tissues: Tissues) -> fem.Function | None:
+    """The cells' stiffness ratios as a DG0 field; None where all are 1 (one tissue, fat)."""
+    if cell_tags is None:
+        return None
+    n_local = mesh.topology.index_map(mesh.topology.dim).size_local
+    tags = np.full(n_local, int(Tissue.FAT), dtype=np.int64)
+    indices = np.asarray(cell_tags.indices)
+    owned = indices < n_local
+    tags[indices[owned]] = np.asarray(cell_tags.values)[owned]
+    ratios = tissues.cell_ratios(tags)
+    heterogeneous = mesh.comm.allreduce(bool(np.any(ratios != 1.0)), op=MPI.LOR)
+    if not heterogeneous:
+        return None
+    V = fem.FunctionSpace(mesh, ("DG", 0))
+    field = fem.Function(V, name="stiffness_ratio")
+    dofs = np.asarray(V.dofmap.list.array).reshape(-1)[:n_local]  # one per cell
+    field.x.array[dofs] = ratios
+    field.x.scatter_forward()
+    return field
+
+
 class GravityProblem:
     """Function spaces, forms and boundary conditions of one mesh.
 
@@ -103,6 +125,9 @@ class GravityProblem:
             its energy joins the potential on the skin. None: no contact.
         self_contact: the skin's contact with itself (:mod:`fem.self_contact`; serial
             only). None: the skin may pass through itself.
+        cell_tags: cell tags with :class:`meshes.tags.Tissue` values (None: all fat).
+        tissues: each tissue's stiffness over the fat's (:mod:`fem.tissues`; None: the
+            defaults).
     """
 
     def __init__(
@@ -113,6 +138,8 @@ class GravityProblem:
         fixed: FixedBoundaries = FixedBoundaries(),
         contact: Contact | None = None,
         self_contact: SelfContact | None = None,
+        cell_tags: Any = None,
+        tissues: Tissues | None = None,
     ) -> None:
         check_mesh(mesh, facet_tags, fixed)
         self.mesh = mesh
@@ -126,6 +153,13 @@ class GravityProblem:
 
         scalar = PETSc.ScalarType
         self.C1 = fem.Constant(mesh, scalar(1.0))
+        #: Each cell's stiffness over the fat's (a DG0 field), or None where every cell has
+        #: the ratio 1: the homogeneous forms are kept.
+        self.stiffness_ratio = _stiffness_ratio(mesh, cell_tags, tissues or Tissues())
+        #: The local C1 (Pa) the strain energy and the pressure preconditioner take; the
+        #: contact penalties take the fat's, :attr:`C1` (:mod:`fem.tissues`).
+        self.local_C1 = self.C1 if self.stiffness_ratio is None \
+            else self.C1 * self.stiffness_ratio
         self.body_force = fem.Constant(mesh, np.zeros(3, dtype=scalar))
         self.density = 0.0
         self.gravity = np.zeros(3)
@@ -190,7 +224,7 @@ class GravityProblem:
         mesh, dx, contact = self.mesh, self.dx, self.contact
         F = deformation_gradient(u)
         self.J = jacobian(F)
-        psi = strain_energy(F, p, self.C1, self.discretisation, self.kappa)
+        psi = strain_energy(F, p, self.local_C1, self.discretisation, self.kappa)
         potential = psi * dx - ufl.dot(self.body_force, u) * dx
         if contact is not None:
             ds = self.skin_measure()
@@ -261,7 +295,7 @@ class GravityProblem:
         if self._preconditioner is None:
             dp = ufl.split(self._trial)[1]
             q = ufl.split(self._test)[1]
-            mass = -(0.5 / self.C1) * dp * q * self.dx
+            mass = -(0.5 / self.local_C1) * dp * q * self.dx
             self._preconditioner = fem.form(self._tangent_ufl + mass)
         return self._preconditioner
 

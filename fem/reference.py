@@ -179,7 +179,7 @@ def estimate_reference(
     inverse = None
     if method == "inverse":
         inverse = solve_inverse_motion(mesh, runner.facet_tags, runner.settings, material,
-                                       gravity)
+                                       gravity, runner.cell_tags)
         if inverse.converged:
             X, warm = inverse.X.copy(), inverse.state
         else:

@@ -422,7 +422,7 @@ class SelfContactAssembler:
             nodes=int(len(np.unique(node))),
             behind=int(behind.sum()),
             in_front=int((~behind).sum()),
-            deepest_mm=1e3 * float(max(-g0.min(initial=0.0), 0.0)),
+            deepest_mm=1e3 * float(max(0.0, -g0.min(initial=0.0))),
             closest_gap_mm=1e3 * float(g0[~behind].min()) if np.any(~behind) else None,
             deepest_at_m=None if deepest is None else X[deepest].tolist(),
             pairs_left=int(len(left.slaves)),

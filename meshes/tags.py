@@ -1,8 +1,9 @@
 """Boundary and cell tags, defined once by name for the whole project.
 
 Every stage (meshing, the FE solver, the dataset, the surrogate) refers to
-surfaces through :class:`Boundary`; the integer values are what is stored as
-gmsh physical groups and dolfinx facet tags.
+surfaces through :class:`Boundary` and to the tissues of the volume through
+:class:`Tissue`; the integer values are what is stored as gmsh physical groups
+and dolfinx facet and cell tags.
 """
 
 from __future__ import annotations
@@ -45,8 +46,39 @@ class Boundary(IntEnum):
             raise ValueError(f"unknown boundary {label!r}; expected one of: {names}") from None
 
 
-TISSUE = 1
-"""Cell tag of the (single, homogeneous) breast tissue volume."""
+class Tissue(IntEnum):
+    """The breast's tissues (cell tag values); a homogeneous breast is all fat."""
+
+    FAT = 1
+    """Adipose tissue: the reference whose C1 the sweep varies."""
+    GLAND = 2
+    """Fibroglandular tissue."""
+    SKIN = 3
+    """The skin, where a mesh resolves it as cells."""
+    TUMOUR = 4
+    """A lesion."""
+
+    @property
+    def label(self) -> str:
+        """Lower-case name used in configs and files."""
+        return self.name.lower()
+
+    @classmethod
+    def from_label(cls, label: str) -> Tissue:
+        """Look a tissue up by its lower-case name.
+
+        Raises:
+            ValueError: if ``label`` names no tissue.
+        """
+        try:
+            return cls[str(label).upper()]
+        except KeyError:
+            names = ", ".join(t.label for t in cls)
+            raise ValueError(f"unknown tissue {label!r}; expected one of: {names}") from None
+
+
+TISSUE = int(Tissue.FAT)
+"""Cell tag of a homogeneous breast's single tissue volume (all fat)."""
 
 MESH_NAME = "mesh"
 CELL_TAGS_NAME = "cell_tags"

@@ -1,0 +1,137 @@
+"""The breast's tissues as their own materials (fem.tissues, meshes.tags.Tissue).
+
+* the ratios are parsed by name and refused by name when bad; a tumour needs its own;
+* a column of two tissues hanging under its own weight (fat at the clamp, a tissue four times
+  stiffer below it) stretches as the one-dimensional solution of incompressible neo-Hookean
+  uniaxial tension says, section by section: P(X) = ρ g (L − X) = 2 C1(X) (λ − λ⁻²);
+* a mesh whose cells all have the ratio 1 keeps the homogeneous forms, to the last digit.
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+
+from fem.exceptions import InvalidParameterError
+from fem.parameters import TISSUE_DENSITY, SolverSettings
+from fem.tissues import DEFAULT_RATIOS, Tissues, tissues_from_mapping
+from meshes.tags import Tissue
+
+TIGHT = {"snes_rtol": 1e-12, "snes_atol": 1e-11, "load_atol": 0.0}
+
+
+@pytest.mark.unit
+def test_the_ratios_are_read_by_name_with_the_defaults_beneath() -> None:
+    tissues = tissues_from_mapping({"gland": 3.0, "tumour": 6.0})
+    assert tissues.ratio(Tissue.GLAND) == 3.0 and tissues.ratio(Tissue.TUMOUR) == 6.0
+    assert tissues.ratio(Tissue.SKIN) == DEFAULT_RATIOS[Tissue.SKIN]
+    assert tissues.ratio(Tissue.FAT) == 1.0
+    assert tissues.describe() == {"fat": 1.0, "gland": 3.0, "skin": DEFAULT_RATIOS[Tissue.SKIN],
+                                  "tumour": 6.0}
+    assert np.array_equal(tissues.cell_ratios(np.array([1, 2, 4, 2])), [1.0, 3.0, 6.0, 3.0])
+    settings = SolverSettings.from_config({"material": {"tissues": {"gland": 1.5}}})
+    assert settings.tissues.ratio(Tissue.GLAND) == 1.5
+    assert settings.describe()["tissues"]["gland"] == 1.5
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize(
+    ("values", "words"),
+    [
+        ({"glandular": 2.0}, "material.tissues: unknown tissue 'glandular'; expected one of: fat, "
+                             "gland, skin, tumour"),
+        ({"gland": -1.0}, "material.tissues.gland must be a positive number"),
+        ({"gland": float("nan")}, "material.tissues.gland must be a positive number"),
+        ({"gland": "2"}, "material.tissues.gland must be a positive number, got '2'"),
+        ({"fat": 2.0}, "material.tissues.fat is 1 by definition"),
+        ([2.0], "material.tissues must be a mapping"),
+    ],
+)
+def test_bad_ratios_are_refused_by_name(values: object, words: str) -> None:
+    with pytest.raises(InvalidParameterError, match=re.escape(words)):
+        tissues_from_mapping(values)  # type: ignore[arg-type]
+
+
+@pytest.mark.unit
+def test_a_tumour_without_a_ratio_and_an_unknown_tag_are_named() -> None:
+    with pytest.raises(InvalidParameterError, match=r"the mesh has tumour cells: give "
+                                                    r"material.tissues.tumour"):
+        Tissues().cell_ratios(np.array([1, 4]))
+    with pytest.raises(InvalidParameterError, match=r"2 cells carry the tag 7, which names no "
+                                                    r"tissue; the tissues are 1 \(fat\)"):
+        Tissues().cell_ratios(np.array([1, 7, 7]))
+
+
+def _column(length: float, width: float, n: int) -> tuple:
+    """A column along x, clamped in x at x = 0, on symmetry rollers y = 0 and z = 0."""
+    from dolfinx import mesh as dmesh
+    from mpi4py import MPI
+
+    from meshes.tags import Boundary
+
+    mesh = dmesh.create_box(MPI.COMM_WORLD, [np.zeros(3), np.array([length, width, width])],
+                            [n, 2, 2], dmesh.CellType.tetrahedron)
+    mesh.topology.create_connectivity(2, 3)
+    exterior = dmesh.exterior_facet_indices(mesh.topology)
+    values = np.full(len(exterior), int(Boundary.SKIN), dtype=np.int32)
+    for boundary, axis in ((Boundary.RIB, 0), (Boundary.STERNAL, 1), (Boundary.CAUDAL, 2)):
+        on = dmesh.locate_entities_boundary(mesh, 2, lambda p, a=axis: np.isclose(p[a], 0.0))
+        values[np.isin(exterior, on)] = int(boundary)
+    facets = dmesh.meshtags(mesh, 2, exterior, values)
+    cells = np.arange(mesh.topology.index_map(3).size_local, dtype=np.int32)
+    centre = dmesh.compute_midpoints(mesh, 3, cells)[:, 0]
+    tissue = np.where(centre < length / 2, int(Tissue.FAT), int(Tissue.GLAND)).astype(np.int32)
+    return mesh, facets, dmesh.meshtags(mesh, 3, cells, tissue)
+
+
+def _stretch(P: float, C1: float) -> float:
+    """λ of incompressible neo-Hookean uniaxial tension at nominal stress P."""
+    return brentq(lambda lam: 2 * C1 * (lam - lam**-2) - P, 1.0, 3.0, xtol=1e-14)
+
+
+@pytest.mark.solve
+def test_a_two_tissue_column_hangs_as_the_uniaxial_solution_says() -> None:
+    from fem.loading import solve_incrementally
+    from fem.parameters import Discretisation, FixedBoundaries, Gravity, Loading, Material
+    from fem.problem import GravityProblem
+    from fem.solver import NewtonSolver
+
+    length, width, C1, ratio = 0.1, 0.01, 1000.0, 4.0
+    fixed = FixedBoundaries({"rib": (0,), "sternal": (1,), "caudal": (2,)})
+    tip = {}
+    for name, tissues in (("two tissues", Tissues({Tissue.GLAND: ratio})),
+                          ("one ratio", Tissues({Tissue.GLAND: 1.0}))):
+        mesh, facets, cells = _column(length, width, 16)
+        problem = GravityProblem(mesh, facets, Discretisation(), fixed, None, None, cells,
+                                 tissues)
+        assert (problem.stiffness_ratio is None) == (name == "one ratio")
+        solver = NewtonSolver(problem, TIGHT)
+        problem.set_case(Material(C1=C1), Gravity(phi=0.0))  # gravity along +x: hanging
+        result = solve_incrementally(problem, solver, Loading())
+        assert result.converged, result.reason
+        # the mean axial displacement over a section, from the displacement's nodes on it
+        u_nodes = problem.displacement().x.array.reshape(-1, 3)
+        coords = problem.V.tabulate_dof_coordinates()
+        at = {key: np.isclose(coords[:, 0], where) for key, where in
+              (("middle", length / 2), ("tip", length))}
+        tip[name] = {key: float(u_nodes[mask, 0].mean()) for key, mask in at.items()}
+        solver.destroy()
+
+    # 1D: u(X) = ∫₀^X (λ(s) − 1) ds, λ from P(s) = ρ g (L − s) and the local C1
+    weight = TISSUE_DENSITY * 9.81
+
+    def u_1d(X: float, ratios: tuple[float, float]) -> float:
+        s = np.linspace(0.0, X, 4001)
+        lam = [_stretch(weight * (length - t), C1 * (ratios[0] if t < length / 2 else ratios[1]))
+               for t in s]
+        return float(np.trapz(np.array(lam) - 1.0, s))
+
+    for name, ratios in (("two tissues", (1.0, ratio)), ("one ratio", (1.0, 1.0))):
+        for key, X in (("middle", length / 2), ("tip", length)):
+            assert tip[name][key] == pytest.approx(u_1d(X, ratios), rel=0.01), (name, key)
+    # the stiffer lower half stretches four times less than the same half of fat
+    lower = {name: tip[name]["tip"] - tip[name]["middle"] for name in tip}
+    assert lower["two tissues"] < 0.3 * lower["one ratio"]
