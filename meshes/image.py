@@ -5,6 +5,7 @@
       image:
         path: patient_labels.nii.gz   # NIfTI, NRRD (.nrrd, .nhdr) or MetaImage (.mha, .mhd)
         breast_labels: [1, 2]         # the labels that make up the breast (fat, gland, tumour)
+        tissues: {gland: [2]}         # optional: the tissue of each label (the rest are fat)
         chest_label: 3                # optional: pectoral muscle or rib cage; its boundary
                                       # with the breast becomes the rib
         side: left                    # optional where the image tells it
@@ -47,7 +48,7 @@ from meshes.importing import InputVolume, fill_checked_surface
 from meshes.orientation import Orientation
 from meshes.quality import exterior_faces, tet_volumes
 from meshes.sizing import MeshSize
-from meshes.tags import Boundary
+from meshes.tags import Boundary, Tissue
 
 log = logging.getLogger(__name__)
 
@@ -190,6 +191,8 @@ class ImageSpec:
         side: ``left`` or ``right``, or None to take it from the image.
         surfaces: rules for named boundaries, in LPS millimetres (the rib's, without a
             chest label).
+        tissues: each tissue's labels, among the breast's; a breast label in none is fat.
+            Every cell is tagged with the tissue the image holds where it lies.
     """
 
     path: str
@@ -197,6 +200,7 @@ class ImageSpec:
     chest_label: int | None = None
     side: str | None = None
     surfaces: dict[Boundary, BoundaryRule] = field(default_factory=dict)
+    tissues: dict[Tissue, tuple[int, ...]] = field(default_factory=dict)
 
     #: The scanner's millimetres: positions and rules are in them.
     units = "mm"
@@ -221,12 +225,31 @@ class ImageSpec:
         if self.chest_label is not None and Boundary.RIB in self.surfaces:
             raise GeometryError("mesh.image: the rib comes from chest_label; drop the rib rule "
                                 "from mesh.image.surfaces (or the chest_label)")
+        seen: dict[int, Tissue] = {}
+        for tissue, labels in self.tissues.items():
+            for label in labels:
+                if label not in self.breast_labels:
+                    raise GeometryError(
+                        f"mesh.image.tissues.{tissue.label}: label {label} is not one of the "
+                        f"breast_labels {list(self.breast_labels)}")
+                if label in seen:
+                    raise GeometryError(
+                        f"mesh.image.tissues: label {label} is both {seen[label].label} and "
+                        f"{tissue.label}")
+                seen[label] = tissue
+
+    def label_tissues(self) -> dict[int, Tissue]:
+        """The tissue of each breast label (fat where :attr:`tissues` names none)."""
+        out = dict.fromkeys(self.breast_labels, Tissue.FAT)
+        for tissue, labels in self.tissues.items():
+            out.update(dict.fromkeys(labels, tissue))
+        return out
 
     @classmethod
     def from_mapping(cls, values: dict[str, Any]) -> ImageSpec:
         """Build from the ``mesh.image`` config mapping."""
-        reject_unknown(values, {"path", "breast_labels", "chest_label", "side", "surfaces"},
-                       "mesh.image key(s)")
+        reject_unknown(values, {"path", "breast_labels", "chest_label", "side", "surfaces",
+                                "tissues"}, "mesh.image key(s)")
         if "path" not in values or "breast_labels" not in values:
             raise GeometryError("mesh.image needs path and breast_labels")
         labels = values["breast_labels"]
@@ -239,6 +262,7 @@ class ImageSpec:
             side=values.get("side"),
             surfaces={Boundary.from_label(name): BoundaryRule.from_mapping(rule, cls.units)
                       for name, rule in (values.get("surfaces") or {}).items()},
+            tissues=_tissue_labels(values.get("tissues")),
         )
 
     def rules(self) -> dict[Boundary, BoundaryRule]:
@@ -385,6 +409,65 @@ def breast_surface(labels: np.ndarray, grid: Grid, spec: ImageSpec,
     return points, tris, info, chest_distance
 
 
+def _tissue_labels(values: Any) -> dict[Tissue, tuple[int, ...]]:
+    """``mesh.image.tissues`` (tissue name → label or labels), typed."""
+    if values is None:
+        return {}
+    if not isinstance(values, dict):
+        raise GeometryError(f"mesh.image.tissues must map tissues to labels, got {values!r}")
+    out = {}
+    for name, labels in values.items():
+        try:
+            tissue = Tissue.from_label(name)
+        except ValueError as err:
+            raise GeometryError(f"mesh.image.tissues: {err}") from None
+        labels = [labels] if isinstance(labels, int) else labels
+        if not isinstance(labels, list) or not all(
+                isinstance(v, int) and not isinstance(v, bool) for v in labels):
+            raise GeometryError(f"mesh.image.tissues.{name} must be a label or a list of labels, "
+                                f"got {values[name]!r}")
+        out[tissue] = tuple(labels)
+    return out
+
+
+def cell_tissues(labels: np.ndarray, grid: Grid, x: np.ndarray, tets: np.ndarray,
+                 tissue_of: dict[int, Tissue]) -> tuple[np.ndarray, int]:
+    """The tissue of each tetrahedron: the label the image holds where the cell lies.
+
+    Each cell samples the label volume (nearest voxel) at its centroid and at points a quarter,
+    a half and three quarters of the way from it to each vertex; the most frequent breast label
+    among the samples wins (the centroid's on a tie). A cell none of whose samples falls on a
+    breast label (a sliver along the smoothed surface) is fat.
+
+    Args:
+        labels: the label volume ``[i, j, k]``.
+        grid: its header's map from voxel indices to LPS millimetres.
+        x: the mesh's points, LPS metres.
+        tets: its cells.
+        tissue_of: each breast label's tissue.
+
+    Returns:
+        ``(tissue per cell, cells that found no breast label)``.
+    """
+    corners = x[tets]  # (n, 4, 3)
+    centre = corners.mean(axis=1)
+    samples = [centre] + [centre + t * (corners[:, v] - centre)
+                          for t in (0.25, 0.5, 0.75) for v in range(4)]
+    points = np.stack(samples, axis=1)  # (n, 13, 3)
+    index = np.rint(grid.to_index(1e3 * points)).astype(np.int64)
+    index = np.clip(index, 0, np.array(labels.shape) - 1)
+    found = labels[index[..., 0], index[..., 1], index[..., 2]]
+    known = np.array(sorted(tissue_of))
+    votes = np.stack([np.sum(found == label, axis=1) for label in known], axis=1)
+    # the centroid's label breaks ties: it counts half a vote more
+    votes = votes + 0.5 * (found[:, :1] == known[None, :])
+    best = known[np.argmax(votes, axis=1)]
+    none = votes.max(axis=1) == 0
+    tissue = np.array([int(tissue_of[int(label)]) for label in best], dtype=np.int64)
+    tissue[none] = int(Tissue.FAT)
+    return tissue, int(none.sum())
+
+
 def image_volume(spec: ImageSpec, size: MeshSize) -> InputVolume:
     """Read the label volume, take the breast's surface, fill it with tetrahedra, group the rib.
 
@@ -397,6 +480,15 @@ def image_volume(spec: ImageSpec, size: MeshSize) -> InputVolume:
     labels, grid = read_labels(spec.path)
     read_s = time.perf_counter() - start
     x, tris, info, chest_distance = breast_surface(labels, grid, spec, size)
+    tissue_of = spec.label_tissues()
+    if any(t is not Tissue.FAT for t in tissue_of.values()):
+        # the breast's voxels (and a voxel's margin) kept for the cells' tissues
+        first, last = _bounds(np.isin(labels, spec.breast_labels))
+        lo, hi = np.maximum(first - 1, 0), np.minimum(last + 2, labels.shape)
+        kept = labels[tuple(slice(a, b) for a, b in zip(lo, hi, strict=True))].copy()
+        kept_grid = Grid(grid.to_physical(lo), grid.spacing, grid.direction, kept.shape)
+    else:
+        kept = kept_grid = None
     del labels
     surface_s = time.perf_counter() - start - read_s
     info.update({"path": spec.path, "units": spec.units, "kind": "label volume"})
@@ -419,6 +511,12 @@ def image_volume(spec: ImageSpec, size: MeshSize) -> InputVolume:
         groups[near] = 1
         names[CHEST_GROUP] = 1
         info["chest_facets"] = int(near.sum())
+    tissues = None
+    if kept is not None:
+        tissues, unresolved = cell_tissues(kept, kept_grid, x, tets, tissue_of)
+        info["tissue_cells"] = {t.label: int(np.sum(tissues == t)) for t in Tissue
+                                if np.any(tissues == t)}
+        info["cells_without_a_breast_label"] = unresolved
     info["seconds"] = {"read": round(read_s, 3), "surface": round(surface_s, 3),
                        "fill": round(time.perf_counter() - start - read_s - surface_s, 3)}
-    return InputVolume(x, tets, faces, groups, names, info)
+    return InputVolume(x, tets, faces, groups, names, info, tissues)

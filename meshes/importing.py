@@ -65,7 +65,7 @@ from meshes.reading import SURFACE_SUFFIXES, VOLUME_SUFFIXES, InputMesh, read_in
 from meshes.remesh import check_dihedral_floor, fill_surface
 from meshes.repair import repair_surface
 from meshes.sizing import MeshSize
-from meshes.tags import Boundary
+from meshes.tags import Boundary, Tissue
 
 log = logging.getLogger(__name__)
 
@@ -175,6 +175,7 @@ class InputVolume:
         groups: the file's group of each boundary triangle (-1: none), or None.
         group_names: physical name -> group integer of the file.
         info: what was read and done, for the quality report.
+        tissues: each cell's :class:`meshes.tags.Tissue` value (None: all fat).
     """
 
     x: np.ndarray
@@ -183,6 +184,7 @@ class InputVolume:
     groups: np.ndarray | None
     group_names: dict[str, int]
     info: dict[str, Any]
+    tissues: np.ndarray | None = None
 
     def select(self, spec: Any) -> dict[Boundary, np.ndarray]:
         """The boundary faces each of ``spec``'s rules selects (in the file's axes and units).
@@ -199,14 +201,15 @@ class InputVolume:
 
 def prepare_input(
     spec: Any, size: MeshSize
-) -> tuple[np.ndarray, np.ndarray, dict[Boundary, np.ndarray], dict[str, Any]]:
+) -> tuple[np.ndarray, np.ndarray, dict[Boundary, np.ndarray], dict[str, Any], np.ndarray | None]:
     """Read, check, tetrahedralise (if a surface) and name the boundary of an input.
 
     The boundary is named in the file's axes (the rules are written in them); the mesh is then
     carried into the project's frame (``spec.orientation``).
 
     Returns:
-        ``(points, tets, facets, info)``: the tagged volume mesh and what was done.
+        ``(points, tets, facets, info, tissues)``: the tagged volume mesh, what was done, and
+        each cell's tissue (None: all fat).
 
     Raises:
         MeshInputError: (a subclass naming the problem) for any broken input.
@@ -221,7 +224,7 @@ def prepare_input(
     info["orientation"] = spec.orientation.describe()
     check_chest_wall_posterior(x, facets[Boundary.RIB], spec.orientation,
                                f"the input {spec.path}")
-    return x, tets, facets, info
+    return x, tets, facets, info, volume.tissues
 
 
 def read_volume(spec: ImportSpec, size: MeshSize) -> InputVolume:
@@ -406,10 +409,10 @@ def write_imported_mesh(
 
     size = import_size(size)
     start = time.perf_counter()
-    x, tets, facets, info = prepare_input(spec, size)
+    x, tets, facets, info, tissues = prepare_input(spec, size)
     mesh_s = time.perf_counter() - start
     with gmsh_session("imported") as model:
-        groups = add_tagged_mesh(model, x, tets, facets)
+        groups = add_tagged_mesh(model, x, tets, facets, tissues)
         report = gmsh_quality(model, groups)
         write_gmsh_model(model, xdmf_path)
     report["source"] = "image" if info.get("kind") == "label volume" else "file"
@@ -417,6 +420,10 @@ def write_imported_mesh(
     report["anatomy"] = imported_anatomy(x, facets)
     report["size"] = size.as_dict()
     report["mesh_wall_s"] = mesh_s
+    if tissues is not None:
+        volumes = np.abs(tet_volumes(x, tets))
+        report["tissue_volume_ml"] = {t.label: 1e6 * float(volumes[tissues == t].sum())
+                                      for t in Tissue if np.any(tissues == t)}
     if png_path is not None:
         from meshes.plot import plot_boundaries
 

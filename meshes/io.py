@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from meshes.exceptions import MeshInputError
-from meshes.tags import CELL_TAGS_NAME, FACET_TAGS_NAME, MESH_NAME, TISSUE, Boundary
+from meshes.tags import CELL_TAGS_NAME, FACET_TAGS_NAME, MESH_NAME, TISSUE, Boundary, Tissue
 
 __all__ = [
     "MeshInputError",
@@ -31,22 +31,32 @@ log = logging.getLogger(__name__)
 
 
 def add_tagged_mesh(
-    model: Any, x: np.ndarray, tets: np.ndarray, facets: dict[Boundary, np.ndarray]
+    model: Any, x: np.ndarray, tets: np.ndarray, facets: dict[Boundary, np.ndarray],
+    tissues: np.ndarray | None = None,
 ) -> dict[Boundary, list[int]]:
     """Put a tagged tetrahedral mesh given as arrays into an empty gmsh model.
 
-    One discrete volume holds the cells and one discrete surface per named
-    boundary its triangles, each with its physical group, so that the model
-    converts to dolfinx exactly like a meshed CAD model.
+    One discrete volume per tissue holds its cells (one, ``tissue``, for a homogeneous
+    mesh: ``tissues`` None) and one discrete surface per named boundary its triangles, each
+    with its physical group, so that the model converts to dolfinx exactly like a meshed CAD
+    model: the cell tags are the tissues' :class:`meshes.tags.Tissue` values.
 
     Returns:
         The gmsh surface tag of each boundary that has facets.
     """
-    volume = model.addDiscreteEntity(3)
-    # dolfinx's gmshio expects node tags 1..N in order
-    model.mesh.addNodes(3, volume, np.arange(1, len(x) + 1), np.asarray(x, dtype=float).ravel())
-    model.mesh.addElementsByType(volume, 4, [], (np.asarray(tets, dtype=np.int64) + 1).ravel())
-    model.addPhysicalGroup(3, [volume], TISSUE, name="tissue")
+    tets = np.asarray(tets, dtype=np.int64)
+    values = np.full(len(tets), TISSUE) if tissues is None else np.asarray(tissues)
+    present = [int(v) for v in np.unique(values)]
+    node_holder = None
+    for value in present:
+        volume = model.addDiscreteEntity(3)
+        if node_holder is None:  # dolfinx's gmshio expects node tags 1..N in order
+            model.mesh.addNodes(3, volume, np.arange(1, len(x) + 1),
+                                np.asarray(x, dtype=float).ravel())
+            node_holder = volume
+        model.mesh.addElementsByType(volume, 4, [], (tets[values == value] + 1).ravel())
+        name = "tissue" if tissues is None else Tissue(value).label
+        model.addPhysicalGroup(3, [volume], value, name=name)
     groups: dict[Boundary, list[int]] = {}
     for boundary, tris in facets.items():
         if len(tris) == 0:

@@ -10,7 +10,8 @@ tumour inside. The voxels are laid out in the scanner's LPS millimetres by an im
 with the breast off its centre, with any rotation and anisotropic spacing.
 
 Labels: 0 background, 1 fat, 2 glandular tissue, 3 pectoral muscle, 4 tumour, 5 the rest of
-the body (in a torso's field of view).
+the body (in a torso's field of view), and, where asked for, 6 the skin: a shell of given
+thickness under the breast's surface (not on the chest wall).
 """
 
 from __future__ import annotations
@@ -21,8 +22,10 @@ import numpy as np
 
 from meshes.orientation import Orientation
 
-FAT, GLAND, PECTORAL, TUMOUR, BODY = 1, 2, 3, 4, 5
+FAT, GLAND, PECTORAL, TUMOUR, BODY, SKIN = 1, 2, 3, 4, 5, 6
 BREAST_LABELS = (FAT, GLAND, TUMOUR)
+#: The tissue of each breast label but fat's, as ``mesh.image.tissues`` names them.
+TISSUE_LABELS = {"gland": [GLAND], "tumour": [TUMOUR], "skin": [SKIN]}
 
 #: The breast's semi-axes (anterior, lateral, cranial), m.
 SEMI_AXES_M = (0.055, 0.07, 0.065)
@@ -32,8 +35,11 @@ TUMOUR_CENTRE_M = (-0.025, 0.01, 0.005)
 TUMOUR_RADIUS_M = 0.008
 
 
-def labels_at(x: np.ndarray) -> np.ndarray:
-    """The phantom's label at points ``x`` (..., 3) in the project's frame, m."""
+def labels_at(x: np.ndarray, skin_m: float = 0.0) -> np.ndarray:
+    """The phantom's label at points ``x`` (..., 3) in the project's frame, m.
+
+    ``skin_m`` > 0 labels a skin of that thickness under the breast's surface.
+    """
     px, py, pz = x[..., 0], x[..., 1], x[..., 2]
     chest = (py**2 + pz**2) / (2 * CHEST_RADIUS_M)  # the chest wall's x, curving posteriorly
     a, b, c = SEMI_AXES_M
@@ -50,6 +56,9 @@ def labels_at(x: np.ndarray) -> np.ndarray:
     out[breast] = FAT
     out[gland] = GLAND
     out[breast & tumour] = TUMOUR
+    if skin_m > 0:
+        inner = (px / (a - skin_m)) ** 2 + (py / (b - skin_m)) ** 2 + (pz / (c - skin_m)) ** 2
+        out[breast & (inner > 1.0)] = SKIN
     return out
 
 
@@ -68,7 +77,8 @@ def rotation(degrees: tuple[float, float, float]) -> np.ndarray:
 def write_phantom(path: str | Path, shape: tuple[int, int, int],
                   spacing_mm: tuple[float, float, float], side: str = "left",
                   direction: np.ndarray | None = None, breast_offset_mm: float = 0.0,
-                  scanner_origin_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> Path:
+                  scanner_origin_mm: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                  skin_mm: float = 0.0) -> Path:
     """Write the phantom as a label volume (the format by the suffix, with SimpleITK).
 
     Args:
@@ -80,6 +90,7 @@ def write_phantom(path: str | Path, shape: tuple[int, int, int],
         breast_offset_mm: how far the field of view's centre lies medial of the breast's
             centre (0: centred on the breast, as a dedicated breast image).
         scanner_origin_mm: where the breast's base centre lies in the scanner's LPS.
+        skin_mm: the skin label's thickness (0: no skin label, the skin is fat's).
 
     Returns:
         ``path``.
@@ -99,7 +110,7 @@ def write_phantom(path: str | Path, shape: tuple[int, int, int],
     for k in range(shape[2]):
         index = np.stack([ii, jj, np.full_like(ii, k)], axis=-1).astype(float)
         lps = origin + (index * spacing) @ direction.T
-        labels[k] = labels_at(frame.to_project(1e-3 * (lps - base)))
+        labels[k] = labels_at(frame.to_project(1e-3 * (lps - base)), 1e-3 * skin_mm)
     image = sitk.GetImageFromArray(labels)
     image.SetSpacing(tuple(float(s) for s in spacing))
     image.SetOrigin(tuple(float(o) for o in origin))

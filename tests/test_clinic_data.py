@@ -236,7 +236,7 @@ def test_a_sharp_rim_remeshes_to_the_floor(tmp_path: Path, size: float, oriented
         _write_stl(tmp_path / "cap.stl", 1e3 * x, tris)
         section.update(surfaces={"rib": RIB_PLANE})
     spec = ImportSpec.from_mapping({"path": str(tmp_path / "cap.stl"), **section})
-    points, tets, facets, info = prepare_input(spec, MeshSize(global_size=size, mound_size=size))
+    points, tets, facets, info, _ = prepare_input(spec, MeshSize(global_size=size, mound_size=size))
     assert info["quality_floor"]["cells_below_floor"] == 0, info["fill"]
     assert info["quality_floor"]["min_dihedral_deg"] >= MIN_DIHEDRAL_DEG
     assert info["fill"]["attempts"][0]["outcome"].startswith("failed: ")

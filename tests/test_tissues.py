@@ -4,12 +4,16 @@
 * a column of two tissues hanging under its own weight (fat at the clamp, a tissue four times
   stiffer below it) stretches as the one-dimensional solution of incompressible neo-Hookean
   uniaxial tension says, section by section: P(X) = ρ g (L − X) = 2 C1(X) (λ − λ⁻²);
-* a mesh whose cells all have the ratio 1 keeps the homogeneous forms, to the last digit.
+* a mesh whose cells all have the ratio 1 keeps the homogeneous forms;
+* a label volume's fat, gland, skin and tumour labels tag the cells, to the labelled volumes,
+  and count in the solve.
 """
 
 from __future__ import annotations
 
 import re
+from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -135,3 +139,57 @@ def test_a_two_tissue_column_hangs_as_the_uniaxial_solution_says() -> None:
     # the stiffer lower half stretches four times less than the same half of fat
     lower = {name: tip[name]["tip"] - tip[name]["middle"] for name in tip}
     assert lower["two tissues"] < 0.3 * lower["one ratio"]
+
+
+@pytest.mark.solve
+def test_a_label_volumes_tissues_become_the_cells_tags_and_count_in_the_solve(
+    tmp_path: Path,
+) -> None:
+    """A label volume's tissues tag the cells, and the stiffer ones hold the breast up.
+
+    Fat, gland, skin and tumour labels each tag their cells, to the labelled volumes; prone
+    at C1 = 1 kPa the breast sags less than the same mesh as one tissue.
+    """
+    import SimpleITK as sitk
+
+    from fem.case import CaseRunner
+    from fem.sweep import Case
+    from meshes.config import MeshConfig, make_mesh
+    from meshes.io import read_mesh
+    from meshes.phantom import BREAST_LABELS, SKIN, TISSUE_LABELS
+    from tests.test_clinic_data import image_section, phantom
+
+    image = phantom(tmp_path, skin_mm=3.0)
+    section = image_section(image, side="left", tissues=TISSUE_LABELS)
+    section["image"]["breast_labels"] = [*BREAST_LABELS, SKIN]
+    section["size"] = {"global_size": 0.01}
+    report = make_mesh(MeshConfig.from_mapping(section), tmp_path / "mesh.xdmf",
+                       tmp_path / "quality.json", tmp_path / "mesh.png")
+    voxels = sitk.ReadImage(str(image))
+    labels = sitk.GetArrayViewFromImage(voxels)
+    voxel_ml = float(np.prod(voxels.GetSpacing())) / 1e3
+    labelled = {name: voxel_ml * float(np.isin(labels, values).sum())
+                for name, values in TISSUE_LABELS.items()}
+    meshed = report["tissue_volume_ml"]
+    assert set(meshed) == {"fat", "gland", "skin", "tumour"}
+    for name in ("gland", "skin"):
+        assert meshed[name] == pytest.approx(labelled[name], rel=0.15), name
+    assert 0.3 * labelled["tumour"] < meshed["tumour"] < 1.5 * labelled["tumour"]
+    _, cell_tags, _ = read_mesh(tmp_path / "mesh.xdmf")
+    counts = dict(zip(*np.unique(cell_tags.values, return_counts=True), strict=True))
+    assert counts == {int(Tissue.from_label(name)): n
+                      for name, n in report["input"]["tissue_cells"].items()}
+
+    base = SolverSettings(petsc_options=TIGHT)
+    case = Case(1.0, 180.0)
+    sag = {}
+    for name, tissues in (("tissues", Tissues({Tissue.TUMOUR: 5.0})),
+                          ("one tissue", Tissues(dict.fromkeys(
+                              (Tissue.GLAND, Tissue.SKIN, Tissue.TUMOUR), 1.0)))):
+        with CaseRunner(tmp_path / "mesh.xdmf", replace(base, tissues=tissues)) as runner:
+            result, timings = runner.solve(case)
+            summary = runner.summary(case, result, timings, measure_unit=False)
+        assert summary["status"] == "converged", name
+        assert summary["settings"]["tissues"] == tissues.describe()
+        sag[name] = summary["max_disp_mm"]
+    assert sag["tissues"] < 0.8 * sag["one tissue"]
