@@ -29,6 +29,26 @@ from fem.splits import GROUP_SPLITS, SplitFractions, group_partition, softest_he
 log = logging.getLogger(__name__)
 
 
+#: The tissue map of cases solved before tissues existed (all fat).
+HOMOGENEOUS = {"fat": 1.0}
+
+
+def tissue_map(summaries: Sequence[dict[str, Any]]) -> dict[str, float]:
+    """The stiffness ratios the cases were solved with (their summaries' settings).
+
+    Raises:
+        DatasetError: if the cases were solved with different maps: their C1 would not be
+            one stiffness parameter.
+    """
+    maps = {json.dumps(((s.get("settings") or {}).get("tissues") or HOMOGENEOUS), sort_keys=True)
+            for s in summaries}
+    if len(maps) > 1:
+        raise DatasetError(
+            f"the cases were solved with {len(maps)} different tissue maps "
+            f"(material.tissues): {'; '.join(sorted(maps))}; solve them again with one")
+    return json.loads(maps.pop())
+
+
 def build_dataset(
     summary_paths: Sequence[str | Path],
     point_paths: Sequence[str | Path],
@@ -95,6 +115,7 @@ def build_dataset(
                                    f"than the body's own size ({size:.3g} m): not a solution")
             displacement[i] = points["u"]
 
+    tissues = tissue_map(summaries)
     converged = np.array([s["status"] == "converged" for s in summaries])
     # A converged state that passes through itself is no breast's: the splits (the data the
     # surrogate learns from and is judged on) leave it out; /cases/self_overlap names it.
@@ -213,6 +234,7 @@ def build_dataset(
         {"seed": seed, "fractions": [split.train, split.validation, split.test]},
         provenance(config),
         nodes,
+        tissues,
     )
     failed = [s["case"] for s in summaries if s["status"] != "converged"]
     log.info("dataset: %d cases (%d failed), %d points", len(summaries), len(failed), n_points)
@@ -230,6 +252,7 @@ def _write_atomically(
     split_info: dict[str, Any],
     prov: dict[str, Any],
     nodes: dict[str, np.ndarray] | None = None,
+    tissues: dict[str, float] | None = None,
 ) -> None:
     import h5py
 
@@ -250,6 +273,7 @@ def _write_atomically(
             h5.attrs["format_version"] = FORMAT_VERSION
             h5.attrs["created"] = datetime.now(UTC).isoformat()
             h5.attrs["provenance"] = json.dumps(prov, default=str)
+            h5.attrs["tissues"] = json.dumps(tissues or HOMOGENEOUS)
             pts = h5.create_group("points")
             pts.create_dataset("X", data=reference["X"]).attrs["units"] = "m"
             pts.create_dataset("node_index", data=reference["node_index"])

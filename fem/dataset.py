@@ -48,15 +48,18 @@ Layout (units in attributes; M cases, N material points)::
                                                  softest and stiffest always train)
 
 Root attributes hold a description, the creation time, the provenance (config
-sections, package versions, git commit) as JSON strings. This module imports
-neither dolfinx nor jax, so any tool can read the format: :func:`fem.aggregate.build_dataset`
-writes it, :func:`read_dataset` and :func:`read_case_columns` read it.
+sections, package versions, git commit) and the tissue map the cases were solved with
+(``tissues``: each tissue's C1 over the fat's, :mod:`fem.tissues`) as JSON strings. This
+module imports neither dolfinx nor jax, so any tool can read the format:
+:func:`fem.aggregate.build_dataset` writes it, :func:`read_dataset` and
+:func:`read_case_columns` read it.
 """
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -91,6 +94,8 @@ class Dataset:
         cells: the mesh's tetrahedra as rows of ``X`` (C, 4), or None if not recorded.
         nodes: every node of a quadratic mesh and the fields there (``/nodes``), where the
             dataset has them and was read with them.
+        tissues: each tissue's C1 over the fat's that the cases were solved with (the root
+            attribute ``tissues``; all fat for a dataset written before it).
     """
 
     X: np.ndarray
@@ -106,6 +111,7 @@ class Dataset:
     node_index: np.ndarray | None = None
     cells: np.ndarray | None = None
     nodes: Nodes | None = None
+    tissues: dict[str, float] = field(default_factory=lambda: {"fat": 1.0})
 
     @property
     def n_points(self) -> int:
@@ -216,6 +222,8 @@ def read_dataset(path: str | Path, nodes: bool = False) -> Dataset:
                 node_index=h5["points/node_index"][...] if "points/node_index" in h5 else None,
                 cells=h5["points/cells"][...] if "points/cells" in h5 else None,
                 nodes=_read_nodes(h5, path) if nodes and "nodes" in h5 else None,
+                tissues=json.loads(h5.attrs["tissues"]) if "tissues" in h5.attrs
+                else {"fat": 1.0},
             )
     except OSError as err:
         raise DatasetError(f"dataset {path} is unreadable ({err})") from None

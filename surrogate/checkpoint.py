@@ -52,7 +52,9 @@ def training_range(ds: Dataset, cases: np.ndarray) -> dict[str, Any]:
     ``unconverged`` lists the (C1, Φ, θ) of the dataset's cases whose FE solve failed:
     holes in the range, where no FE solution backs a prediction. ``c1_by_direction`` lists each
     direction's [Φ, θ, softest C1, stiffest C1] among the converged training cases: a sweep
-    need not solve every direction at every C1 (``sweep.refine``'s bands).
+    need not solve every direction at every C1 (``sweep.refine``'s bands). ``tissues`` is the
+    tissue map the cases were solved with (each tissue's C1 over the fat's, whose C1 is the
+    model's input).
     """
     cases = np.asarray(cases, dtype=int)
     converged = cases[ds.converged[cases]]
@@ -68,6 +70,7 @@ def training_range(ds: Dataset, cases: np.ndarray) -> dict[str, Any]:
         "unconverged": unconverged_cases(ds),
         "c1_by_direction": [[p, t, min(c1), max(c1)]
                             for (p, t), c1 in sorted(by_direction.items())],
+        "tissues": dict(ds.tissues),
     }
 
 

@@ -16,7 +16,7 @@ import pytest
 
 from fem.aggregate import build_dataset
 from fem.case_files import write_points
-from fem.dataset import BOUNDARY
+from fem.dataset import BOUNDARY, read_dataset
 from fem.exceptions import DatasetError
 from fem.splits import SplitFractions
 from fem.sweep import Case
@@ -437,3 +437,21 @@ def test_cases_set_aside_leave_every_split_and_keep_the_others(tmp_path: Path) -
     audit.write(tmp_path / "audit.json")
     kept = without_unstable(ds, tmp_path / "audit.json")
     assert np.flatnonzero(~kept.converged).tolist() == [gone]
+
+
+def test_the_dataset_records_the_tissue_map_and_refuses_two(tmp_path: Path) -> None:
+    """The cases' tissue map is a root attribute; cases solved with two maps are refused."""
+    tissues = {"fat": 1.0, "gland": 2.0, "skin": 18.5, "tumour": 5.0}
+    same = {i: {"settings": {"tissues": tissues}} for i in range(5)}
+    summaries, points = _cases(tmp_path / "same", same)
+    build_dataset(summaries, points, tmp_path / "same.h5")
+    assert read_dataset(tmp_path / "same.h5").tissues == tissues
+    # cases without the setting (solved before tissues existed) are all fat
+    summaries, points = _cases(tmp_path / "old")
+    build_dataset(summaries, points, tmp_path / "old.h5")
+    assert read_dataset(tmp_path / "old.h5").tissues == {"fat": 1.0}
+    mixed = {**same, 3: {"settings": {"tissues": {**tissues, "gland": 3.0}}}}
+    summaries, points = _cases(tmp_path / "mixed", mixed)
+    with pytest.raises(DatasetError, match=r"solved with 2 different tissue maps"):
+        build_dataset(summaries, points, tmp_path / "mixed.h5")
+    assert not (tmp_path / "mixed.h5").exists()
