@@ -87,7 +87,7 @@ class CaseRunner:
         self.mesh, self.cell_tags, self.facet_tags = read_mesh(mesh_path, self.comm)
         self.problem = GravityProblem(
             self.mesh, self.facet_tags, settings.discretisation, settings.fixed, settings.contact,
-            settings.self_contact, self.cell_tags, settings.tissues,
+            settings.self_contact, self.cell_tags, settings.tissues, settings.skin,
         )
         self.solver = NewtonSolver(self.problem, settings.petsc_options, settings.solver)
         self.setup_s = time.perf_counter() - start

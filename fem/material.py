@@ -56,6 +56,33 @@ class Penalty:
         return 0.5 * self.kappa * (jacobian(F) - 1) ** 2
 
 
+@dataclass(frozen=True, slots=True)
+class Membrane:
+    """An incompressible neo-Hookean membrane on a surface: the skin as a sheet bonded to it.
+
+    Per unit reference area, W = C1 t (I1_s + 1/J_s² − 3): the solid's law integrated over the
+    sheet's thickness t under plane stress (its free faces carry no normal stress), the
+    thickness stretch 1/J_s set by incompressibility. I1_s = tr C − N·C N is the in-plane
+    stretch invariant and J_s = |cof(F) N| the area stretch (Nanson's formula), with N the
+    surface's reference normal and F the solid's deformation gradient on it: the sheet takes
+    the in-plane deformation of the surface it is bonded to, and no bending.
+
+    Attributes:
+        C1: the membrane's material parameter (Pa).
+        thickness: t (m).
+    """
+
+    C1: ufl.core.expr.Expr
+    thickness: ufl.core.expr.Expr | float
+
+    def strain_energy(self, F: ufl.core.expr.Expr, N: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
+        """Strain energy per unit reference area of the surface with normal ``N``."""
+        C = F.T * F
+        in_plane = ufl.tr(C) - ufl.dot(N, C * N)
+        area = ufl.cofac(F) * N
+        return self.C1 * self.thickness * (in_plane + 1.0 / ufl.dot(area, area) - 3)
+
+
 def first_piola_kirchhoff(psi: ufl.core.expr.Expr, F: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
     """P = ∂ψ/∂F for a strain energy ψ written in terms of ``ufl.variable`` F."""
     return ufl.diff(psi, F)

@@ -11,7 +11,7 @@ import numpy as np
 from fem.contact import Contact, contact_from_mapping, resolve_obstacle
 from fem.exceptions import InvalidParameterError
 from fem.self_contact import SelfContact, self_contact_from_mapping
-from fem.tissues import Tissues, tissues_from_mapping
+from fem.tissues import SkinLayer, Tissues, skin_from_mapping, tissues_from_mapping
 from meshes.tags import Boundary
 
 STANDARD_GRAVITY = 9.81  # m/s², the paper's |g|
@@ -314,6 +314,8 @@ class SolverSettings:
         self_contact: the skin's contact with itself (None: it may pass through itself).
         tissues: each tissue's stiffness over the fat's (``material.tissues``), for meshes
             whose cells carry tissue tags.
+        skin: the skin as a membrane on the skin boundary (``material.skin``; None: none),
+            where the mesh's cells carry no skin tag.
     """
 
     discretisation: Discretisation = Discretisation()
@@ -326,6 +328,7 @@ class SolverSettings:
     contact: Contact | None = None
     self_contact: SelfContact | None = None
     tissues: Tissues = Tissues()
+    skin: SkinLayer | None = None
 
     def __post_init__(self) -> None:
         from fem.options import solver_options  # options imports exceptions only
@@ -355,6 +358,7 @@ class SolverSettings:
             self_contact=None if fe.get("self_contact") is None
             else self_contact_from_mapping(fe["self_contact"]),
             tissues=tissues_from_mapping(material.get("tissues")),
+            skin=skin_from_mapping(material.get("skin")),
         )
 
     def describe(self, defaults: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -374,4 +378,5 @@ class SolverSettings:
             "contact": None if self.contact is None else self.contact.as_mapping(),
             "self_contact": None if self.self_contact is None else self.self_contact.as_mapping(),
             "tissues": self.tissues.describe(),
+            "skin": None if self.skin is None else self.skin.describe(self.tissues),
         }

@@ -27,11 +27,11 @@ from fem.contact import Contact
 from fem.exceptions import InvalidParameterError, MeshError
 from fem.io import boundary_vertex_nodes, node_to_vertex_dof
 from fem.kinematics import deformation_gradient, jacobian
-from fem.material import Incompressible, NeoHookean, Penalty
+from fem.material import Incompressible, Membrane, NeoHookean, Penalty
 from fem.parameters import Discretisation, FixedBoundaries, Gravity, Material
 from fem.self_contact import SelfContact, SelfContactAssembler
 from fem.skin_surface import SkinSurface
-from fem.tissues import Tissues
+from fem.tissues import SkinLayer, Tissues
 from meshes.io import boundary_facets, geometry_nodes
 from meshes.tags import Boundary, Tissue
 
@@ -92,6 +92,13 @@ def strain_energy(
     return psi + Penalty(ratio * C1).strain_energy(F)
 
 
+def _has_skin_cells(mesh: Any, cell_tags: Any) -> bool:
+    """Whether any cell is tagged skin (on any process)."""
+    local = cell_tags is not None and bool(np.any(np.asarray(cell_tags.values)
+                                                  == int(Tissue.SKIN)))
+    return bool(mesh.comm.allreduce(local, op=MPI.LOR))
+
+
 def _stiffness_ratio(mesh: Any, cell_tags: Any, tissues: Tissues) -> fem.Function | None:
     """The cells' stiffness ratios as a DG0 field; None where all are 1 (one tissue, fat)."""
     if cell_tags is None:
@@ -128,6 +135,8 @@ class GravityProblem:
         cell_tags: cell tags with :class:`meshes.tags.Tissue` values (None: all fat).
         tissues: each tissue's stiffness over the fat's (:mod:`fem.tissues`; None: the
             defaults).
+        skin: the skin as a membrane on the skin boundary (None: none); left out, with a
+            note in the log, where the cell tags already hold skin cells.
     """
 
     def __init__(
@@ -140,6 +149,7 @@ class GravityProblem:
         self_contact: SelfContact | None = None,
         cell_tags: Any = None,
         tissues: Tissues | None = None,
+        skin: SkinLayer | None = None,
     ) -> None:
         check_mesh(mesh, facet_tags, fixed)
         self.mesh = mesh
@@ -155,7 +165,16 @@ class GravityProblem:
         self.C1 = fem.Constant(mesh, scalar(1.0))
         #: Each cell's stiffness over the fat's (a DG0 field), or None where every cell has
         #: the ratio 1: the homogeneous forms are kept.
-        self.stiffness_ratio = _stiffness_ratio(mesh, cell_tags, tissues or Tissues())
+        tissues = tissues or Tissues()
+        self.stiffness_ratio = _stiffness_ratio(mesh, cell_tags, tissues)
+        #: The skin membrane in force (None: none, or the mesh's skin cells carry the skin).
+        self.skin = None if skin is None or _has_skin_cells(mesh, cell_tags) else skin
+        if skin is not None and self.skin is None:
+            log.info("the mesh's cells carry the skin: no skin membrane is added")
+        self._skin_ratio = fem.Constant(mesh, scalar(tissues.ratio(Tissue.SKIN) if self.skin
+                                                  else 1.0))
+        self._skin_thickness = fem.Constant(mesh, scalar(self.skin.thickness if self.skin
+                                                         else 0.0))
         #: The local C1 (Pa) the strain energy and the pressure preconditioner take; the
         #: contact penalties take the fat's, :attr:`C1` (:mod:`fem.tissues`).
         self.local_C1 = self.C1 if self.stiffness_ratio is None \
@@ -226,6 +245,10 @@ class GravityProblem:
         self.J = jacobian(F)
         psi = strain_energy(F, p, self.local_C1, self.discretisation, self.kappa)
         potential = psi * dx - ufl.dot(self.body_force, u) * dx
+        if self.skin is not None:
+            membrane = Membrane(self._skin_ratio * self.C1, self._skin_thickness)
+            potential += membrane.strain_energy(F, ufl.FacetNormal(mesh)) \
+                * self.skin_measure()(int(Boundary.SKIN))
         if contact is not None:
             ds = self.skin_measure()
             x = ufl.SpatialCoordinate(mesh)

@@ -14,6 +14,12 @@ What reads C1, and which value it takes:
   value, since μ is the local shear modulus;
 * the contact penalties (:mod:`fem.contact`, :mod:`fem.self_contact`): the case's C1 (the
   fat's), so that their penetration scales with the sag of the bulk, as before.
+
+The skin is 1–2.5 mm thick and the cells 6–25 mm: a mesh rarely resolves it. Where its cells
+carry no skin tag, :class:`SkinLayer` carries it as a membrane on the ``skin`` boundary
+(:class:`fem.material.Membrane`: the skin's neo-Hookean law over its thickness, in plane
+stress), its C1 the skin's ratio times the fat's; where a segmentation labelled the skin's
+cells, they carry it and no membrane is added.
 """
 
 from __future__ import annotations
@@ -27,7 +33,7 @@ import numpy as np
 from fem.exceptions import InvalidParameterError
 from meshes.tags import Tissue
 
-__all__ = ["DEFAULT_RATIOS", "Tissues", "tissues_from_mapping"]
+__all__ = ["DEFAULT_RATIOS", "SkinLayer", "Tissues", "skin_from_mapping", "tissues_from_mapping"]
 
 #: The stiffness ratios to fat that apply where the config names none (docs/tissues.md gives
 #: each one's source). A tumour has none: its ratio varies too widely between lesions to
@@ -104,6 +110,44 @@ class Tissues:
         """The ratios in force, every tissue that has one (JSON-friendly)."""
         known = {**DEFAULT_RATIOS, **self.ratios}
         return {t.label: float(known[t]) for t in Tissue if t in known}
+
+
+@dataclass(frozen=True, slots=True)
+class SkinLayer:
+    """The skin as a membrane on the ``skin`` boundary (``material.skin``).
+
+    Attributes:
+        thickness: the skin's thickness, m (1–2.5 mm in the breast; docs/tissues.md).
+    """
+
+    thickness: float = 0.0015
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.thickness, (int, float)) and math.isfinite(self.thickness)
+                and 0.0 < self.thickness <= 0.01):
+            raise InvalidParameterError(
+                f"material.skin.thickness must be a number in (0, 0.01] m, got {self.thickness!r}")
+
+    def describe(self, tissues: Tissues) -> dict[str, float]:
+        """JSON-friendly: the thickness and the skin's ratio to the fat."""
+        return {"thickness": float(self.thickness), "ratio": tissues.ratio(Tissue.SKIN)}
+
+
+def skin_from_mapping(values: dict[str, Any] | None) -> SkinLayer | None:
+    """:class:`SkinLayer` from ``material.skin`` (None: no skin membrane), naming bad keys."""
+    if values is None:
+        return None
+    if not isinstance(values, dict):
+        raise InvalidParameterError(f"material.skin must be a mapping or null, got {values!r}")
+    unknown = sorted(set(values) - {"thickness"})
+    if unknown:
+        raise InvalidParameterError(f"unknown material.skin key(s): {', '.join(unknown)}; "
+                                    "known: thickness")
+    thickness = values.get("thickness", SkinLayer.thickness)
+    if isinstance(thickness, bool) or not isinstance(thickness, (int, float)):
+        raise InvalidParameterError(
+            f"material.skin.thickness must be a number in (0, 0.01] m, got {thickness!r}")
+    return SkinLayer(float(thickness))
 
 
 def tissues_from_mapping(values: dict[str, Any] | None) -> Tissues:
