@@ -16,7 +16,8 @@ SNAKEMAKE := $(VENV)/bin/snakemake --snakefile $(CURDIR)/Snakefile --directory $
 # Debian packages: dolfinx 0.5.2 (PETSc 3.18, MPI), h5py on the same HDF5, a fast BLAS for MUMPS,
 # the X/GL libraries the gmsh wheel links against, SLURM + munge for the cluster-profile test,
 # and Chromium for the viewer's browser test (driven by Playwright, pointed at this browser).
-APT_PACKAGES := python3-dolfinx python3-h5py libopenblas0-pthread python3-venv \
+APT_PACKAGES := python3-dolfinx python3-h5py python3-pygalmesh libopenblas0-pthread \
+	python3-venv \
 	libglu1-mesa libxcursor1 libxft2 libxinerama1 \
 	slurm-wlm munge \
 	chromium fonts-dejavu-core

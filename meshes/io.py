@@ -102,9 +102,43 @@ def write_tagged_mesh(mesh: Any, cell_tags: Any, facet_tags: Any, xdmf_path: str
             mesh.topology.create_connectivity(2, 3)
             xdmf.write_meshtags(cell_tags)
             xdmf.write_meshtags(facet_tags)
+        if comm.size == 1:
+            without_timestamps(tmp_xdmf.with_suffix(".h5"))
         for suffix in (".h5", ".xdmf"):  # the .xdmf last: it is what marks completion
             shutil.move(str(tmp_xdmf.with_suffix(suffix)), str(target.with_suffix(suffix)))
     log.info("wrote %s (%d cells)", target, mesh.topology.index_map(3).size_global)
+
+
+def without_timestamps(h5_path: str | Path) -> None:
+    """Rewrite an HDF5 file without its objects' modification times (same groups, data, attributes).
+
+    HDF5 stamps every dataset with the second it was written (dolfinx leaves the library's
+    default on), so two writes of one mesh differ in a few bytes; without the stamps the same
+    mesh gives the same file, byte for byte.
+    """
+    import h5py
+
+    source = Path(h5_path)
+    target = source.with_name(source.name + ".tmp")
+    untimed = h5py.h5p.create(h5py.h5p.GROUP_CREATE)
+    untimed.set_obj_track_times(False)
+
+    def copy(src: Any, dst: Any) -> None:
+        dst.attrs.update(dict(src.attrs))
+        for name, item in src.items():
+            if isinstance(item, h5py.Group):
+                h5py.h5g.create(dst.id, name.encode(), gcpl=untimed)
+                copy(item, dst[name])
+            else:
+                data = dst.create_dataset(name, data=item[()], track_times=False)
+                data.attrs.update(dict(item.attrs))
+
+    root = h5py.h5p.create(h5py.h5p.FILE_CREATE)
+    root.set_obj_track_times(False)
+    with h5py.File(source, "r") as src, h5py.File(
+            h5py.h5f.create(str(target).encode(), h5py.h5f.ACC_TRUNC, fcpl=root)) as dst:
+        copy(src, dst)
+    target.replace(source)
 
 
 GEOMETRY_DATASET = f"/Mesh/{MESH_NAME}/geometry"
