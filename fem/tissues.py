@@ -33,7 +33,8 @@ import numpy as np
 from fem.exceptions import InvalidParameterError
 from meshes.tags import Tissue
 
-__all__ = ["DEFAULT_RATIOS", "SkinLayer", "Tissues", "skin_from_mapping", "tissues_from_mapping"]
+__all__ = ["DEFAULT_RATIOS", "DEFAULT_SKIN_THICKNESS", "SkinLayer", "Tissues",
+           "skin_from_mapping", "tissues_from_mapping"]
 
 #: The stiffness ratios to fat that apply where the config names none (docs/tissues.md gives
 #: each one's source). A tumour has none: its ratio varies too widely between lesions to
@@ -112,6 +113,10 @@ class Tissues:
         return {t.label: float(known[t]) for t in Tissue if t in known}
 
 
+#: The skin's thickness where the config names none, m (docs/tissues.md).
+DEFAULT_SKIN_THICKNESS = 0.0015
+
+
 @dataclass(frozen=True, slots=True)
 class SkinLayer:
     """The skin as a membrane on the ``skin`` boundary (``material.skin``).
@@ -120,7 +125,7 @@ class SkinLayer:
         thickness: the skin's thickness, m (1–2.5 mm in the breast; docs/tissues.md).
     """
 
-    thickness: float = 0.0015
+    thickness: float = DEFAULT_SKIN_THICKNESS
 
     def __post_init__(self) -> None:
         if not (isinstance(self.thickness, (int, float)) and math.isfinite(self.thickness)
@@ -143,7 +148,7 @@ def skin_from_mapping(values: dict[str, Any] | None) -> SkinLayer | None:
     if unknown:
         raise InvalidParameterError(f"unknown material.skin key(s): {', '.join(unknown)}; "
                                     "known: thickness")
-    thickness = values.get("thickness", SkinLayer.thickness)
+    thickness = values.get("thickness", DEFAULT_SKIN_THICKNESS)
     if isinstance(thickness, bool) or not isinstance(thickness, (int, float)):
         raise InvalidParameterError(
             f"material.skin.thickness must be a number in (0, 0.01] m, got {thickness!r}")
