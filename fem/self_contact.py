@@ -54,6 +54,7 @@ from scipy.spatial import cKDTree
 
 from fem.exceptions import InvalidParameterError
 from fem.point_triangle import barycentric, signed_distance_derivatives
+from fem.rest_pairs import RestPairs, rest_treatment, surface_normals
 from fem.skin_surface import SkinSurface, triangle_radii
 
 log = logging.getLogger(__name__)
@@ -161,32 +162,6 @@ _SLACK = 0.3
 _STRETCH = 2.0
 
 
-#: A pair faces at rest (:meth:`SelfContactAssembler._rest_treatment`) when its normals are
-#: more than 90° apart in the reference configuration: neighbours on a smooth skin, even a
-#: strongly curved one, are nearer parallel; the two sides of a thin region, a sharp rim or a
-#: crease are not.
-_REST_FACING = 0.0
-#: How near (in bands) a node lies to a triangle at rest for their pair to be one at rest: a
-#: node on the other side of a thin region may slide that far along it and stay left out.
-_REST_REACH = 2.0
-#: Nearer a triangle's plane at rest than this fraction of the offset, a node touches it.
-_TOUCHING = 1e-3
-
-
-def _normals(x: np.ndarray, tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unit normals of the triangles and (area-weighted) of the nodes at ``x``."""
-    corners = x[tri]
-    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    length = np.linalg.norm(normal, axis=1)
-    normal = normal / np.where(length > 0, length, 1.0)[:, None]
-    weighted = np.repeat(normal * length[:, None], 3, axis=0)  # area-weighted, per corner
-    node_normal = np.column_stack([
-        np.bincount(tri.ravel(), weighted[:, k], minlength=len(x)) for k in range(3)
-    ])
-    node_normal /= np.maximum(np.linalg.norm(node_normal, axis=1), 1e-300)[:, None]
-    return normal, node_normal
-
-
 def _largest_turn(now: np.ndarray, before: np.ndarray) -> float:
     """The largest change |n − n₀| of unit normals (rows)."""
     return float(np.sqrt(np.max(np.sum((now - before) ** 2, axis=1), initial=0.0)))
@@ -196,43 +171,6 @@ def _smoothstep(s: np.ndarray) -> np.ndarray:
     """0 below 0, 1 above 1, and 3s² − 2s³ (C¹) between."""
     s = np.clip(s, 0.0, 1.0)
     return s * s * (3.0 - 2.0 * s)
-
-
-@dataclass(frozen=True, slots=True)
-class RestPairs:
-    """The skin's self-contact pairs in the reference configuration (at zero displacement).
-
-    Attributes:
-        treatment: ``settings.at_rest``, what became of them.
-        pairs: node–triangle pairs that would push at rest, without a treatment (their node
-            nearer a facing triangle's plane than the offset, or behind it within the band).
-        nodes: the skin nodes among them.
-        behind, in_front: of those pairs, the node behind the triangle (the other side of a
-            thin region or a sharp rim) or in front of it (a crease nearer than the offset).
-        deepest_mm: how far the deepest node lies behind a facing triangle (0 if none).
-        closest_gap_mm: the smallest gap in front (None if no pair lies in front).
-        deepest_at_m: reference position of the deepest node (None without pairs).
-        pairs_left: the pairs still pushing at rest after the treatment (0).
-    """
-
-    treatment: str
-    pairs: int
-    nodes: int
-    behind: int
-    in_front: int
-    deepest_mm: float
-    closest_gap_mm: float | None
-    deepest_at_m: list[float] | None
-    pairs_left: int
-
-    def to_json(self) -> dict[str, Any]:
-        """JSON-friendly fields."""
-        return {name: getattr(self, name) for name in self.__slots__}
-
-    @classmethod
-    def from_json(cls, values: dict[str, Any]) -> RestPairs:
-        """Inverse of :meth:`to_json`."""
-        return cls(**values)
 
 
 @dataclass
@@ -285,7 +223,7 @@ class SelfContactAssembler:
 
     def __post_init__(self) -> None:
         self._radii = self.surface.radii
-        self._rest_normal, self._rest_node_normal = _normals(self.surface.X,
+        self._rest_normal, self._rest_node_normal = surface_normals(self.surface.X,
                                                              self.surface.triangles)
         # triangles in classes of reference size, up to 1.5, 3 and more times the median, so
         # that the many small triangles of the fold are searched with their own short reach
@@ -349,7 +287,7 @@ class SelfContactAssembler:
         s, surf = self.settings, self.surface
         tri = surf.triangles
         corners = x[tri]  # (t, 3, 3)
-        normal, node_normal = _normals(x, tri)
+        normal, node_normal = surface_normals(x, tri)
         # a triangle stretched past _STRETCH times its reference size belongs to an iterate
         # no breast takes: it takes no part, and the search's reach stays the reference's
         usable = triangle_radii(corners) <= _STRETCH * self._radii
@@ -368,34 +306,12 @@ class SelfContactAssembler:
                         triangle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Which pairs take part, and the offset each is measured from (m).
 
-        A pair is one *at rest* when, in the reference configuration, the node lies within
-        :data:`_REST_REACH` bands of the triangle, nearer its plane than ``offset`` (or behind
-        it), and their normals are more than 90° apart: the pair would push at rest, and no
-        smooth skin has such neighbours. The test is the pair's own, in reference
-        coordinates, so it is the same at every iterate: a node that slides along the other
-        side of a thin region stays left out. Behind the triangle at rest, the node is the
-        other side of the tissue (a thin region, a sharp rim), which no contact separates;
-        in front, the two sides of a crease that the surface was made with, which may close
-        no further than they are.
+        :func:`fem.rest_pairs.rest_treatment` of the reference skin: the pairs at rest left
+        out, or measured from their rest gap (``settings.at_rest``).
         """
         s, surf = self.settings, self.surface
-        offset = np.full(len(node), s.offset)
-        if not len(node) or s.at_rest == "none":
-            return np.ones(len(node), dtype=bool), offset
-        X, tri = surf.X, surf.triangles
-        rest_normal = self._rest_normal[triangle]
-        g0 = np.einsum("ij,ij->i", rest_normal, X[node] - X[tri[triangle, 0]])
-        facing0 = -np.einsum("ij,ij->i", self._rest_node_normal[node], rest_normal)
-        d0 = np.min(np.linalg.norm(X[tri[triangle]] - X[node][:, None], axis=2), axis=1)
-        at_rest = (g0 < s.offset) & (facing0 > _REST_FACING) & (d0 <= _REST_REACH * s.band)
-        # touching at rest (|g0| at rounding's scale, as two bodies of one mesh do) is in front
-        behind = at_rest & (g0 < -_TOUCHING * s.offset)
-        if s.at_rest == "exclude":
-            return ~at_rest, offset
-        measured = at_rest if s.at_rest == "rest_gap" else at_rest & ~behind
-        offset[measured] = g0[measured]
-        kept = np.ones(len(node), dtype=bool) if s.at_rest == "rest_gap" else ~behind
-        return kept, offset
+        return rest_treatment(s.at_rest, s.offset, s.band, surf.X, surf.triangles,
+                              self._rest_normal, self._rest_node_normal, node, triangle)
 
     def _find_rest_pairs(self) -> RestPairs:
         """The pairs that would push at rest (the reference skin), and those left (none).
@@ -414,19 +330,7 @@ class SelfContactAssembler:
         self._last = self._last_x = self._verlet = None
         self.begin_solve()
         self.reset_counters()
-        behind = g0 < -_TOUCHING * s.offset
-        deepest = node[np.argmin(g0)] if len(g0) else None
-        return RestPairs(
-            treatment=s.at_rest,
-            pairs=int(len(node)),
-            nodes=int(len(np.unique(node))),
-            behind=int(behind.sum()),
-            in_front=int((~behind).sum()),
-            deepest_mm=1e3 * float(max(0.0, -g0.min(initial=0.0))),
-            closest_gap_mm=1e3 * float(g0[~behind].min()) if np.any(~behind) else None,
-            deepest_at_m=None if deepest is None else X[deepest].tolist(),
-            pairs_left=int(len(left.slaves)),
-        )
+        return RestPairs.found(s.at_rest, s.offset, X, node, g0, int(len(left.slaves)))
 
     def _candidates(self, x: np.ndarray, node_normal: np.ndarray,
                     normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -16,7 +16,8 @@ from pathlib import Path
 from typing import Any
 
 from fem.parameters import Discretisation
-from fem.self_contact import RestPairs, SelfContact, SelfContactAssembler
+from fem.rest_pairs import RestPairs
+from fem.self_contact import SelfContact, SelfContactAssembler
 from fem.skin_surface import SkinSurface
 
 __all__ = ["MeshRestPairs", "rest_pairs", "rest_pairs_of_mesh"]
