@@ -9,9 +9,35 @@ and dolfinx facet and cell tags.
 from __future__ import annotations
 
 from enum import IntEnum
+from typing import Any
 
 
-class Boundary(IntEnum):
+class _Named:
+    """Tags looked up by their lower-case names (:class:`Boundary`, :class:`Tissue`)."""
+
+    name: str
+
+    @property
+    def label(self) -> str:
+        """Lower-case name used in configs, files and gmsh physical groups."""
+        return self.name.lower()
+
+    @classmethod
+    def from_label(cls, label: str) -> Any:
+        """Look a tag up by its lower-case name.
+
+        Raises:
+            ValueError: if ``label`` names none.
+        """
+        try:
+            return cls[str(label).upper()]  # type: ignore[index]
+        except KeyError:
+            names = ", ".join(t.label for t in cls)  # type: ignore[attr-defined]
+            kind = cls.__name__.lower()  # what a tag names: boundary, tissue
+            raise ValueError(f"unknown {kind} {label!r}; expected one of: {names}") from None
+
+
+class Boundary(_Named, IntEnum):
     """Named boundary surfaces of the breast domain (facet tag values)."""
 
     RIB = 1
@@ -27,26 +53,8 @@ class Boundary(IntEnum):
     AXILLA = 6
     """Lateral cut towards the axilla."""
 
-    @property
-    def label(self) -> str:
-        """Lower-case name used in configs, files and gmsh physical groups."""
-        return self.name.lower()
 
-    @classmethod
-    def from_label(cls, label: str) -> Boundary:
-        """Look a boundary up by its lower-case name.
-
-        Raises:
-            ValueError: if ``label`` names no boundary.
-        """
-        try:
-            return cls[label.upper()]
-        except KeyError:
-            names = ", ".join(b.label for b in cls)
-            raise ValueError(f"unknown boundary {label!r}; expected one of: {names}") from None
-
-
-class Tissue(IntEnum):
+class Tissue(_Named, IntEnum):
     """The breast's tissues (cell tag values); a homogeneous breast is all fat."""
 
     FAT = 1
@@ -57,24 +65,6 @@ class Tissue(IntEnum):
     """The skin, where a mesh resolves it as cells."""
     TUMOUR = 4
     """A lesion."""
-
-    @property
-    def label(self) -> str:
-        """Lower-case name used in configs and files."""
-        return self.name.lower()
-
-    @classmethod
-    def from_label(cls, label: str) -> Tissue:
-        """Look a tissue up by its lower-case name.
-
-        Raises:
-            ValueError: if ``label`` names no tissue.
-        """
-        try:
-            return cls[str(label).upper()]
-        except KeyError:
-            names = ", ".join(t.label for t in cls)
-            raise ValueError(f"unknown tissue {label!r}; expected one of: {names}") from None
 
 
 TISSUE = int(Tissue.FAT)

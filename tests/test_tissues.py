@@ -14,6 +14,7 @@ from __future__ import annotations
 import re
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -69,22 +70,35 @@ def test_a_tumour_without_a_ratio_and_an_unknown_tag_are_named() -> None:
         Tissues().cell_ratios(np.array([1, 7, 7]))
 
 
+def _tag_column(mesh: Any, length: float, end: int | None) -> Any:
+    """A column's facet tags: x = 0 the rib, y = 0 and z = 0 symmetry rollers, the rest skin.
+
+    ``end``: the boundary of the far end x = length instead of skin (None: skin).
+    """
+    from dolfinx import mesh as dmesh
+
+    from meshes.tags import Boundary
+
+    mesh.topology.create_connectivity(2, 3)
+    exterior = dmesh.exterior_facet_indices(mesh.topology)
+    values = np.full(len(exterior), int(Boundary.SKIN), dtype=np.int32)
+    planes = [(int(Boundary.RIB), 0, 0.0), (int(Boundary.STERNAL), 1, 0.0),
+              (int(Boundary.CAUDAL), 2, 0.0)] + ([] if end is None else [(end, 0, length)])
+    for value, axis, at in planes:
+        on = dmesh.locate_entities_boundary(mesh, 2, lambda p, a=axis, c=at: np.isclose(p[a], c))
+        values[np.isin(exterior, on)] = value
+    return dmesh.meshtags(mesh, 2, exterior, values)
+
+
 def _column(length: float, width: float, n: int) -> tuple:
     """A column along x, clamped in x at x = 0, on symmetry rollers y = 0 and z = 0."""
     from dolfinx import mesh as dmesh
     from mpi4py import MPI
 
-    from meshes.tags import Boundary
 
     mesh = dmesh.create_box(MPI.COMM_WORLD, [np.zeros(3), np.array([length, width, width])],
                             [n, 2, 2], dmesh.CellType.tetrahedron)
-    mesh.topology.create_connectivity(2, 3)
-    exterior = dmesh.exterior_facet_indices(mesh.topology)
-    values = np.full(len(exterior), int(Boundary.SKIN), dtype=np.int32)
-    for boundary, axis in ((Boundary.RIB, 0), (Boundary.STERNAL, 1), (Boundary.CAUDAL, 2)):
-        on = dmesh.locate_entities_boundary(mesh, 2, lambda p, a=axis: np.isclose(p[a], 0.0))
-        values[np.isin(exterior, on)] = int(boundary)
-    facets = dmesh.meshtags(mesh, 2, exterior, values)
+    facets = _tag_column(mesh, length, None)
     cells = np.arange(mesh.topology.index_map(3).size_local, dtype=np.int32)
     centre = dmesh.compute_midpoints(mesh, 3, cells)[:, 0]
     tissue = np.where(centre < length / 2, int(Tissue.FAT), int(Tissue.GLAND)).astype(np.int32)
@@ -217,16 +231,8 @@ def _skinned_column(length: float, width: float, skin: float, resolved: bool) ->
             s = x[:, axis].copy()
             x[:, axis] = np.where(s <= inner + 1e-12, s * (width - skin) / inner,
                                   width - skin + (s - inner) * skin / (width - inner))
-    mesh.topology.create_connectivity(2, 3)
-    exterior = dmesh.exterior_facet_indices(mesh.topology)
-    values = np.full(len(exterior), int(Boundary.SKIN), dtype=np.int32)
-    for boundary, axis in ((Boundary.RIB, 0), (Boundary.STERNAL, 1), (Boundary.CAUDAL, 2)):
-        on = dmesh.locate_entities_boundary(mesh, 2, lambda p, a=axis: np.isclose(p[a], 0.0))
-        values[np.isin(exterior, on)] = int(boundary)
     # the far end is a free cut, no skin: only the column's sides are
-    end = dmesh.locate_entities_boundary(mesh, 2, lambda p: np.isclose(p[0], length))
-    values[np.isin(exterior, end)] = int(Boundary.AXILLA)
-    facets = dmesh.meshtags(mesh, 2, exterior, values)
+    facets = _tag_column(mesh, length, int(Boundary.AXILLA))
     cells = np.arange(mesh.topology.index_map(3).size_local, dtype=np.int32)
     centre = dmesh.compute_midpoints(mesh, 3, cells)
     in_skin = resolved & ((centre[:, 1] > width - skin) | (centre[:, 2] > width - skin))
