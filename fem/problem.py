@@ -163,9 +163,9 @@ class GravityProblem:
 
         scalar = PETSc.ScalarType
         self.C1 = fem.Constant(mesh, scalar(1.0))
+        tissues = tissues or Tissues()
         #: Each cell's stiffness over the fat's (a DG0 field), or None where every cell has
         #: the ratio 1: the homogeneous forms are kept.
-        tissues = tissues or Tissues()
         self.stiffness_ratio = _stiffness_ratio(mesh, cell_tags, tissues)
         #: The skin membrane in force (None: none, or the mesh's skin cells carry the skin).
         self.skin = None if skin is None or _has_skin_cells(mesh, cell_tags) else skin

@@ -249,12 +249,12 @@ class SelfContactAssembler:
             return self._last  # the tangent at the residual's state
         start = time.perf_counter()
         tri = surf.triangles
-        node, triangle, beta, facing = self._facing(x)
+        node, triangle, plane_gap, beta, facing = self._facing(x)
         # the pairs that faced each other within reach at rest: left out, or measured from
         # their rest gap (settings.at_rest)
         kept, offset = self._rest_treatment(node, triangle)
-        node, triangle, beta, facing, offset = (
-            a[kept] for a in (node, triangle, beta, facing, offset))
+        node, triangle, plane_gap, beta, facing, offset = (
+            a[kept] for a in (node, triangle, plane_gap, beta, facing, offset))
         # A node's candidates share it by a partition of unity over the triangles its
         # projection falls on, fading out over edge_taper past a triangle's edge and as the
         # normals turn from facing each other to the facing limit: the force is continuous
@@ -264,14 +264,15 @@ class SelfContactAssembler:
             * _smoothstep((facing - s.facing) / (0.5 * (1.0 - s.facing)))
         total = np.bincount(node, share, minlength=len(x))
         share = share / np.maximum(total[node], 1.0)
+        # the kernel for the active pairs only (at rest, a pair measured from its rest gap has
+        # plane_gap equal to it, bit for bit: the same arithmetic on the same coordinates)
+        active = plane_gap < offset
+        node, triangle, offset = node[active], triangle[active], offset[active]
+        share = self._hold(node * len(tri) + triangle, share[active])
         g, grad, hess = signed_distance_derivatives(
             x[node], *(x[tri[triangle, k]] for k in range(3))
         )
-        active = g < offset
-        node, triangle, offset = node[active], triangle[active], offset[active]
-        share = self._hold(node * len(tri) + triangle, share[active])
-        result = SelfContactState(node, triangle, share, g[active] - offset, grad[active],
-                                  hess[active], offset)
+        result = SelfContactState(node, triangle, share, g - offset, grad, hess, offset)
         self.seconds += time.perf_counter() - start
         self.evaluations += 1
         self._last, self._last_x = result, x
@@ -281,8 +282,9 @@ class SelfContactAssembler:
         """The node–triangle pairs of the skin at ``x`` that may touch, and how.
 
         A node within ``band`` of a facing triangle's plane, its projection on the triangle or
-        within ``edge_taper`` past its edge. Returns ``(node, triangle, beta, facing)``: beta
-        the projection's smallest barycentric coordinate, facing −n_node · n_triangle.
+        within ``edge_taper`` past its edge. Returns ``(node, triangle, gap, beta, facing)``:
+        gap the node's signed distance from the triangle's plane, beta the projection's
+        smallest barycentric coordinate, facing −n_node · n_triangle.
         """
         s, surf = self.settings, self.surface
         tri = surf.triangles
@@ -297,10 +299,10 @@ class SelfContactAssembler:
         node, triangle, facing = node[keep], triangle[keep], facing[keep]
         gap = np.einsum("ij,ij->i", normal[triangle], x[node] - corners[triangle, 0])
         near = np.abs(gap) <= s.band  # the cheap test first
-        node, triangle, facing = node[near], triangle[near], facing[near]
+        node, triangle, gap, facing = node[near], triangle[near], gap[near], facing[near]
         beta = barycentric(x[node], *(corners[triangle, k] for k in range(3))).min(axis=1)
         near = beta > -s.edge_taper
-        return node[near], triangle[near], beta[near], facing[near]
+        return node[near], triangle[near], gap[near], beta[near], facing[near]
 
     def _rest_treatment(self, node: np.ndarray,
                         triangle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -320,10 +322,8 @@ class SelfContactAssembler:
         :meth:`_rest_treatment`; the search's counters start afresh afterwards.
         """
         s, surf = self.settings, self.surface
-        X, tri = surf.X, surf.triangles
-        node, triangle, _, _ = self._facing(X)
-        normal = self._rest_normal[triangle]
-        g0 = np.einsum("ij,ij->i", normal, X[node] - X[tri[triangle, 0]])
+        X = surf.X
+        node, _, g0, _, _ = self._facing(X)
         pushing = g0 < s.offset
         node, g0 = node[pushing], g0[pushing]
         left = self.pairs(np.zeros(int(surf.dofs.max()) + 1 if surf.dofs.size else 0))
