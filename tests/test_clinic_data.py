@@ -263,6 +263,29 @@ def image_section(path: Path, **extra: object) -> dict:
                       "chest_label": PECTORAL, **extra}}
 
 
+def tissue_section(path: Path, **extra: object) -> dict:
+    """The phantom's mesh section with its fat, gland, skin and tumour labels as tissues."""
+    from meshes.phantom import SKIN, TISSUE_LABELS
+
+    section = image_section(path, side="left", tissues=TISSUE_LABELS, **extra)
+    section["image"]["breast_labels"] = [*BREAST_LABELS, SKIN]
+    section["size"] = {"global_size": 0.01}
+    return section
+
+
+def labelled_tissue_ml(path: Path) -> dict[str, float]:
+    """Each tissue's labelled volume in the phantom's image (ml), fat's aside."""
+    import SimpleITK as sitk
+
+    from meshes.phantom import TISSUE_LABELS
+
+    voxels = sitk.ReadImage(str(path))
+    labels = sitk.GetArrayViewFromImage(voxels)
+    voxel_ml = float(np.prod(voxels.GetSpacing())) / 1e3
+    return {name: voxel_ml * float(np.isin(labels, values).sum())
+            for name, values in TISSUE_LABELS.items()}
+
+
 @pytest.mark.parametrize("suffix", [".nii.gz", ".nrrd", ".mha"])
 def test_a_label_volume_meshes_with_the_chest_label_as_the_rib(tmp_path: Path,
                                                                suffix: str) -> None:

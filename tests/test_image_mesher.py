@@ -14,18 +14,14 @@ import pytest
 from meshes.config import MeshConfig, make_mesh
 from meshes.exceptions import GeometryError
 from meshes.image import ImageSpec
-from meshes.phantom import BREAST_LABELS, SKIN, TISSUE_LABELS
 from meshes.tags import Tissue
-from tests.test_clinic_data import image_section, phantom
+from tests.test_clinic_data import image_section, labelled_tissue_ml, phantom, tissue_section
 
 pytestmark = pytest.mark.unit
 
 
-def tissue_section(image: Path, **extra: object) -> dict:
-    section = image_section(image, side="left", tissues=TISSUE_LABELS, mesher="cgal", **extra)
-    section["image"]["breast_labels"] = [*BREAST_LABELS, SKIN]
-    section["size"] = {"global_size": 0.01}
-    return section
+def cgal_section(image: Path, **extra: object) -> dict:
+    return tissue_section(image, mesher="cgal", **extra)
 
 
 def test_cgal_meshes_a_tissue_per_label_and_two_runs_write_the_same_file(tmp_path: Path) -> None:
@@ -34,12 +30,10 @@ def test_cgal_meshes_a_tissue_per_label_and_two_runs_write_the_same_file(tmp_pat
     Each tissue's meshed volume is near its labelled one, and the mesh file (cells, tags and
     points) is the same, byte for byte, on a second run.
     """
-    import SimpleITK as sitk
-
     from meshes.io import read_mesh
 
     image = phantom(tmp_path, skin_mm=3.0)
-    config = MeshConfig.from_mapping(tissue_section(image))
+    config = MeshConfig.from_mapping(cgal_section(image))
     assert config.image.mesher == "cgal"
     reports = [make_mesh(config, tmp_path / run / "mesh.xdmf", tmp_path / run / "q.json",
                          tmp_path / run / "m.png")
@@ -47,11 +41,7 @@ def test_cgal_meshes_a_tissue_per_label_and_two_runs_write_the_same_file(tmp_pat
     report = reports[0]
     info = report["input"]
     assert info["mesher"] == "cgal"
-    voxels = sitk.ReadImage(str(image))
-    labels = sitk.GetArrayViewFromImage(voxels)
-    voxel_ml = float(np.prod(voxels.GetSpacing())) / 1e3
-    labelled = {name: voxel_ml * float(np.isin(labels, values).sum())
-                for name, values in TISSUE_LABELS.items()}
+    labelled = labelled_tissue_ml(image)
     meshed = report["tissue_volume_ml"]
     assert set(meshed) == {"fat", "gland", "skin", "tumour"}
     for name in ("gland", "skin"):
