@@ -52,3 +52,7 @@ class NoRibFacetsError(MeshInputError):
 
 class SurfaceRuleError(MeshInputError):
     """A boundary rule is inconsistent with the input (unknown group, facets matched twice)."""
+
+
+class SeveralBodiesError(MeshInputError):
+    """A surface or volume mesh holds more than one body (apart, nested or crossing)."""

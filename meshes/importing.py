@@ -19,7 +19,8 @@ same way; every boundary facet no rule selects is skin.
 
 Every kind of broken input stops with a typed error from :mod:`meshes.exceptions`
 that names the problem: implausible size for the declared units, surface not
-closed, self-intersecting, degenerate or inverted elements, no rib facets.
+closed, more than one body (:mod:`meshes.bodies`), self-intersecting, degenerate or inverted
+elements, no rib facets.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from meshes.bodies import check_one_body
 from meshes.boundary_rules import (
     POSTERIOR,
     BoundaryRule,
@@ -252,6 +254,7 @@ def read_volume(spec: ImportSpec, size: MeshSize) -> InputVolume:
         check_face_manifold(tets, what)
         faces = exterior_faces(tets)
         check_closed(x, faces, f"the boundary of {spec.path}")
+        check_one_body(x, faces, what, cells=tets)
         info["quality_floor"] = check_dihedral_floor(x, tets, what, strict=False)
         info["kind"] = "volume mesh"
         groups = face_groups(mesh, faces)
@@ -285,7 +288,9 @@ def fill_checked_surface(x: np.ndarray, tris: np.ndarray, size: MeshSize, units:
         info: the quality report's input record, filled in.
         remesh: remesh the surface (the floor is then strict: a remesh is the import's own
             work; kept triangles bound what the optimisers can do, so there it warns).
-        crossings: check that no two triangles cross (a marching-cubes surface cannot).
+        crossings: check that the surface bounds one body and that no two triangles cross (a
+            label volume's surface is one piece, its holes filled, by marching cubes, which
+            crosses nothing).
         **fill: passed to :func:`meshes.remesh.fill_surface` (envelopes, reparametrise).
 
     Returns:
@@ -297,6 +302,7 @@ def fill_checked_surface(x: np.ndarray, tris: np.ndarray, size: MeshSize, units:
     check_closed(x, tris, what)
     info["volume_ml"] = check_plausible_volume(enclosed_volume(x, tris), units, what)
     if crossings:
+        check_one_body(x, tris, what)
         check_no_self_intersections(x, tris, what)
     info["surface_triangles"] = int(len(tris))
     result = fill_surface(x, tris, size, remesh, **fill)

@@ -283,6 +283,20 @@ def _two_boxes_crossing(path: Path) -> None:
     write_stl(path, np.vstack([x, x + [0.02, 0.05, 0.05]]), np.vstack([tris, tris + 8]))
 
 
+def _two_spheres(path: Path, apart: float) -> None:
+    """Two closed spheres of 50 mm radius, ``apart`` metres between centres, in one OBJ.
+
+    At 0.06 m they cross as mirror images (their triangles meet along edges), at 0.2 m not.
+    """
+    import trimesh
+
+    ball = trimesh.creation.icosphere(subdivisions=2, radius=0.05)
+    x, tris = np.asarray(ball.vertices), np.asarray(ball.faces)
+    both = trimesh.Trimesh(np.vstack([x, x + [apart, 0.0, 0.0]]), np.vstack([tris, tris + len(x)]),
+                           process=False)
+    both.export(str(path.with_suffix(".obj")))
+
+
 def _inverted_tetrahedra(path: Path) -> None:
     """The box as tetrahedra about its centre, three of them inside out (a .vtu volume mesh)."""
     import meshio
@@ -320,7 +334,16 @@ FILE_PROBES: dict[str, Callable[[Path], Outcome]] = {
         rib={"plane": {"point": [-0.1, 0, 0], "normal": [1, 0, 0]}, "distance": 0.001},
     ),
     "a surface with a hole": file_probe(_open_surface, r"not a closed surface"),
-    "two surfaces through each other": file_probe(_two_boxes_crossing, r"intersect"),
+    "two surfaces through each other": file_probe(
+        _two_boxes_crossing, r"holds 2 closed bodies.*?cross each other near \(\S+, \S+, \S+\) mm"),
+    "two separate closed bodies in one OBJ": file_probe(  # the rib: the far sphere's back
+        lambda p: _two_spheres(p, 0.2), r"holds 2 closed bodies, not one.*?they lie apart",
+        suffix=".obj", rib={"plane": {"point": [0.25, 0, 0], "normal": [1, 0, 0]},
+                            "distance": 0.01}),
+    "two spheres crossing along their edges": file_probe(
+        lambda p: _two_spheres(p, 0.06),
+        r"holds 2 closed bodies.*?cross each other near \(\S+, \S+, \S+\) mm", suffix=".obj",
+        rib={"plane": {"point": [0.11, 0, 0], "normal": [1, 0, 0]}, "distance": 0.01}),
     "a chest wall anterior of the breast, no orientation": file_probe(
         lambda p: write_stl(p, *box_surface()), r"chest wall \(the rib facets\) lies [0-9.]+ mm "
         r"anterior of the breast's centroid",

@@ -227,15 +227,17 @@ def test_surface_not_manifold(tmp_path: Path) -> None:
 
 def test_surface_self_intersecting(tmp_path: Path) -> None:
     x, tris = box_mesh(2)
-    # two overlapping copies of the box: each closed, together crossing each other
-    shifted = x + np.array([0.02, 0.05, 0.04])
-    both = write_surface(
-        tmp_path / "two.stl", np.vstack([x, shifted]), np.vstack([tris, tris + len(x)])
-    )
+    # one body whose surface crosses itself: the node nearest the middle of the back (x = 0)
+    # pulled through the front (x = 5 cm), its triangles a spike through the front's
+    # (two bodies crossing are refused as two bodies: tests/test_bodies.py)
+    middle = np.argmin(np.linalg.norm(x - [0.0, 0.1, 0.075], axis=1))
+    x = x.copy()
+    x[middle] = [0.08, 0.1, 0.075]
+    spiked = write_surface(tmp_path / "spiked.stl", x, tris)
     with pytest.raises(
         SelfIntersectionError, match=r"intersects itself: \d+ pair\(s\) of triangles cross"
     ):
-        write_imported_mesh(spec(both), SIZE, tmp_path / "m.xdmf")
+        write_imported_mesh(spec(spiked), SIZE, tmp_path / "m.xdmf")
 
 
 def test_wrong_units_millimetres_read_as_metres(tmp_path: Path) -> None:
