@@ -86,11 +86,12 @@ reproduce: setup
 		$(SNAKEMAKE) -j$(JOBS) $(PRESET_ARGS); rest=$$?; exit $$(( first || rest )))
 
 # ruff (with the docstring rules of pyproject.toml), the import-linter contracts (the layers
-# import downward only) and Snakemake's own lint of the workflow.
+# import downward only) and Snakemake's own lint of the workflow (as a dry run, -n: it writes no
+# run log, and may look beside a run working here, which any other Snakemake call may not).
 lint: setup
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/lint-imports
-	$(VENV)/bin/snakemake --lint
+	$(VENV)/bin/snakemake --lint -n
 
 # Re-resolve the pins from requirements.in (needs network); review the diff. Lines marked
 # "# NODEPS" are installed without dependency resolution (see requirements.in).

@@ -7,6 +7,10 @@ from snakemake.utils import min_version
 min_version("9.0")
 
 
+# First: a run refused by the working directory's run lock writes nothing there.
+include: "workflow/rules/workdir.smk"
+
+
 # config.yaml is the study; a --configfile replaces it rather than being merged into it, so that
 # a config such as tests/config.yaml stands alone. A syntax error is reported with its line.
 if not workflow.overwrite_configfiles:

@@ -4,12 +4,11 @@ import re
 from collections import namedtuple
 
 from snakemake.exceptions import WorkflowError
-from snakemake.logging import logger
 
 from studies.architecture import RepeatPlan
 from studies.config import ConfigError, WorkflowConfig
 from studies.fe_variants import MESH_ID_PATTERN, VARIANT_ID_PATTERN, Variant
-from studies.workdir import RunLock, age_refused
+from studies.workdir import age_refused
 from fem.sweep import ANGLE_PATTERN, C1_PATTERN
 
 # Every job's software under --use-conda (the env file says how it relates to `make setup`).
@@ -28,21 +27,6 @@ except ConfigError as err:
 # that still reads it agrees with CONFIG; the rules take their params from CONFIG.
 config.clear()
 config.update(CONFIG.section())
-
-# One run at a time in a working directory (studies.workdir): every run takes the kernel lock,
-# and the run that gets it clears the Snakemake locks a killed run left (no --unlock needed).
-# A dry run that finds it taken goes on (it writes nothing); a real run stops before any job.
-RUN_LOCK = RunLock()
-if workflow.is_main_process:
-    if RUN_LOCK.acquire():
-        RUN_LOCK.clear_stale_snakemake_locks()
-    else:
-        logger.warning(RUN_LOCK.busy_message())
-
-
-onstart:
-    if workflow.is_main_process and not RUN_LOCK.acquire():
-        raise WorkflowError(RUN_LOCK.busy_message())
 
 
 CASE_DIR = "results/cases/c1={c1}_phi={phi}_theta={theta}"
