@@ -29,3 +29,18 @@ def read_config_file(path: str | Path) -> dict[str, Any]:
         return configfile.read_config_file(path)
     except configfile.ConfigFileError as err:
         raise ConfigFileError(str(err)) from None
+
+
+def check_expansion(data: Any, source: str | Path) -> None:
+    """Refuse a config whose YAML aliases expand it beyond bounds (an alias bomb).
+
+    :func:`meshes.configfile.check_expansion`, for a mapping read elsewhere (Snakemake reads a
+    ``--configfile`` itself).
+
+    Raises:
+        ConfigFileError: naming the key whose value expands beyond the limit.
+    """
+    try:
+        configfile.check_expansion(data, source)
+    except configfile.ConfigFileError as err:
+        raise ConfigFileError(str(err)) from None

@@ -29,7 +29,7 @@ import jsonschema
 import numpy as np
 from jsonschema import validators
 
-from fem.configfile import ConfigFileError
+from fem.configfile import ConfigFileError, check_expansion
 from fem.configfile import read_config_file as fem_read_config_file
 from fem.contact import resolve_obstacle
 from fem.directions import direction_keys
@@ -95,6 +95,10 @@ def validated(config: Mapping[str, Any], schema_path: str | Path = SCHEMA_PATH) 
     Raises:
         ConfigError: listing every violation, each as ``dotted.key: message``.
     """
+    try:  # before anything walks it: an alias bomb walked never ends
+        check_expansion(config, "the config")
+    except ConfigFileError as err:
+        raise ConfigError(str(err)) from None
     schema = load_schema(schema_path)
     problems = schema_errors(config, schema)
     if problems:

@@ -156,10 +156,10 @@ def _batches(cases: list[Case], jobs: int) -> list[list[Case]]:
 def run(config_path: Path, ns: tuple[int, ...], n_test: int, c1: tuple[float, ...], out: Path,
         jobs: int = 2) -> DirectionDensity:
     """Solve, train and compare every design (see the module's docstring)."""
-    from studies.config import WorkflowConfig
+    from studies.config import WorkflowConfig, read_config_file
 
     start = time.perf_counter()
-    raw = yaml.safe_load(config_path.read_text())
+    raw = read_config_file(config_path)
     config = WorkflowConfig.from_mapping(raw)
     out.mkdir(parents=True, exist_ok=True)
     (out / "config.yaml").write_text(yaml.safe_dump(raw))

@@ -118,6 +118,17 @@ def config_probe(config: dict[str, Any] | str, text: str) -> Callable[[Path], Ou
     return probe
 
 
+def alias_bomb(mapping: bool = False) -> str:
+    """A ``sweep`` of nine anchors, each ten aliases of the one before (a billion laughs)."""
+    lines = []
+    for i in range(9):
+        items = ["lol"] * 10 if i == 0 else [f"*a{i - 1}"] * 10
+        body = ("{" + ", ".join(f"k{j}: {v}" for j, v in enumerate(items)) + "}" if mapping
+                else "[" + ", ".join(items) + "]")
+        lines.append(f"  a{i}: &a{i} {body}\n")
+    return "sweep:\n" + "".join(lines)
+
+
 CONFIG_PROBES: dict[str, Callable[[Path], Outcome]] = {
     "C1 list item below its bound": config_probe(
         config_with(sweep__C1_kPa=[1.0, -2.0]), r"sweep\.C1_kPa\.1: -2\.0 is less than"
@@ -173,6 +184,10 @@ CONFIG_PROBES: dict[str, Callable[[Path], Outcome]] = {
         "sweep:\n  C1_kPa: [1.0, 5.0\n  phi_deg: [0.0]\n", r"YAML syntax error at line 3, column"
     ),
     "a config that is a list": config_probe("- mesh\n- fe\n", r"a config file is a mapping"),
+    "a YAML alias bomb": config_probe(alias_bomb(), r"sweep\.a4 expands to more than 100000"),
+    "a YAML alias bomb given as --configfile": config_probe(
+        config_with(sweep=yaml.safe_load(alias_bomb())["sweep"]),
+        r"sweep\.a4 expands to more than 100000"),
     "a YAML tag that would run a command": config_probe(
         'sweep: !!python/object/apply:os.system ["touch SENTINEL"]\n',
         r"could not determine a constructor for the tag",
@@ -665,6 +680,23 @@ def workdir_probe(workdir: Path) -> Outcome:
     return expect(run, r"WORKDIR=\S+ is a file, not a folder to work in")
 
 
+def alias_bomb_make_probe(workdir: Path) -> Outcome:
+    """``make reproduce CONFIG=<a bomb of mappings>``: refused by the config check it runs first.
+
+    Snakemake merges the mappings of a ``--configfile`` itself, every copy, before the Snakefile
+    is read: only the check before it can stop such a file.
+    """
+    bomb = workdir / "bomb.yaml"
+    bomb.write_text(alias_bomb(mapping=True))
+    run = subprocess.run(["make", "-s", "-C", str(REPO), "reproduce", f"CONFIG={bomb}",
+                          f"WORKDIR={workdir / 'run'}"], capture_output=True, text=True,
+                         timeout=120)
+    outcome = expect(run, r"bomb\.yaml: sweep\.a4 expands to more than 100000")
+    if outcome.passed and (workdir / "run").exists():
+        return Outcome(False, "the run's working directory was made")
+    return outcome
+
+
 # -- running -------------------------------------------------------------------------------
 
 
@@ -691,7 +723,8 @@ def main(argv: list[str] | None = None) -> int:
     selected = [
         (kind, name, probe)
         for kind, probes in (("config", CONFIG_PROBES), ("file", FILE_PROBES),
-                             ("make", {"WORKDIR naming a file": workdir_probe}))
+                             ("make", {"WORKDIR naming a file": workdir_probe,
+                                       "an alias bomb as CONFIG": alias_bomb_make_probe}))
         for name, probe in probes.items()
         if args.k in name
     ]
