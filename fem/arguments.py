@@ -4,14 +4,17 @@ Every entry point takes these through argparse's ``type=``, so a bad value stops
 work with ``error: argument --phi: ...`` and exit status 2, in the same words everywhere; the
 bounds are those of the config's schema (``workflow/schemas/config.schema.yaml``:
 ``definitions.angle`` and the C1 values), so the command line and the config refuse the same
-values.
+values. The output paths (a file or folder that can be written, and that is none of the
+command's inputs) are checked by :mod:`meshes.arguments`, below every layer, whose commands
+write too; they are taken from here.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
-from pathlib import Path
+
+from meshes.arguments import output_file, output_folder, overwritten, refuse_overwriting
 
 ANGLE_DEG = (-180.0, 360.0)
 """The range of Φ and θ (degrees), as the config's ``definitions.angle``."""
@@ -56,23 +59,5 @@ def positive(text: str) -> float:
     return value
 
 
-def output_folder(text: str) -> Path:
-    """A folder to write into: absent (it is made) or a folder, not a file."""
-    path = Path(text)
-    if path.exists() and not path.is_dir():
-        raise argparse.ArgumentTypeError(f"{text} is a file, not a folder to write into")
-    return path
-
-
-def output_file(text: str) -> Path:
-    """A file to write, not a folder (its folder is made where missing)."""
-    path = Path(text)
-    if path.is_dir():
-        raise argparse.ArgumentTypeError(f"{text} is a folder, not a file to write")
-    if path.parent.exists() and not path.parent.is_dir():
-        raise argparse.ArgumentTypeError(f"the folder of {text} is a file")
-    return path
-
-
 __all__ = ["ANGLE_DEG", "C1_KPA", "angle_deg", "c1_kpa", "output_file", "output_folder",
-           "positive"]
+           "overwritten", "positive", "refuse_overwriting"]

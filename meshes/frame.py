@@ -10,7 +10,9 @@ image. The config's ``mesh.file`` says the file's units and orientation; the imp
 translate, so points map by the same linear map as the mesh. For a label volume
 (``mesh.source: image``) the file's frame is the scanner's LPS millimetres of the image's
 header; with ``--voxels`` the points are (continuous) voxel indices i, j, k of the image
-instead, in (``--to project``) or out (``--to file``). Exit status 2 names a bad config or CSV.
+instead, in (``--to project``) or out (``--to file``). Exit status 2 names a bad config or CSV,
+or an output that would overwrite an input (the points, the config, the files it imports);
+nothing is written then. A missing output folder is made.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from meshes.arguments import output_file, refuse_overwriting
 from meshes.config import read_mesh_config
 from meshes.exceptions import GeometryError, MeshInputError
 from meshes.points import read_points, write_points
@@ -31,7 +34,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("config", type=Path,
                         help="a config file whose mesh.source is file or image")
     parser.add_argument("points", type=Path, help="CSV name,x,y,z")
-    parser.add_argument("out", type=Path, help="CSV to write")
+    parser.add_argument("out", type=output_file, help="CSV to write")
     parser.add_argument("--to", choices=("project", "file"), required=True,
                         help="project: from the file's frame into the project's (m); "
                              "file: back")
@@ -44,6 +47,9 @@ def main(argv: list[str] | None = None) -> int:
         if spec is None:
             raise GeometryError(f"{args.config}: mesh.source is parametric: the project's frame "
                                 "is the geometry's own")
+        refuse_overwriting(parser, "out", [args.out], [
+            ("points", args.points), ("config", args.config),
+            *[("a file of the config's mesh section", Path(p)) for p in spec.input_files()]])
         if args.voxels and config.image is None:
             raise GeometryError(f"{args.config}: --voxels needs mesh.source image (a label "
                                 "volume whose header maps voxels to millimetres)")
@@ -56,10 +62,11 @@ def main(argv: list[str] | None = None) -> int:
             out = spec.to_file_frame(points)
             if args.voxels:
                 out = spec.file_frame_to_voxels(out)
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        write_points(args.out, names, out)
     except (OSError, GeometryError, MeshInputError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
-    write_points(args.out, names, out)
     unit = "m" if args.to == "project" else ("voxels" if args.voxels else spec.units)
     print(f"wrote {len(names)} points to {args.out} ({args.to} frame, {unit})")
     return 0

@@ -260,7 +260,7 @@ def track_file(points_csv: Path, imaged: Path, reference: Path, model_folder: Pa
 
 def main(argv: list[str] | None = None) -> int:
     """Track the points by both paths, write the CSV (and a JSON beside it), print a summary."""
-    from fem.arguments import angle_deg, c1_kpa, output_file
+    from fem.arguments import angle_deg, c1_kpa, output_file, refuse_overwriting
     from fem.configfile import read_config_file
     from fem.exceptions import FEError
     from fem.parameters import SolverSettings
@@ -282,6 +282,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="config: solver settings and mesh.file or mesh.image")
     parser.add_argument("--out", type=output_file, required=True, help="CSV to write")
     args = parser.parse_args(argv)
+    refuse_overwriting(parser, "--out", [args.out, args.out.with_suffix(".json")], [
+        ("points", args.points), ("--imaged", args.imaged), ("--reference", args.reference),
+        ("--model", args.model), ("--config", args.config)])
     logging.basicConfig(level=logging.WARNING, format="%(message)s")
     try:
         values = read_config_file(args.config) if args.config else {}

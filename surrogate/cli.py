@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from fem.arguments import angle_deg, c1_kpa
+from fem.arguments import angle_deg, c1_kpa, overwritten
 from fem.configfile import read_config_file
 from fem.exceptions import DatasetError
 from meshes.points import moved_table, movement_table, read_points, write_points
@@ -66,6 +66,16 @@ def predict(args: argparse.Namespace) -> int:
         print(f"error: --output {output}: the folder {output.parent} does not exist",
               file=sys.stderr)
         return 2
+    if output is not None:
+        model = Path(args.model)
+        inputs = [("MODEL", model.parent if model.suffix == ".json" else model),
+                  ("--points", args.points and Path(args.points)), ("--mesh", Path(args.mesh))]
+        written = [output] + ([output.with_suffix(".h5")] if output.suffix == ".xdmf" else [])
+        why = next(filter(None, (overwritten(path, inputs) for path in written)), None)
+        if why is not None:
+            print(f"error: --output {why}: it would be overwritten; write elsewhere",
+                  file=sys.stderr)
+            return 2
     if args.from_phi is None and args.from_theta is not None:
         print("error: --from-theta needs --from-phi", file=sys.stderr)
         return 2

@@ -668,6 +668,20 @@ COMMAND_PROBES: dict[str, Callable[[Path, Path], Outcome]] = {
     "points from a binary file": command_probe(
         [*MODEL_QUERY, "--points", "points.csv"], r"points\.csv: not a text CSV",
         prepare=lambda w: (w / "points.csv").write_bytes(bytes(range(256)))),
+    "the viewer written over the model's model.json": command_probe(
+        ["report.viewer", MODEL, "-o", f"{MODEL}/model.json", "--mesh", MESH],
+        r"argument -o/--output: model/model\.json lies in an input folder \(MODEL: model\)"),
+    "the viewer written over the mesh's HDF5 data": command_probe(
+        ["report.viewer", MODEL, "-o", "results/mesh/mesh.h5", "--mesh", MESH],
+        r"mesh\.h5 is the HDF5 data of an input \(--mesh"),
+    "predicted positions written over the points": command_probe(
+        [*MODEL_QUERY, "--points", "points.csv", "-o", "points.csv"],
+        r"--output points\.csv is an input \(--points: points\.csv\)", prepare=_corner_points),
+    "meshes.frame written over its picks": command_probe(
+        ["meshes.frame", "import.yaml", "picks.csv", "picks.csv", "--to", "project"],
+        r"argument out: picks\.csv is an input \(points: picks\.csv\)",
+        prepare=lambda w: (_import_config(w, {"axes": "LPS", "side": "left"}),
+                           (w / "picks.csv").write_text("name,x,y,z\ntumour,30,-40,10\n"))),
 }
 
 

@@ -40,6 +40,8 @@ REPO = HERE.parent.parent
 NODE_MODULES = REPO / "node_modules"
 ESBUILD = NODE_MODULES / ".bin" / "esbuild"
 THREE_LICENSE = NODE_MODULES / "three" / "LICENSE"
+LICENCE = "THREE-LICENSE.txt"
+"""three.js's licence, written beside the page."""
 MAX_FE_CASES = 24
 """FE cases carried for comparison: the clinical cases and others spread over the sweep (each
 adds its surface field, about 1 % of the page per 1,000 surface vertices)."""
@@ -268,7 +270,7 @@ def build_viewer(
         tmp.replace(output)
     finally:
         tmp.unlink(missing_ok=True)
-    shutil.copyfile(THREE_LICENSE, output.parent / "THREE-LICENSE.txt")
+    shutil.copyfile(THREE_LICENSE, output.parent / LICENCE)
     info = {"points": len(model.X), "surface_vertices": int(len(vertices)),
             "triangles": len(triangles),
             "fe_cases": len(cases), "named_points": len(points),

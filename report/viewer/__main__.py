@@ -12,7 +12,8 @@ movement from the imaged posture first) and labels its clinical cases; with ``--
 ``name,x,y,z`` CSV of material points inside the body, in the model's reference frame, m, as
 ``surrogate.cli predict --points`` reads) it draws where the surrogate moves them. The page
 opens from the file system, as the workflow's does. Exit status 2 names a model, mesh,
-dataset, config or point that cannot be used; nothing is written then.
+dataset, config or point that cannot be used, or an output that would overwrite an input (a file
+of the model folder, the mesh or its HDF5 data, any file given); nothing is written then.
 """
 
 from __future__ import annotations
@@ -21,11 +22,11 @@ import argparse
 import sys
 from pathlib import Path
 
-from fem.arguments import output_file
+from fem.arguments import output_file, refuse_overwriting
 from fem.exceptions import DatasetError
 from meshes.exceptions import MeshInputError
 from meshes.points import read_points
-from report.viewer import ViewerError, build_viewer
+from report.viewer import LICENCE, ViewerError, build_viewer
 from studies.config import ConfigError, WorkflowConfig, read_config_file
 from surrogate.exceptions import SurrogateError
 
@@ -59,6 +60,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--points", type=Path, metavar="CSV",
                         help="named material points inside the body (name,x,y,z, m) to draw")
     args = parser.parse_args(argv)
+    model = args.model.parent if args.model.suffix == ".json" else args.model  # or its model.json
+    refuse_overwriting(parser, "-o/--output", [args.output, args.output.parent / LICENCE], [
+        ("MODEL", model), ("--mesh", args.mesh), ("--dataset", args.dataset),
+        ("--config", args.config), ("--points", args.points)])
     try:
         clinical, postures, start, initial = [], [], None, None
         if args.config:  # checked as a run checks it
