@@ -1,13 +1,14 @@
 """Benchmark: the corpus's cases on one anatomy with the skin membrane and without it.
 
 ``python -m benchmarks.skin ANATOMY [--config config.yaml] [--thickness 0.0015] [--ratio 18.5]
-[--cases C1:PHI ...] [--out DIR] [--limit-s 1800]``
+[--cases C1:PHI ...] [--settings homogeneous skin skin-plain] [--out DIR] [--limit-s 1800]``
 
 It writes the corpus anatomy (:mod:`meshes.corpus`; imports at ``corpus.import_size``),
 meshes it as the corpus study does, and solves the corpus's cases (the clinical ones, then
 ``corpus.soft_C1`` at every ``corpus.soft_phi``; or ``--cases``) with the config's solver
 settings, homogeneous and with the skin as a membrane (``material.skin``, its ratio to the
-fat ``material.tissues.skin``), each setting in a fresh process one after the other
+fat ``material.tissues.skin``; ``skin`` the membrane that wrinkles, ``skin-plain`` the one that
+resists compression), each setting in a fresh process one after the other
 (``--limit-s`` seconds each). It prints per case and setting the outcome, the load reached,
 load steps, wall seconds and max |u|, and where both converged the ratio of the two.
 """
@@ -29,7 +30,8 @@ from fem.sweep import Case
 from fem.tissues import DEFAULT_SKIN_THICKNESS, SkinLayer, Tissues
 from meshes.tags import Tissue
 
-SETTINGS = ("homogeneous", "skin")
+#: homogeneous; the skin membrane that wrinkles (the default); the plain membrane.
+SETTINGS = ("homogeneous", "skin", "skin-plain")
 
 
 def parse_case(text: str) -> Case:
@@ -66,8 +68,9 @@ def solve(mesh: Path, config: dict[str, Any], setting: str, skin: SkinLayer, rat
     from fem.case import CaseRunner
 
     settings = SolverSettings.from_config(config)
-    if setting == "skin":
-        settings = replace(settings, skin=skin, tissues=Tissues({Tissue.SKIN: ratio}))
+    if setting.startswith("skin"):
+        settings = replace(settings, skin=replace(skin, wrinkles=setting == "skin"),
+                           tissues=Tissues({Tissue.SKIN: ratio}))
     else:
         settings = replace(settings, skin=None)
     rows = []
@@ -76,7 +79,8 @@ def solve(mesh: Path, config: dict[str, Any], setting: str, skin: SkinLayer, rat
             result, timings = runner.solve(case)
             s = runner.summary(case, result, timings, measure_unit=False)
             rows.append({"case": case.id, "status": s["status"], "load": s["load_fraction"],
-                         "steps": s["load_steps"], "wall_s": s["wall_s"]["solve"],
+                         "steps": s["load_steps"], "newton": s["total_newton_iterations"],
+                         "wall_s": s["wall_s"]["solve"],
                          "max_disp_mm": s["max_disp_mm"]})
             (out / f"{setting}.json").write_text(json.dumps(rows))
 
@@ -91,6 +95,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--cases", type=parse_case, nargs="+")
     parser.add_argument("--out", type=Path)
     parser.add_argument("--limit-s", type=float, default=1800.0)
+    parser.add_argument("--settings", nargs="+", choices=SETTINGS, default=list(SETTINGS[:2]))
     parser.add_argument("--child", nargs=2, metavar=("MESH", "SETTING"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     out = args.out or Path(tempfile.mkdtemp(prefix="skin_"))
@@ -106,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
         mesh = make_mesh(config, args.anatomy, out)
     extra = [f"{c.C1}:{c.phi}:{c.theta}" for c in cases]
     results = {}
-    for setting in SETTINGS:
+    for setting in args.settings:
         command = [sys.executable, "-m", "benchmarks.skin", args.anatomy, "--config",
                    str(args.config), "--thickness", str(args.thickness), "--ratio",
                    str(args.ratio), "--out", str(out), "--cases", *extra,
@@ -121,19 +126,19 @@ def main(argv: list[str] | None = None) -> int:
         results[setting] = {r["case"]: r for r in json.loads(path.read_text())} \
             if path.is_file() else {}
     print(f"{args.anatomy}: skin {1e3 * args.thickness:g} mm at {args.ratio:g} × the fat")
-    print(f"{'case':30} {'setting':12} {'status':10} {'λ':>6} {'steps':>5} {'wall s':>8} "
-          f"{'max|u| mm':>9} {'skin/hom.':>9}")
+    print(f"{'case':30} {'setting':12} {'status':10} {'λ':>6} {'steps':>5} {'Newton':>6} "
+          f"{'wall s':>8} {'max|u| mm':>9} {'skin/hom.':>9}")
     for case in cases:
-        for setting in SETTINGS:
+        for setting in args.settings:
             r = results[setting].get(case.id)
             if r is None:
                 print(f"{case.id:30} {setting:12} {'not run':10}")
                 continue
-            other = results["homogeneous"].get(case.id)
-            ratio = r["max_disp_mm"] / other["max_disp_mm"] if setting == "skin" and other \
+            other = results.get("homogeneous", {}).get(case.id)
+            ratio = r["max_disp_mm"] / other["max_disp_mm"] if setting != "homogeneous" and other \
                 and other["status"] == r["status"] == "converged" else None
             print(f"{case.id:30} {setting:12} {r['status']:10} {r['load']:6.3f} {r['steps']:5d} "
-                  f"{r['wall_s']:8.1f} {r['max_disp_mm']:9.2f} "
+                  f"{r['newton']:6d} {r['wall_s']:8.1f} {r['max_disp_mm']:9.2f} "
                   f"{'-' if ratio is None else format(ratio, '.3f'):>9}")
     return 0
 

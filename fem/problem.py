@@ -246,7 +246,8 @@ class GravityProblem:
         psi = strain_energy(F, p, self.local_C1, self.discretisation, self.kappa)
         potential = psi * dx - ufl.dot(self.body_force, u) * dx
         if self.skin is not None:
-            membrane = Membrane(self._skin_ratio * self.C1, self._skin_thickness)
+            membrane = Membrane(self._skin_ratio * self.C1, self._skin_thickness,
+                                self.skin.wrinkles)
             potential += membrane.strain_energy(F, ufl.FacetNormal(mesh)) \
                 * self.skin_measure()(int(Boundary.SKIN))
         if contact is not None:

@@ -123,19 +123,26 @@ class SkinLayer:
 
     Attributes:
         thickness: the skin's thickness, m (1–2.5 mm in the breast; docs/tissues.md).
+        wrinkles: the membrane carries no compression (its relaxed, tension-field energy:
+            :class:`fem.material.Membrane`); False: it resists compression as a bonded solid.
     """
 
     thickness: float = DEFAULT_SKIN_THICKNESS
+    wrinkles: bool = True
 
     def __post_init__(self) -> None:
         if not (isinstance(self.thickness, (int, float)) and math.isfinite(self.thickness)
                 and 0.0 < self.thickness <= 0.01):
             raise InvalidParameterError(
                 f"material.skin.thickness must be a number in (0, 0.01] m, got {self.thickness!r}")
+        if not isinstance(self.wrinkles, bool):
+            raise InvalidParameterError(
+                f"material.skin.wrinkles must be true or false, got {self.wrinkles!r}")
 
-    def describe(self, tissues: Tissues) -> dict[str, float]:
-        """JSON-friendly: the thickness and the skin's ratio to the fat."""
-        return {"thickness": float(self.thickness), "ratio": tissues.ratio(Tissue.SKIN)}
+    def describe(self, tissues: Tissues) -> dict[str, float | bool]:
+        """JSON-friendly: the thickness, the skin's ratio to the fat, whether it wrinkles."""
+        return {"thickness": float(self.thickness), "ratio": tissues.ratio(Tissue.SKIN),
+                "wrinkles": self.wrinkles}
 
 
 def skin_from_mapping(values: dict[str, Any] | None) -> SkinLayer | None:
@@ -144,15 +151,15 @@ def skin_from_mapping(values: dict[str, Any] | None) -> SkinLayer | None:
         return None
     if not isinstance(values, dict):
         raise InvalidParameterError(f"material.skin must be a mapping or null, got {values!r}")
-    unknown = sorted(set(values) - {"thickness"})
+    unknown = sorted(set(values) - {"thickness", "wrinkles"})
     if unknown:
         raise InvalidParameterError(f"unknown material.skin key(s): {', '.join(unknown)}; "
-                                    "known: thickness")
+                                    "known: thickness, wrinkles")
     thickness = values.get("thickness", DEFAULT_SKIN_THICKNESS)
     if isinstance(thickness, bool) or not isinstance(thickness, (int, float)):
         raise InvalidParameterError(
             f"material.skin.thickness must be a number in (0, 0.01] m, got {thickness!r}")
-    return SkinLayer(float(thickness))
+    return SkinLayer(float(thickness), values.get("wrinkles", True))
 
 
 def tissues_from_mapping(values: dict[str, Any] | None) -> Tissues:

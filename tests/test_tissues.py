@@ -271,3 +271,54 @@ def test_the_skin_membrane_carries_what_a_resolved_skin_layer_does() -> None:
                              Tissues(), SkinLayer(skin))
     assert problem.skin is None
 
+
+
+def _plain_membrane(a: float, b: float) -> float:
+    """The plain membrane's energy over C1 t at principal squared in-plane stretches a, b."""
+    return a + b + 1.0 / (a * b) - 3.0
+
+
+@pytest.mark.solve
+@pytest.mark.parametrize("stretches", [(1.3, 1.1), (1.4, 0.7), (1.2, 0.95), (0.9, 0.8),
+                                       (1.05, 0.5), (1.0, 1.0)])
+def test_the_wrinkling_membrane_is_the_least_energy_of_any_fine_wrinkling(
+        stretches: tuple[float, float]) -> None:
+    """The relaxed membrane energy equals min W over every wrinkled state of the same mean.
+
+    A sheet's mean stretches (λ1, λ2) can be taken by any finer wrinkling whose true stretches
+    are at least as long; the relaxed energy is the least of the plain energy over them,
+    found here by brute force, independent of the closed form of fem.material.Membrane
+    (taut, wrinkled, slack). The plain membrane keeps its compressive energy.
+    """
+    import ufl
+    from dolfinx import fem
+    from dolfinx import mesh as dmesh
+    from mpi4py import MPI
+    from scipy.optimize import minimize
+
+    from fem.material import Membrane
+
+    l1, l2 = stretches
+    cube = dmesh.create_unit_cube(MPI.COMM_WORLD, 1, 1, 1, dmesh.CellType.tetrahedron)
+    top = dmesh.locate_entities_boundary(cube, 2, lambda x: np.isclose(x[2], 1.0))
+    tags = dmesh.meshtags(cube, 2, top, np.ones_like(top))
+    ds = ufl.Measure("ds", domain=cube, subdomain_data=tags)(1)
+    # a sheared, rotated F whose in-plane principal stretches on the top face are (l1, l2)
+    c, s = np.cos(0.4), np.sin(0.4)
+    R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    U = np.diag([l1, l2, 1.3]) + np.array([[0, 0, 0.2], [0, 0, -0.1], [0, 0, 0]])
+    F = ufl.as_matrix((R @ U).tolist())
+    energy = {wrinkles: fem.assemble_scalar(fem.form(
+        Membrane(2.0, 0.5, wrinkles).strain_energy(F, ufl.FacetNormal(cube)) * ds))
+        for wrinkles in (True, False)}
+    a, b = l1**2, l2**2
+    assert energy[False] == pytest.approx(_plain_membrane(a, b), rel=1e-9)
+
+    def wrinkled(t: np.ndarray) -> float:  # true squared stretches a + t0², b + t1² ≥ (a, b)
+        return _plain_membrane(a + t[0] ** 2, b + t[1] ** 2)
+
+    least = min(minimize(wrinkled, start, method="Nelder-Mead",
+                         options={"xatol": 1e-10, "fatol": 1e-14, "maxiter": 4000}).fun
+                for start in ([0.0, 0.0], [0.5, 0.5], [0.0, 0.8], [0.8, 0.0]))
+    assert energy[True] == pytest.approx(least, abs=1e-7)
+    assert energy[True] <= energy[False] + 1e-12
