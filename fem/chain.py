@@ -176,7 +176,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--config", type=Path, help="workflow config (fe, material, mesh.fixed)")
     parser.add_argument("--from-rest", action="store_true", help="no guesses: every case cold")
     args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    # force: FFCx (imported with dolfinx) has already given the root logger a handler
+    logging.basicConfig(level=logging.INFO, format="%(message)s", force=True)
     from fem.configfile import read_config_file
     from fem.exceptions import FEError
 

@@ -5,8 +5,8 @@ Example::
     mpirun -n 2 .venv/bin/python -m fem.cli results/mesh/mesh.xdmf --c1 1.0 --phi 180 \
         --out results/cases/c1=1.00_phi=180.0_theta=0.0 --config config.yaml
 
-Only rank 0 logs. The case folder receives the same files as the workflow's
-``solve`` rule writes.
+Only rank 0 logs: each load step and Newton iteration as it happens, then the case's outcome.
+The case folder receives the same files as the workflow's ``solve`` rule writes.
 """
 
 from __future__ import annotations
@@ -27,6 +27,9 @@ from fem.parameters import SolverSettings
 from fem.sweep import Case
 from meshes.io import MeshInputError
 
+LOG_FORMAT = "%(asctime)s %(levelname)s %(name)s: %(message)s"
+"""The console's lines: when, how grave, which module, what (as a workflow job's log has them)."""
+
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit status (0 also for a case that did not converge)."""
@@ -45,10 +48,14 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     comm = MPI.COMM_WORLD
+    # force: FFCx, imported with dolfinx, has already given the root logger a handler, which
+    # would make basicConfig do nothing and leave the solve silent (its load steps and Newton
+    # iterations are logged at INFO, as they happen)
     if comm.rank == 0:
-        logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO)
+        logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
+                            format=LOG_FORMAT, force=True)
     else:
-        logging.basicConfig(level=logging.CRITICAL)
+        logging.basicConfig(level=logging.CRITICAL, force=True)
     try:
         config = read_config_file(args.config) if args.config else {}
         if args.solver:

@@ -246,7 +246,8 @@ def solve_incrementally(
                 exact_retry=outcome.exact_retry,
             )
         )
-        log.debug("λ=%.4f step=%.4f %s in %d its", target, step, reason, outcome.iterations)
+        log.info("load step to λ=%.4f (step %.4f): %s in %d Newton iterations", target, step,
+                 reason, outcome.iterations)
         if ok:
             fraction = target
             history = [history[-1], (fraction, state.copy())]

@@ -298,7 +298,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="the inverse-motion solve checked by forward solves (default), or "
                              "the fixed point alone with Anderson's or Aitken's acceleration")
     args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    # force: FFCx (imported with dolfinx) has already given the root logger a handler
+    logging.basicConfig(level=logging.INFO, format="%(message)s", force=True)
     try:
         settings = SolverSettings.from_config(read_config_file(args.config) if args.config
                                               else {})

@@ -14,6 +14,7 @@ when to retry.
 from __future__ import annotations
 
 import itertools
+import logging
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -32,6 +33,8 @@ from fem.linear_setup import (
 from fem.options import BLR_OPTIONS, SOLVER_KEYS, solver_options
 from fem.parameters import STANDARD_GRAVITY
 from fem.problem import GravityProblem
+
+log = logging.getLogger(__name__)
 
 #: Every solver's options live in PETSc's database under this prefix and a counter.
 SOLVER_PREFIX = "breast_"
@@ -250,6 +253,8 @@ class SnesSystem:
         if its == 0:
             self._norms = []
         self._norms.append(float(norm))
+        # as it happens: a Newton iteration of a large mesh can take minutes
+        log.info("Newton iteration %d: residual %.3e", its, norm)
 
     # -- tolerances -------------------------------------------------------------------------------
     def scale_to_load(self) -> float:
