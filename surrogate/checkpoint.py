@@ -27,6 +27,7 @@ from surrogate.config import SurrogateConfig
 from surrogate.data import Normalisation
 from surrogate.exceptions import ModelFileError, SurrogateConfigError
 from surrogate.model import Params, from_arrays, to_arrays
+from surrogate.training_range import check_record
 
 if TYPE_CHECKING:  # training code is not needed to save or load a model
     from surrogate.epochs import TrainResult
@@ -241,6 +242,7 @@ def load_checkpoint(folder: str | Path) -> Checkpoint:
         points = {k: arrays.pop(k) for k in list(arrays) if k.startswith(("points_", "mesh_"))}
         params = from_arrays(arrays, config)
         norm = Normalisation.from_dict(meta["normalisation"])
+        trained = check_record(meta.get("training_range", {}))
         X, boundary = points["points_X"], points["points_boundary"]
     except (KeyError, TypeError, ValueError, SurrogateConfigError) as err:
         raise ModelFileError(f"{folder}: {err}") from None
@@ -269,7 +271,7 @@ def load_checkpoint(folder: str | Path) -> Checkpoint:
         norm,
         X,
         boundary,
-        meta.get("training_range", {}),
+        trained,
         point_factor=points.get("points_factor"),
         node_index=points.get("points_node_index"),
         metrics=meta.get("metrics") or {},
@@ -284,9 +286,16 @@ def read_model_card(folder: str | Path) -> dict[str, Any]:
     """The ``model.json`` of a model folder (hyperparameters, training range, metrics).
 
     Raises:
-        ModelFileError: if it is missing or not JSON.
+        ModelFileError: if it is missing, not JSON, or its training range is damaged
+            (:func:`surrogate.training_range.check_record`).
     """
-    return _read(Path(folder) / MODEL_JSON)
+    path = Path(folder) / MODEL_JSON
+    card = _read(path)
+    try:
+        check_record(card.get("training_range", {}) if isinstance(card, dict) else {})
+    except ValueError as err:
+        raise ModelFileError(f"{path}: {err}") from None
+    return card
 
 
 def read_history(folder: str | Path) -> dict[str, Any]:

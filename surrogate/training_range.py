@@ -24,6 +24,56 @@ typical spacing (the median angle to each one's nearest) from every one of them 
 extrapolation."""
 
 
+def _finite(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _check_rows(record: dict[str, Any], key: str, width: int) -> None:
+    """Refuse ``record[key]`` unless rows of ``width`` finite numbers (a flat list for 0)."""
+    value = record[key]
+    if not isinstance(value, list):
+        raise ValueError(f"training_range.{key} is {value!r}, not a list")
+    for i, row in enumerate(value):
+        ok = _finite(row) if width == 0 else (
+            isinstance(row, list) and len(row) == width and all(map(_finite, row)))
+        if not ok:
+            what = "a finite number" if width == 0 else f"{width} finite numbers"
+            raise ValueError(f"training_range.{key}[{i}] is {row!r}, not {what}")
+
+
+def check_record(record: Any) -> dict[str, Any]:
+    """``model.json``'s ``training_range`` checked: its numbers finite, its C1 ranges ordered.
+
+    Each key may be absent (a model saved before it was recorded is judged without it).
+
+    Raises:
+        ValueError: naming the key and its value: a card edited or damaged, whose warnings
+            would compare queries against NaN or a reversed range and never warn.
+    """
+    if not isinstance(record, dict):
+        raise ValueError(f"training_range is {record!r}, not a mapping of the trained values")
+    if "C1_kPa" in record:
+        value = record["C1_kPa"]
+        if not (isinstance(value, list) and len(value) == 2 and all(map(_finite, value))
+                and 0 < value[0] <= value[1]):
+            raise ValueError(f"training_range.C1_kPa is {value!r}, not [low, high] in kPa with "
+                             "0 < low <= high")
+    for key, width in (("phi_deg", 0), ("theta_deg", 0), ("directions", 2),
+                       ("unconverged", 3), ("c1_by_direction", 4)):
+        if key in record:
+            _check_rows(record, key, width)
+    for i, (_, _, low, high) in enumerate(record.get("c1_by_direction", [])):
+        if not 0 < low <= high:
+            raise ValueError(f"training_range.c1_by_direction[{i}]: its C1 range [{low}, "
+                             f"{high}] is not 0 < low <= high")
+    tissues = record.get("tissues", {})
+    if not isinstance(tissues, dict) or not all(
+            _finite(v) and v > 0 for v in tissues.values()):
+        raise ValueError(f"training_range.tissues is {tissues!r}, not each tissue's positive "
+                         "C1 ratio")
+    return record
+
+
 def _unit_directions(pairs: Any) -> np.ndarray:
     """Unit gravity directions of (Φ, θ) pairs in degrees, shape (n, 3)."""
     angles = np.asarray(pairs, dtype=float).reshape(-1, 2)

@@ -529,6 +529,16 @@ def _spoil_card(workdir: Path, **normalisation: Any) -> None:
     (workdir / MODEL / "model.json").write_text(json.dumps(card))
 
 
+def _spoil_range(workdir: Path, C1_kPa: Any = None, whole: Any = None) -> None:
+    """The model card's training range replaced (``whole``) or its C1 range changed."""
+    card = json.loads((workdir / MODEL / "model.json").read_text())
+    if whole is not None:
+        card["training_range"] = whole
+    else:
+        card["training_range"]["C1_kPa"] = C1_kPa
+    (workdir / MODEL / "model.json").write_text(json.dumps(card))
+
+
 def _nan_node(workdir: Path) -> None:
     import h5py
 
@@ -615,6 +625,16 @@ COMMAND_PROBES: dict[str, Callable[[Path, Path], Outcome]] = {
     "predict with a model of format 999": command_probe(
         MODEL_QUERY, r"format_version 999 is not one this code reads",
         prepare=lambda w: _spoil_card(w, format_version=999)),
+    "predict with a training range of NaN": command_probe(
+        MODEL_QUERY, r"training_range is nan, not a mapping",
+        prepare=lambda w: _spoil_range(w, whole=float("nan"))),
+    "predict with a C1 training range of [NaN, NaN]": command_probe(
+        MODEL_QUERY, r"training_range\.C1_kPa is \[nan, nan\], not \[low, high\]",
+        prepare=lambda w: _spoil_range(w, [float("nan")] * 2)),
+    "the viewer of a model with its C1 training range reversed": command_probe(
+        ["report.viewer", MODEL, "-o", "page.html", "--mesh", MESH],
+        r"training_range\.C1_kPa is \[5\.0, 1\.0\], not \[low, high\]",
+        prepare=lambda w: _spoil_range(w, [5.0, 1.0])),
     "the viewer written over a folder": command_probe(
         ["report.viewer", MODEL, "-o", "page.html", "--mesh", MESH],
         r"page\.html is a folder, not a file to write",
