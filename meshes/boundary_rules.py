@@ -196,6 +196,7 @@ def select_facets(
     face_groups: np.ndarray | None = None,
     group_names: dict[str, int] | None = None,
     posterior: np.ndarray = POSTERIOR,
+    orientation_key: str = "mesh.file.orientation",
 ) -> dict[Boundary, np.ndarray]:
     """The boundary facets each rule selects, as a mask per boundary.
 
@@ -207,6 +208,7 @@ def select_facets(
         face_groups: group integer of each face from the file (-1: none), or None.
         group_names: physical name -> group integer of the file.
         posterior: the patient's posterior in the points' axes (for a ``posterior`` rule).
+        orientation_key: the config key that says where posterior is (for the message).
 
     Raises:
         NoRibFacetsError: if the rib rule selects nothing, with how near the closest facet was.
@@ -245,7 +247,7 @@ def select_facets(
                 raise error(
                     f"no boundary facets found for the {boundary.label} surface: none is "
                     f"{rule.describe()}; widen the angle or the band, or check "
-                    "mesh.file.orientation"
+                    f"{orientation_key}"
                 )
         else:
             distance = _facet_distance(x, faces, rule, units)

@@ -50,6 +50,15 @@ class NoRibFacetsError(MeshInputError):
     """The rule that selects the rib (fixed chest-wall) surface matched no boundary facet."""
 
 
+class ImageHeaderError(MeshInputError):
+    """A label volume's header cannot place its voxels, or its data is shorter than it says.
+
+    A voxel size that is not finite and positive, direction cosines that are not orthonormal,
+    a NIfTI ``pixdim`` that disagrees with its sform, a field of view too small for a breast,
+    or a truncated file: each is named by its header field.
+    """
+
+
 class SurfaceRuleError(MeshInputError):
     """A boundary rule is inconsistent with the input (unknown group, facets matched twice)."""
 

@@ -10,13 +10,17 @@
                                       # with the breast becomes the rib
         side: left                    # optional where the image tells it
         mesher: ftetwild              # optional: ftetwild (default) or cgal
+        orientation: SLA              # optional: where the voxel axes i, j, k point, for a
+                                      # header whose direction is wrong
 
 The image is read with SimpleITK, which gives every format's voxels in the scanner's physical
 space in ITK's LPS convention (NIfTI's RAS sform/qform is converted on reading): the map from a
 voxel index to millimetres is the header's origin, direction cosines and spacing, so no axes
-need declaring. A breast's side is taken from the image where it can tell (the breast labelled
-off the centre of a torso's field of view), and asked for where it cannot (a dedicated breast
-image, centred on the breast).
+need declaring; the header is checked first (:mod:`meshes.image_header`), and ``orientation``
+replaces its direction cosines. A breast's side is taken from the image where it can tell (the
+breast labelled off the centre of a torso's field of view), and asked for where it cannot (a
+dedicated breast image, centred on the breast). Every check that needs no mesh runs before the
+meshing (:func:`meshes.label_volume.check_before_meshing`).
 
 Meshing (see docs/geometry.md for the measurement behind the choice): with ``mesher: cgal``
 CGAL's labelled-image mesher meshes the labels themselves, one subdomain per tissue, the same
@@ -33,7 +37,6 @@ rule, in LPS millimetres).
 
 from __future__ import annotations
 
-import functools
 import logging
 import time
 from dataclasses import dataclass, field
@@ -47,9 +50,11 @@ from meshes.checks import (
     UNITS,
 )
 from meshes.exceptions import GeometryError, MeshInputError, reject_unknown
+from meshes.image_header import Grid, read_header
 from meshes.image_tissues import cell_tissues, tissue_labels
 from meshes.importing import InputVolume, fill_checked_surface
-from meshes.orientation import Orientation
+from meshes.label_volume import bounds, check_before_meshing, image_side, read_labels
+from meshes.orientation import Orientation, axes_code
 from meshes.quality import exterior_faces, tet_volumes
 from meshes.sizing import MeshSize
 from meshes.tags import Boundary, Tissue
@@ -60,10 +65,6 @@ IMAGE_SUFFIXES = (".nii", ".nii.gz", ".nrrd", ".nhdr", ".mha", ".mhd")
 
 #: The coarsest working grid the surface is taken from, m (finer for a finer global_size).
 WORKING_SPACING_M = 0.002
-
-#: A breast labelled this far off the centre of the image's field of view (m, left-right) is on
-#: that side of a torso's image; nearer the centre the image cannot tell.
-SIDE_OFFSET_M = 0.03
 
 #: The file group of the facets next to the chest label, which the rib rule selects.
 CHEST_GROUP = "chest_wall"
@@ -82,114 +83,6 @@ def image_suffix(path: str | Path) -> str:
                  if name.endswith(s)), "")
 
 
-@dataclass(frozen=True)
-class Grid:
-    """The header's map from voxel indices (i, j, k) to the scanner's LPS millimetres."""
-
-    origin: np.ndarray
-    spacing: np.ndarray
-    direction: np.ndarray
-    shape: tuple[int, int, int]
-
-    def to_physical(self, index: np.ndarray) -> np.ndarray:
-        """Continuous voxel indices (..., 3) to LPS millimetres."""
-        return self.origin + (np.asarray(index, dtype=float) * self.spacing) @ self.direction.T
-
-    def to_index(self, physical: np.ndarray) -> np.ndarray:
-        """LPS millimetres (..., 3) to continuous voxel indices."""
-        return ((np.asarray(physical, dtype=float) - self.origin) @ self.direction) / self.spacing
-
-
-def read_header(path: str | Path) -> Grid:
-    """The voxel-to-millimetre map of an image, from its header alone."""
-    import SimpleITK as sitk
-
-    reader = sitk.ImageFileReader()
-    reader.SetFileName(str(path))
-    try:
-        reader.ReadImageInformation()
-    except RuntimeError as err:
-        raise MeshInputError(f"cannot read the image {path}: {_first_line(err)}") from None
-    return _grid(reader)
-
-
-def _grid(image: Any) -> Grid:
-    return Grid(np.array(image.GetOrigin(), dtype=float), np.array(image.GetSpacing(), dtype=float),
-                np.array(image.GetDirection(), dtype=float).reshape(3, 3),
-                tuple(int(n) for n in image.GetSize()))
-
-
-def _first_line(err: Exception) -> str:
-    lines = [line.strip() for line in str(err).splitlines() if line.strip()]
-    described = [line for line in lines if "Description" in line or "ERROR" in line.upper()]
-    return (described or lines or [type(err).__name__])[-1]
-
-
-def read_labels(path: str | Path) -> tuple[np.ndarray, Grid]:
-    """The label volume, indexed ``[i, j, k]`` as the header's indices, and its grid.
-
-    Raises:
-        MeshInputError: for a missing or unreadable file, or an image that is not a label
-            volume (not 3D, or non-integer values).
-    """
-    import SimpleITK as sitk
-
-    path = Path(path)
-    if not path.is_file():
-        raise MeshInputError(f"image file {path} does not exist")
-    try:
-        image = sitk.ReadImage(str(path))
-    except RuntimeError as err:
-        raise MeshInputError(f"cannot read the image {path}: {_first_line(err)}") from None
-    if image.GetDimension() != 3 or image.GetNumberOfComponentsPerPixel() != 1:
-        raise MeshInputError(f"{path} is not a 3D label volume: {image.GetDimension()}D with "
-                             f"{image.GetNumberOfComponentsPerPixel()} component(s) per voxel")
-    labels = sitk.GetArrayViewFromImage(image)  # [k, j, i]
-    if not np.issubdtype(labels.dtype, np.integer):
-        if not np.array_equal(labels, np.round(labels)):
-            raise MeshInputError(f"{path} holds non-integer values ({labels.dtype}): a label "
-                                 "volume (segmentation) holds one integer label per voxel")
-        labels = labels.astype(np.int32)
-    return np.array(labels).transpose(2, 1, 0), _grid(image)
-
-
-def label_counts(labels: np.ndarray) -> dict[int, int]:
-    """Voxels per label (0, the background, included)."""
-    values, counts = np.unique(labels, return_counts=True)
-    return {int(v): int(c) for v, c in zip(values, counts, strict=True)}
-
-
-def _bounds(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The first and last index of ``mask``'s True voxels along each axis (it has some)."""
-    spans = [np.flatnonzero(mask.any(axis=tuple(a for a in range(3) if a != axis)))
-             for axis in range(3)]
-    return np.array([s[0] for s in spans]), np.array([s[-1] for s in spans])
-
-
-def _centroid(mask: np.ndarray) -> np.ndarray:
-    """The mean index of ``mask``'s True voxels (without listing them)."""
-    total = float(mask.sum())
-    return np.array([
-        float(mask.sum(axis=tuple(a for a in range(3) if a != axis)) @ np.arange(mask.shape[axis]))
-        / total for axis in range(3)])
-
-
-@functools.lru_cache(maxsize=4)
-def _side_from_image(path: str, mtime: float, breast_labels: tuple[int, ...]) -> str | None:
-    labels, grid = read_labels(path)
-    breast = np.isin(labels, breast_labels)
-    if not breast.any():
-        return None
-    centre = grid.to_physical(_centroid(breast))
-    corners = np.array([[i, j, k] for i in (0, grid.shape[0] - 1) for j in (0, grid.shape[1] - 1)
-                        for k in (0, grid.shape[2] - 1)])
-    fov = grid.to_physical(corners)[:, 0]
-    offset = 1e-3 * (centre[0] - 0.5 * (fov.min() + fov.max()))  # +x of LPS: patient's left
-    if abs(offset) < SIDE_OFFSET_M:
-        return None
-    return "left" if offset > 0 else "right"
-
-
 @dataclass(frozen=True, slots=True)
 class ImageSpec:
     """What to mesh from a label volume (the ``mesh.image`` config section).
@@ -206,6 +99,9 @@ class ImageSpec:
         mesher: ``cgal`` (CGAL's labelled-image mesher, :mod:`meshes.cgal_image`: one
             subdomain per tissue, deterministic) or ``ftetwild`` (marching cubes and fTetWild,
             each cell tagged by a vote of the labels it covers).
+        axes: ``mesh.image.orientation``: where the voxel axes i, j, k point in the patient,
+            an axes code (as ``mesh.file.orientation.axes``) that replaces the header's
+            direction cosines; None: the header's.
     """
 
     path: str
@@ -215,11 +111,14 @@ class ImageSpec:
     surfaces: dict[Boundary, BoundaryRule] = field(default_factory=dict)
     tissues: dict[Tissue, tuple[int, ...]] = field(default_factory=dict)
     mesher: str = DEFAULT_MESHER
+    axes: str | None = None
 
     #: The scanner's millimetres: positions and rules are in them.
     units = "mm"
     #: The surface is always remeshed.
     remesh = True
+    #: The key that says where the image's axes point (named in refusals).
+    orientation_key = "mesh.image.orientation"
 
     def __post_init__(self) -> None:
         if not image_suffix(self.path):
@@ -234,6 +133,8 @@ class ImageSpec:
                                 f"{self.mesher!r}")
         if self.side is not None and self.side not in ("left", "right"):
             raise GeometryError("mesh.image.side must be left or right")
+        if self.axes is not None:
+            object.__setattr__(self, "axes", axes_code(self.axes, "mesh.image.orientation"))
         if self.chest_label is None and Boundary.RIB not in self.surfaces:
             raise GeometryError(
                 "mesh.image needs the rib: a chest_label (the pectoral muscle or rib cage "
@@ -266,7 +167,7 @@ class ImageSpec:
     def from_mapping(cls, values: dict[str, Any]) -> ImageSpec:
         """Build from the ``mesh.image`` config mapping."""
         reject_unknown(values, {"path", "breast_labels", "chest_label", "side", "surfaces",
-                                "tissues", "mesher"}, "mesh.image key(s)")
+                                "tissues", "mesher", "orientation"}, "mesh.image key(s)")
         if "path" not in values or "breast_labels" not in values:
             raise GeometryError("mesh.image needs path and breast_labels")
         labels = values["breast_labels"]
@@ -281,6 +182,7 @@ class ImageSpec:
                       for name, rule in (values.get("surfaces") or {}).items()},
             tissues=tissue_labels(values.get("tissues")),
             mesher=str(values.get("mesher", DEFAULT_MESHER)),
+            axes=None if values.get("orientation") is None else str(values["orientation"]),
         )
 
     def rules(self) -> dict[Boundary, BoundaryRule]:
@@ -296,17 +198,17 @@ class ImageSpec:
         Raises:
             GeometryError: where the side is not given and the image cannot tell it.
         """
-        side = self.side
-        if side is None:
-            path = Path(self.path)
-            side = _side_from_image(str(path), path.stat().st_mtime if path.exists() else 0.0,
-                                    self.breast_labels)
-            if side is None:
-                raise GeometryError(
-                    f"{self.path}: the image does not tell the breast's side (it is labelled "
-                    f"within {1e3 * SIDE_OFFSET_M:g} mm of the field of view's centre, as in a "
-                    "dedicated breast image): give mesh.image.side (left or right)")
-        return Orientation("LPS", side)
+        return Orientation("LPS", image_side(self))
+
+    def frame_words(self) -> tuple[str, str]:
+        """How the image's frame is named in a refusal, and what to change."""
+        axes = (f"the axes {self.axes} of mesh.image.orientation" if self.axes is not None
+                else "the axes of its header's direction cosines")
+        side = self.side or "taken from the image"
+        return (f"with {axes}, side {side}",
+                "check where the image's voxel axes i, j, k point in the patient (give them as "
+                "mesh.image.orientation where the header is wrong, e.g. SLA for i superior, j "
+                "left, k anterior) and mesh.image.side")
 
     def input_files(self) -> list[str]:
         """Every file the mesh is made from (for the workflow's dependencies)."""
@@ -325,27 +227,36 @@ class ImageSpec:
 
     def voxels_to_file_frame(self, index: np.ndarray) -> np.ndarray:
         """Voxel indices (i, j, k; continuous) to LPS millimetres, by the header."""
-        return read_header(self.path).to_physical(index)
+        return read_header(self.path, self.axes).to_physical(index)
 
     def file_frame_to_voxels(self, physical: np.ndarray) -> np.ndarray:
         """LPS millimetres to voxel indices, by the header."""
-        return read_header(self.path).to_index(physical)
+        return read_header(self.path, self.axes).to_index(physical)
 
     def select_posterior(self) -> np.ndarray:
         """The patient's posterior in LPS (for a posterior rule)."""
         return self.orientation.to_file(POSTERIOR)
 
     def read_volume(self, size: MeshSize) -> InputVolume:
-        """The breast meshed from the image by :attr:`mesher` (see the module's docstring)."""
+        """The breast meshed from the image by :attr:`mesher` (see the module's docstring).
+
+        The header and every check that needs no mesh come first
+        (:func:`meshes.label_volume.check_before_meshing`).
+        """
+        start = time.perf_counter()
+        labels, grid = read_labels(self.path, self.axes)
+        checked = check_before_meshing(labels, grid, self, working_spacing(size))
+        read_s = time.perf_counter() - start
         if self.mesher == "cgal":
             from meshes.cgal_image import cgal_volume
 
-            start = time.perf_counter()
-            labels, grid = read_labels(self.path)
-            counts = check_labels(labels, self)
-            return cgal_volume(self, size, labels, grid, counts, CHEST_GROUP, WORKING_SPACING_M,
-                               read_s=time.perf_counter() - start)
-        return image_volume(self, size)
+            counts = {int(v): c for v, c in checked["labels"].items()}
+            volume = cgal_volume(self, size, labels, grid, counts, CHEST_GROUP,
+                                 WORKING_SPACING_M, read_s=read_s)
+        else:
+            volume = image_volume(self, size, labels, grid, checked, read_s)
+        volume.info.update(checked)
+        return volume
 
 
 def _detached_data(header: Path) -> list[str]:
@@ -361,26 +272,16 @@ def _detached_data(header: Path) -> list[str]:
     return []
 
 
-def check_labels(labels: np.ndarray, spec: ImageSpec) -> dict[int, int]:
-    """Voxels per label, having checked that the breast's and the chest's labels occur.
-
-    Raises:
-        MeshInputError: naming the absent labels and the image's own.
-    """
-    counts = label_counts(labels)
-    absent = [v for v in spec.breast_labels if v not in counts]
-    if spec.chest_label is not None and spec.chest_label not in counts:
-        absent.append(spec.chest_label)
-    if absent:
-        raise MeshInputError(
-            f"{spec.path}: label(s) {', '.join(map(str, absent))} do not occur in the image; its "
-            "labels (voxels): " + ", ".join(f"{v} ({n})" for v, n in counts.items()))
-    return counts
+def working_spacing(size: MeshSize) -> float:
+    """The working grid's spacing for ``size``, m: ``global_size / 6``, at most 2 mm."""
+    return min(size.global_size / 6.0, WORKING_SPACING_M)
 
 
-def breast_surface(labels: np.ndarray, grid: Grid, spec: ImageSpec,
-                   size: MeshSize) -> tuple[np.ndarray, np.ndarray, dict[str, Any], Any]:
+def breast_surface(labels: np.ndarray, grid: Grid, spec: ImageSpec, size: MeshSize,
+                   counts: dict[int, int]) -> tuple[np.ndarray, np.ndarray, dict[str, Any], Any]:
     """The breast's surface (LPS, metres) from the label volume, and the chest's distance.
+
+    ``counts`` are the voxels per label (:func:`meshes.label_volume.check_labels`).
 
     Returns:
         ``(points, triangles, info, chest_distance)``: ``chest_distance(points_m)`` gives the
@@ -389,14 +290,13 @@ def breast_surface(labels: np.ndarray, grid: Grid, spec: ImageSpec,
     from scipy import ndimage
     from skimage.measure import block_reduce, marching_cubes
 
-    counts = check_labels(labels, spec)
     breast = np.isin(labels, spec.breast_labels)
-    first, last = _bounds(breast)
+    first, last = bounds(breast)
     lo = np.maximum(first - 2, 0)
     hi = np.minimum(last + 3, labels.shape)
     crop = tuple(slice(a, b) for a, b in zip(lo, hi, strict=True))
     spacing_m = 1e-3 * grid.spacing
-    target = min(size.global_size / 6.0, WORKING_SPACING_M)
+    target = working_spacing(size)
     factor = tuple(int(max(1, round(target / s))) for s in spacing_m)
     fraction = block_reduce(breast[crop].astype(np.float32), factor, np.mean, cval=0.0)
     solid = fraction >= 0.5
@@ -445,22 +345,29 @@ def breast_surface(labels: np.ndarray, grid: Grid, spec: ImageSpec,
     return points, tris, info, chest_distance
 
 
-def image_volume(spec: ImageSpec, size: MeshSize) -> InputVolume:
-    """Read the label volume, take the breast's surface, fill it with tetrahedra, group the rib.
+def image_volume(spec: ImageSpec, size: MeshSize, labels: np.ndarray, grid: Grid,
+                 checked: dict[str, Any], read_s: float = 0.0) -> InputVolume:
+    """Take the breast's surface from the label volume, fill it with tetrahedra, group the rib.
+
+    Args:
+        spec: the ``mesh.image`` section.
+        size: ``global_size`` bounds the cells.
+        labels: the label volume ``[i, j, k]``, checked (``checked``).
+        grid: its header's map to LPS millimetres.
+        checked: what :func:`meshes.label_volume.check_before_meshing` found.
+        read_s: the seconds reading and checking took, for the report.
 
     Raises:
-        MeshInputError: (a subclass naming the problem) for an unreadable image, absent labels,
-            or a surface that cannot be meshed.
+        MeshInputError: (a subclass naming the problem) for a surface that cannot be meshed.
     """
     what = f"the breast of {spec.path}"
-    start = time.perf_counter()
-    labels, grid = read_labels(spec.path)
-    read_s = time.perf_counter() - start
-    x, tris, info, chest_distance = breast_surface(labels, grid, spec, size)
+    start = time.perf_counter() - read_s
+    counts = {int(v): c for v, c in checked["labels"].items()}
+    x, tris, info, chest_distance = breast_surface(labels, grid, spec, size, counts)
     tissue_of = spec.label_tissues()
     if any(t is not Tissue.FAT for t in tissue_of.values()):
         # the breast's voxels (and a voxel's margin) kept for the cells' tissues
-        first, last = _bounds(np.isin(labels, spec.breast_labels))
+        first, last = bounds(np.isin(labels, spec.breast_labels))
         lo, hi = np.maximum(first - 1, 0), np.minimum(last + 2, labels.shape)
         kept = labels[tuple(slice(a, b) for a, b in zip(lo, hi, strict=True))].copy()
         kept_grid = Grid(grid.to_physical(lo), grid.spacing, grid.direction, kept.shape)

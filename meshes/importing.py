@@ -61,7 +61,7 @@ from meshes.exceptions import (
     SurfaceRuleError,
     reject_unknown,
 )
-from meshes.orientation import Orientation, check_chest_wall_posterior
+from meshes.orientation import Orientation, check_chest_wall_posterior, file_frame_words
 from meshes.quality import exterior_faces, tet_volumes
 from meshes.reading import SURFACE_SUFFIXES, VOLUME_SUFFIXES, InputMesh, read_input
 from meshes.remesh import check_dihedral_floor, fill_surface
@@ -138,9 +138,16 @@ class ImportSpec:
             orientation=Orientation.from_mapping(values.get("orientation")),
         )
 
+    #: The key that says where the file's axes point (named in refusals).
+    orientation_key = "mesh.file.orientation"
+
     def rules(self) -> dict[Boundary, BoundaryRule]:
         """The boundary rules (the file's axes and units)."""
         return dict(self.surfaces)
+
+    def frame_words(self) -> tuple[str, str]:
+        """How the file's frame is named in a refusal, and what to change."""
+        return file_frame_words(self.orientation)
 
     def select_posterior(self) -> np.ndarray:
         """The patient's posterior in the file's axes (for a posterior rule)."""
@@ -198,7 +205,7 @@ class InputVolume:
                 unknown group (:func:`meshes.boundary_rules.select_facets`).
         """
         return select_facets(self.x, self.faces, spec.rules(), spec.units, self.groups,
-                             self.group_names, spec.select_posterior())
+                             self.group_names, spec.select_posterior(), spec.orientation_key)
 
 
 def prepare_input(
@@ -225,7 +232,7 @@ def prepare_input(
     x, tets, facets = into_project_frame(x, tets, facets, spec.orientation)
     info["orientation"] = spec.orientation.describe()
     check_chest_wall_posterior(x, facets[Boundary.RIB], spec.orientation,
-                               f"the input {spec.path}")
+                               f"the input {spec.path}", spec.frame_words())
     return x, tets, facets, info, volume.tissues
 
 
@@ -336,7 +343,7 @@ def preview_rules(
     try:  # the run's checks of the selection and of the frame, in its order
         check_selection(volume.x, volume.faces, selected, spec.rules())
         check_chest_wall_posterior(x, facets[Boundary.RIB], spec.orientation,
-                                   f"the input {spec.path}")
+                                   f"the input {spec.path}", spec.frame_words())
         problem = None
     except (SurfaceRuleError, GeometryError) as err:
         problem = str(err)

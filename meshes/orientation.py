@@ -34,6 +34,36 @@ PROJECT = "project"
 """The file is already in the project's frame (the default): no map."""
 
 
+def axes_code(axes: str, key: str) -> str:
+    """An anatomical axes code, upper case: three letters, one of each pair L/R, A/P, S/I.
+
+    Raises:
+        GeometryError: naming ``key`` where ``axes`` is not such a code.
+    """
+    code = str(axes).upper()
+    pairs = sorted(i for c in code for i, pair in enumerate(PAIRS) if c in pair)
+    if len(code) != 3 or pairs != [0, 1, 2]:
+        raise GeometryError(
+            f"{key} {axes!r} is not an anatomical code: three letters, one of each pair L/R, "
+            "A/P, S/I, naming where each axis points (e.g. LPS for DICOM, RAS for NIfTI)"
+        )
+    return code
+
+
+def axes_directions(code: str) -> np.ndarray:
+    """Each axis of ``code`` as a column of unit vectors in (Left, Posterior, Superior)."""
+    return np.array([DIRECTIONS[c] for c in code]).T
+
+
+def nearest_code(directions: np.ndarray) -> str:
+    """The axes code nearest to direction cosines (columns in LPS): each column's largest part."""
+    letters = []
+    for column in np.asarray(directions, dtype=float).T:
+        axis = int(np.argmax(np.abs(column)))
+        letters.append("LPS"[axis] if column[axis] > 0 else "RAI"[axis])
+    return "".join(letters)
+
+
 @dataclass(frozen=True, slots=True)
 class Orientation:
     """The file's axes in the patient (``mesh.file.orientation``).
@@ -53,14 +83,7 @@ class Orientation:
             if self.side is not None and self.side not in SIDES:
                 raise GeometryError(f"mesh.file.orientation.side must be one of {SIDES}")
             return
-        code = str(self.axes).upper()
-        pairs = sorted(i for c in code for i, pair in enumerate(PAIRS) if c in pair)
-        if len(code) != 3 or pairs != [0, 1, 2]:
-            raise GeometryError(
-                f"mesh.file.orientation.axes {self.axes!r} is not an anatomical code: three "
-                "letters, one of each pair L/R, A/P, S/I, naming where each file axis points "
-                "(e.g. LPS for DICOM, RAS for NIfTI)"
-            )
+        code = axes_code(self.axes, "mesh.file.orientation.axes")
         object.__setattr__(self, "axes", code)
         if self.side not in SIDES:
             raise GeometryError(
@@ -109,14 +132,35 @@ class Orientation:
                 "mirrored": self.mirrors}
 
 
+def file_frame_words(orientation: Orientation) -> tuple[str, str]:
+    """How a surface or volume file's frame is named in a refusal, and what to change."""
+    frame = (f"with mesh.file.orientation axes {orientation.axes}, side {orientation.side}"
+             if orientation.declared else
+             "taken to be in the project's frame (x anterior to posterior: no "
+             "mesh.file.orientation axes)")
+    remedy = ("check the axes code (where each file axis points) and the side"
+              if orientation.declared else
+              "declare the file's axes and the breast's side (mesh.file.orientation)")
+    return frame, remedy
+
+
 def check_chest_wall_posterior(
-    x: np.ndarray, rib_facets: np.ndarray, orientation: Orientation, what: str
+    x: np.ndarray, rib_facets: np.ndarray, orientation: Orientation, what: str,
+    words: tuple[str, str] | None = None,
 ) -> float:
     """Refuse an orientation, declared or not, that puts the chest wall anterior of the breast.
 
     In the project's frame the chest wall is posterior (+x) of the tissue it holds: the rib
     facets' centroid must lie at a larger x than the body's. A file without an orientation is
     taken to be in that frame, and is checked the same way.
+
+    Args:
+        x: the mesh's points in the project's frame.
+        rib_facets: the rib's triangles.
+        orientation: the map the points came through.
+        what: the input, for the message.
+        words: how the frame is named and what to change (default
+            :func:`file_frame_words`: ``mesh.file.orientation``'s).
 
     Returns:
         How far posterior of the body's centroid the chest wall lies, m.
@@ -128,13 +172,7 @@ def check_chest_wall_posterior(
     body_x = float(x[:, 0].mean())
     if rib_x > body_x:
         return rib_x - body_x
-    frame = (f"with mesh.file.orientation axes {orientation.axes}, side {orientation.side}"
-             if orientation.declared else
-             "taken to be in the project's frame (x anterior to posterior: no "
-             "mesh.file.orientation axes)")
-    remedy = ("check the axes code (where each file axis points) and the side"
-              if orientation.declared else
-              "declare the file's axes and the breast's side (mesh.file.orientation)")
+    frame, remedy = words or file_frame_words(orientation)
     raise GeometryError(
         f"{what}: {frame}, the chest wall (the rib facets) lies "
         f"{1e3 * (body_x - rib_x):.3g} mm anterior of the breast's centroid, where it belongs "

@@ -3,8 +3,10 @@
     .venv/bin/python -m meshes.preview config.yaml [--png rules.png]
 
 Reads the config's ``mesh`` section (``source: file`` or ``image``), reads and checks the file
-(for a label volume: its labels, their voxels and volumes, which make up the breast and which is
-the chest, and the breast meshed), and prints, for each rule, the facets it selects, their
+(for a label volume: its header checked, where its voxel axes point and whether the header or
+``mesh.image.orientation`` says so, its labels, their voxels and volumes, which make up the
+breast and which is the chest, the breast meshed, and any warning: a field of view that cuts
+the breast), and prints, for each rule, the facets it selects, their
 area and their share of the boundary's area; then
 whether the import would stop (two rules claim a facet, the rib is more than 70 % or less than
 2 % of the boundary). The ``mesh`` section is checked by the config's schema first, as a run
@@ -73,6 +75,10 @@ def _print_labels(info: dict) -> None:
         roles[str(info["chest_label"])] = "chest wall (its boundary with the breast: rib)"
     print(f"label volume {info['path']}: {' x '.join(map(str, info['image_shape']))} voxels of "
           f"{' x '.join(f'{v:.3g}' for v in info['voxel_size_mm'])} mm")
+    axes = info["axes"]
+    source = ("mesh.image.orientation (the header's direction set aside)"
+              if axes["from"] != "header" else "the header's direction cosines")
+    print(f"voxel axes i, j, k point {axes['code']} (by {source}); breast side {info['side']}")
     print(f"{'label':>6} {'voxels':>11} {'volume ml':>10}  role")
     for label, count in info["labels"].items():
         role = roles.get(label, "background" if label == "0" else "not used")
@@ -80,6 +86,8 @@ def _print_labels(info: dict) -> None:
     print(f"meshed: {info['meshed_volume_ml']:.1f} ml of the labelled "
           f"{info['labelled_volume_ml']:.1f} ml, {info['fill']['method']}, worst dihedral "
           f"{info['quality_floor']['min_dihedral_deg']:.1f}°")
+    for warning in info["warnings"]:
+        print(f"warning: {warning}")
 
 
 if __name__ == "__main__":

@@ -369,6 +369,113 @@ FILE_PROBES: dict[str, Callable[[Path], Outcome]] = {
 }
 
 
+# -- bad label volumes (mesh.source: image) ---------------------------------------------------
+
+
+def image_probe(make: Callable[[Path], Path], text: str,
+                **image: Any) -> Callable[[Path], Outcome]:
+    """Mesh the label volume ``make`` writes in the folder: the job fails, its log names ``text``.
+
+    The volume is :mod:`meshes.phantom`'s, small (160 x 165 x 150 mm in 4 mm voxels), spoiled.
+    """
+
+    def probe(workdir: Path) -> Outcome:
+        path = make(workdir)
+        config = config_with(
+            mesh__source="image",
+            mesh__size={"fold_size": None, "order": 1, "global_size": 0.03},
+            mesh__image={"path": path.name, "breast_labels": [1, 2, 4], "chest_label": 3,
+                         "side": "left", **image},
+        )
+        del config["fe"]["contact"]
+        config_path = workdir / "image.yaml"
+        config_path.write_text(yaml.safe_dump(config))
+        run = snakemake(workdir, config_path, "-j1", "results/mesh/mesh.xdmf")
+        outcome = expect(run, text, workdir / "results/logs/mesh.log")
+        if outcome.passed and (workdir / "results/mesh/mesh.xdmf").exists():
+            return Outcome(False, "a mesh was written")
+        return outcome
+
+    return probe
+
+
+def _phantom(folder: Path, suffix: str = ".nii", **kwargs: Any) -> Path:
+    from meshes.phantom import write_phantom
+
+    return write_phantom(folder / f"labels{suffix}", (40, 44, 30), (4.0, 3.75, 5.0), **kwargs)
+
+
+def _zero_pixdim(folder: Path) -> Path:
+    """NIfTI-1's pixdim[1] (float32 at byte 80) set to 0; the sform still says 4 mm."""
+    path = _phantom(folder)
+    data = bytearray(path.read_bytes())
+    data[80:84] = np.float32(0.0).tobytes()
+    path.write_bytes(bytes(data))
+    return path
+
+
+def _metaimage_edit(old: str, new: str) -> Callable[[Path], Path]:
+    def make(folder: Path) -> Path:
+        path = _phantom(folder, ".mhd")
+        path.write_text(path.read_text().replace(old, new))
+        return path
+
+    return make
+
+
+def _cut_in_half(folder: Path) -> Path:
+    path = _phantom(folder, ".nii.gz")
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    return path
+
+
+def _two_breasts(folder: Path) -> Path:
+    """The phantom twice, side by side along i: two equal breasts."""
+    import SimpleITK as sitk
+
+    one = sitk.ReadImage(str(_phantom(folder)))
+    both = sitk.GetImageFromArray(np.concatenate([sitk.GetArrayFromImage(one)] * 2, axis=2))
+    both.SetSpacing(one.GetSpacing())
+    both.SetOrigin(one.GetOrigin())
+    both.SetDirection(one.GetDirection())
+    sitk.WriteImage(both, str(folder / "two.nii.gz"), True)
+    return folder / "two.nii.gz"
+
+
+def _research_phantom(folder: Path) -> Path:
+    """Voxel axes really SLA (the breast along +k), written LPS with the identity direction."""
+    import SimpleITK as sitk
+
+    sla = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])  # i S, j L, k A in LPS
+    image = sitk.ReadImage(str(_phantom(folder, ".nrrd", direction=sla)))
+    image.SetDirection(tuple(np.eye(3).ravel()))
+    sitk.WriteImage(image, str(folder / "research.nrrd"), True)
+    return folder / "research.nrrd"
+
+
+IMAGE_PROBES: dict[str, Callable[[Path], Outcome]] = {
+    "a NIfTI whose pixdim is 0 (its sform says 4 mm)": image_probe(
+        _zero_pixdim, r"pixdim\[1:4\] = \(0, 3\.75, 5\) mm is not a finite, positive voxel size"),
+    "a MetaImage whose direction matrix is scaled by 2": image_probe(
+        _metaimage_edit("TransformMatrix = 1 0 0 0 1 0 0 0 1",
+                        "TransformMatrix = 2 0 0 0 2 0 0 0 2"),
+        r"direction cosines \(TransformMatrix\) are not orthonormal"),
+    "a MetaImage whose spacing is 1e-6 mm": image_probe(
+        _metaimage_edit("ElementSpacing = 4 3.75 5", "ElementSpacing = 4e-06 3.75e-06 5e-06"),
+        r"the image is \S+ mm across .*? probably in other units"),
+    # without the tumour's label, which lies in the half that is lost
+    "a .nii.gz cut to half its bytes": image_probe(
+        _cut_in_half, r"labels\.nii\.gz is truncated", breast_labels=[1, 2]),
+    "two equal breasts in one image": image_probe(
+        _two_breasts, r"form 2 separate pieces: the largest (\S+) ml .*?the next \1 ml"),
+    "a wrong header and no mesh.image.orientation": image_probe(
+        _research_phantom, r"lies \S+ mm from the breast's centroid towards the patient's "
+        r"inferior \(I\), 90° from posterior.*?give them as mesh\.image\.orientation"),
+}
+FILE_PROBES.update(IMAGE_PROBES)
+
+
 # -- bad case files at aggregation ---------------------------------------------------------
 
 # the smallest sweep whose dataset every reader takes: three cases to train, validate and
