@@ -10,9 +10,10 @@ image. The config's ``mesh.file`` says the file's units and orientation; the imp
 translate, so points map by the same linear map as the mesh. For a label volume
 (``mesh.source: image``) the file's frame is the scanner's LPS millimetres of the image's
 header; with ``--voxels`` the points are (continuous) voxel indices i, j, k of the image
-instead, in (``--to project``) or out (``--to file``). Exit status 2 names a bad config or CSV,
-or an output that would overwrite an input (the points, the config, the files it imports);
-nothing is written then. A missing output folder is made.
+instead, in (``--to project``: each within the image, voxel centres at 0 to n - 1) or out
+(``--to file``). Exit status 2 names a bad config or CSV, a voxel outside the image, or an
+output that would overwrite an input (the points, the config, the files it imports); nothing
+is written then. A missing output folder is made.
 """
 
 from __future__ import annotations
@@ -21,10 +22,36 @@ import argparse
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from meshes.arguments import output_file, refuse_overwriting
 from meshes.config import read_mesh_config
 from meshes.exceptions import GeometryError, MeshInputError
+from meshes.image_header import read_header
 from meshes.points import read_points, write_points
+
+
+def check_voxel_indices(names: list[str], index: np.ndarray, shape: tuple[int, ...],
+                        points: Path, image: str | Path) -> None:
+    """Refuse voxel indices that lie outside the image.
+
+    Voxel ``i`` covers the indices from ``i - 0.5`` to ``i + 0.5``: the image spans -0.5 to
+    ``n - 0.5`` along each axis.
+
+    Raises:
+        MeshInputError: naming the first point outside, its indices, how many are, and the
+            image's size in voxels.
+    """
+    upper = np.asarray(shape, dtype=float) - 0.5
+    outside = np.flatnonzero(np.any((index < -0.5) | (index > upper), axis=1))
+    if len(outside):
+        first = outside[0]
+        at = ", ".join(f"{v:g}" for v in index[first])
+        raise MeshInputError(
+            f"{points}: point {first + 1} ({names[first]!r}) at voxel indices ({at}) lies "
+            f"outside the image {image} of {' x '.join(map(str, shape))} voxels (indices from "
+            f"-0.5 to {', '.join(f'{u:g}' for u in upper)} along i, j, k); {len(outside)} of "
+            f"{len(names)} point(s) do: give voxel indices of this image")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -56,6 +83,8 @@ def main(argv: list[str] | None = None) -> int:
         names, points = read_points(args.points)
         if args.to == "project":
             if args.voxels:
+                check_voxel_indices(names, points, read_header(spec.path, spec.axes).shape,
+                                    args.points, spec.path)
                 points = spec.voxels_to_file_frame(points)
             out = spec.to_project_frame(points)
         else:

@@ -12,6 +12,7 @@ import argparse
 import os
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -87,6 +88,43 @@ def test_frame_makes_a_missing_output_folder(tmp_path: Path,
     out = tmp_path / "new" / "folder" / "out.csv"
     assert frame([str(config), str(picks), str(out), "--to", "project"]) == 0
     assert out.read_text().splitlines()[0] == "name,x,y,z"
+
+
+def image_config(tmp_path: Path, shape: tuple[int, int, int] = (50, 56, 36)) -> Path:
+    """A config meshing a phantom label volume of ``shape`` voxels."""
+    from meshes.phantom import BREAST_LABELS, PECTORAL, write_phantom
+
+    image = write_phantom(tmp_path / "labels.nii.gz", shape=shape, spacing_mm=(3.2, 3.0, 4.0))
+    config = tmp_path / "image.yaml"
+    config.write_text(yaml.safe_dump({"mesh": {"source": "image", "image": {
+        "path": str(image), "breast_labels": list(BREAST_LABELS), "chest_label": PECTORAL,
+        "side": "left"}}}))
+    return config
+
+
+@pytest.mark.parametrize("index", ["1000,1000,1000", "-3,10,10", "10,56,10"])
+def test_frame_refuses_voxel_indices_outside_the_image(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], index: str) -> None:
+    config = image_config(tmp_path)
+    picks = tmp_path / "voxels.csv"
+    picks.write_text(f"name,x,y,z\ninside,10,10,10\nstray,{index}\n")
+    out = tmp_path / "out.csv"
+    line = refused([str(config), str(picks), str(out), "--to", "project", "--voxels"], capsys)
+    assert "point 2 ('stray') at voxel indices" in line
+    assert "outside the image" in line and "50 x 56 x 36 voxels" in line
+    assert not out.exists()
+
+
+def test_frame_takes_voxel_indices_to_the_image_s_edges(tmp_path: Path) -> None:
+    config = image_config(tmp_path)
+    picks = tmp_path / "voxels.csv"
+    picks.write_text("name,x,y,z\nfirst,-0.5,-0.5,-0.5\nlast,49.5,55.5,35.5\n")
+    out = tmp_path / "out.csv"
+    assert frame([str(config), str(picks), str(out), "--to", "project", "--voxels"]) == 0
+    xyz = np.loadtxt(out, delimiter=",", skiprows=1, usecols=(1, 2, 3))
+    # the image's diagonal: 50 x 3.2, 56 x 3.0, 36 x 4.0 mm
+    assert np.linalg.norm(xyz[1] - xyz[0]) == pytest.approx(
+        1e-3 * np.linalg.norm([160.0, 168.0, 144.0]), rel=1e-6)  # NIfTI: float32
 
 
 def test_an_output_is_checked_against_every_kind_of_input(tmp_path: Path) -> None:
