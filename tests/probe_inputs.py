@@ -696,6 +696,29 @@ def _import_config(workdir: Path, orientation: dict, rib: dict | None = None) ->
     (workdir / "import.yaml").write_text(yaml.safe_dump({"mesh": mesh}))
 
 
+def truncated_arrays_rerun_probe(workdir: Path, solved: Path) -> Outcome:
+    """The workflow's 3D view of a model whose ``params.npz`` is then cut short.
+
+    The view is built (the workflow's ``viewer`` rule alone, on the probes' model as the
+    selected one); the arrays are then truncated: the next run must make the view again and
+    fail naming them in its log, twice (not "Nothing to be done", the rule reading only the card).
+    """
+    shutil.copytree(solved, workdir, symlinks=True, dirs_exist_ok=True)
+    shutil.copytree(workdir / MODEL, workdir / "results/surrogate/model")
+    view = ("--allowed-rules", "viewer", "--", "results/viewer/index.html")
+    built = snakemake(workdir, workdir / "sweep.yaml", "-j1", *view)
+    if built.returncode != 0:
+        return Outcome(False, f"the view of the whole model failed: {built.stderr[-400:]}")
+    _spoil_params(workdir / "results/surrogate")
+    for attempt in ("first", "second"):
+        run = snakemake(workdir, workdir / "sweep.yaml", "-j1", *view)
+        outcome = expect(run, r"params\.npz is not a whole NumPy archive",
+                         workdir / "results/logs/viewer.log")
+        if not outcome.passed:
+            return Outcome(False, f"{attempt} run: {outcome.detail}")
+    return outcome
+
+
 MODEL_QUERY = ["surrogate.cli", "predict", MODEL, "--c1", "2", "--phi", "90"]
 
 COMMAND_PROBES: dict[str, Callable[[Path, Path], Outcome]] = {
@@ -763,6 +786,8 @@ COMMAND_PROBES: dict[str, Callable[[Path, Path], Outcome]] = {
     "the viewer of a truncated model": command_probe(
         ["report.viewer", MODEL, "-o", "page.html", "--mesh", MESH],
         r"params\.npz is not a whole NumPy archive", prepare=_spoil_params),
+    "the workflow's view of a model whose params.npz is then truncated":
+        truncated_arrays_rerun_probe,
     "the viewer of a model with a NaN scale": command_probe(
         ["report.viewer", MODEL, "-o", "page.html", "--mesh", MESH],
         r"normalisation\.x_std is nan", prepare=lambda w: _spoil_card(w, x_std=float("nan"))),

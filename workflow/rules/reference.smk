@@ -67,6 +67,7 @@ if IMAGED is not None:
             imaged=IMAGED_MESH,
             reference=MESH,
             model=MODEL,
+            model_arrays=MODEL_ARRAYS,
             points=lambda w: IMAGED.point_files[w.name],
         output:
             csv="results/tracking/{name}.csv",
@@ -92,6 +93,7 @@ if IMAGED is not None:
         input:
             reference=MESH,
             model=MODEL,
+            model_arrays=MODEL_ARRAYS,
             observation=IMAGED.observation or [],
         output:
             json=STIFFNESS_JSON,

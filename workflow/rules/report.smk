@@ -85,6 +85,7 @@ rule first_report:
 rule viewer:
     input:
         model=MODEL,
+        model_arrays=MODEL_ARRAYS,
         mesh=MESH,
         dataset=DATASET,
         # with reference_state.points: each set's material positions, found by rule tracking

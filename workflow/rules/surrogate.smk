@@ -62,6 +62,7 @@ checkpoint study_repeats:
 rule architecture_study:
     input:
         runs=study_runs(),
+        runs_arrays=study_runs("params.npz"),
     output:
         table=STUDY_TABLE,
     params:
@@ -91,7 +92,7 @@ rule select_model:
         audit=FE_STABILITY_AUDIT_JSON,
     output:
         model=MODEL,
-        params=f"{SURROGATE_DIR}/model/params.npz",
+        params=MODEL_ARRAYS,
         history=f"{SURROGATE_DIR}/model/history.json",
     params:
         refit=CONFIG.surrogate_study.refit,
@@ -190,7 +191,9 @@ rule held_out:
         dataset=DATASET,
         audit=FE_STABILITY_AUDIT_JSON,
         model=MODEL,
+        model_arrays=MODEL_ARRAYS,
         held_out=held_out_models(),
+        held_out_arrays=held_out_models("params.npz"),
     output:
         HELD_OUT_JSON,
     params:
@@ -210,7 +213,9 @@ rule clinical:
     input:
         dataset=DATASET,
         model=MODEL,
+        model_arrays=MODEL_ARRAYS,
         model_by_case=MODEL_BY_CASE,
+        model_by_case_arrays=MODEL_BY_CASE_ARRAYS,
         mesh=MESH,
         summaries=expand(f"results/cases/{{case}}/summary.json", case=clinical_ids()),
     output:
@@ -235,7 +240,9 @@ rule extrapolation:
     input:
         dataset=DATASET,
         model=MODEL,
+        model_arrays=MODEL_ARRAYS,
         model_by_case=MODEL_BY_CASE,
+        model_by_case_arrays=MODEL_BY_CASE_ARRAYS,
         summaries=extrapolation_files("summary.json"),
         points=extrapolation_files("points.h5"),
     output:
@@ -257,6 +264,7 @@ rule extrapolation:
 rule postures:
     input:
         model=MODEL,
+        model_arrays=MODEL_ARRAYS,
         summaries=posture_files("summary.json"),
         points=posture_files("points.h5"),
         fields=posture_files("fields.h5"),
@@ -280,6 +288,7 @@ rule postures:
 rule off_grid:
     input:
         model=MODEL,
+        model_arrays=MODEL_ARRAYS,
         summaries=off_grid_files("summary.json"),
         points=off_grid_files("points.h5"),
         fields=off_grid_files("fields.h5"),
@@ -302,6 +311,7 @@ rule off_grid:
 rule warning_coverage:
     input:
         model=MODEL,
+        model_arrays=MODEL_ARRAYS,
     output:
         WARNING_COVERAGE_JSON,
     log:
@@ -320,6 +330,7 @@ rule warning_coverage:
 rule surrogate_benchmark:
     input:
         model=MODEL,
+        model_arrays=MODEL_ARRAYS,
         mesh=MESH,
         table=STUDY_TABLE,
         clinical=CLINICAL_JSON,
