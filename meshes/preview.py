@@ -78,7 +78,7 @@ def _print_labels(info: dict) -> None:
     axes = info["axes"]
     source = ("mesh.image.orientation (the header's direction set aside)"
               if axes["from"] != "header" else "the header's direction cosines")
-    print(f"voxel axes i, j, k point {axes['code']} (by {source}); breast side {info['side']}")
+    print(f"voxel axes i, j, k point {axes['code']}, by {source}; breast side {info['side']}")
     print(f"{'label':>6} {'voxels':>11} {'volume ml':>10}  role")
     for label, count in info["labels"].items():
         role = roles.get(label, "background" if label == "0" else "not used")

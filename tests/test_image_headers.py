@@ -332,9 +332,10 @@ def test_preview_says_which_axes_were_used(tmp_path: Path) -> None:
     image = research_phantom(tmp_path)
     done = preview(tmp_path, section(image, orientation="sla"))
     assert done.returncode == 0, done.stderr
-    assert "voxel axes i, j, k point SLA (by mesh.image.orientation" in done.stdout
+    assert "voxel axes i, j, k point SLA, by mesh.image.orientation (the header's" in (
+        done.stdout)
     done = preview(tmp_path, section(small(tmp_path)))
-    assert "voxel axes i, j, k point LPS (by the header's direction cosines)" in done.stdout
+    assert "voxel axes i, j, k point LPS, by the header's direction cosines;" in done.stdout
 
 
 def test_the_orientation_key_is_checked(tmp_path: Path) -> None:
