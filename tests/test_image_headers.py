@@ -400,3 +400,15 @@ def test_the_corrected_research_phantom_solves(tmp_path: Path) -> None:
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "converged" and summary["max_disp_mm"] > 0.5
 
+
+
+def test_a_posterior_rule_that_selects_nothing_names_the_image_key(tmp_path: Path) -> None:
+    """Its remedy names mesh.image.orientation, which an image has, not mesh.file.orientation."""
+    from meshes.exceptions import NoRibFacetsError
+
+    values = section(small(tmp_path))
+    del values["image"]["chest_label"]
+    values["image"]["surfaces"] = {"rib": {"posterior": {"angle": 0.01, "band": 0.01}}}
+    with pytest.raises(NoRibFacetsError, match=r"or check mesh\.image\.orientation$"):
+        make_mesh(MeshConfig.from_mapping(values), tmp_path / "m.xdmf", tmp_path / "q.json",
+                  tmp_path / "m.png")
