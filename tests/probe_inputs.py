@@ -804,6 +804,9 @@ COMMAND_PROBES: dict[str, Callable[[Path, Path], Outcome]] = {
     "the preview of orientation {}": command_probe(
         ["meshes.preview", "import.yaml"], r"invalid mesh section: mesh\.file\.orientation",
         prepare=lambda w: _import_config(w, {})),
+    "the preview of an alias bomb": command_probe(
+        ["meshes.preview", "bomb.yaml"], r"bomb\.yaml: sweep\.a4 expands to more than 100000",
+        prepare=lambda w: (w / "bomb.yaml").write_text(alias_bomb(mapping=True))),
     "the preview of a distance beside a posterior rule": command_probe(
         ["meshes.preview", "import.yaml"], r"invalid mesh section: mesh\.file\.surfaces\.rib",
         prepare=lambda w: _import_config(w, {"axes": "LPS", "side": "left"}, {
