@@ -26,7 +26,8 @@ COARSE = {"global_size": 0.03, "mound_size": 0.02, "order": 1}
 #: that the workers finish together; the workflow's module first, as it builds the small run
 #: that later modules read (:func:`small_run`). The others follow in the order pytest finds them.
 LONGEST_FIRST = (
-    "test_workflow.py", "test_slurm.py", "test_probe_inputs.py", "test_self_contact.py",
+    "test_workflow.py", "test_slurm.py", "test_probe_inputs.py", "test_patient_page.py",
+    "test_self_contact.py",
     "test_reference.py", "test_workflow_safety.py", "test_viewer.py", "test_clinic_data.py",
     "test_fem_robustness.py",
     "test_surrogate.py", "test_sweep_workflow.py", "test_fem_mpi.py", "test_fem_solvers.py",
