@@ -108,12 +108,17 @@ class Membrane:
         a = (in_plane + root) / 2
         b = (in_plane - root) / 2
         wrinkled = self.C1 * self.thickness * (a + 2 / ufl.sqrt(a) - 3)
-        return ufl.conditional(ufl.le(a, 1.0), 0.0,
-                               ufl.conditional(ufl.ge(b * area2, 1.0), taut, wrinkled))
+        # taut first, with room for the floor's shift of b: at rest (a = b = 1, where all three
+        # meet) the sheet's tangent is then the taut one, and Newton's first step from rest
+        # feels the skin (slack there, it would see none)
+        return ufl.conditional(ufl.ge(b * area2, 1.0 - _TAUT_TOLERANCE), taut,
+                               ufl.conditional(ufl.le(a, 1.0), 0.0, wrinkled))
 
 
 #: Floor under the discriminant of the in-plane stretches (squared stretches are O(1)).
 _ROOT_FLOOR = 1e-12
+#: The taut test's allowance: the floor lowers b by at most √floor / 2.
+_TAUT_TOLERANCE = 1e-6
 
 
 def first_piola_kirchhoff(psi: ufl.core.expr.Expr, F: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
