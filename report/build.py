@@ -32,6 +32,7 @@ from report.sections.paper import paper_section
 from report.sections.reference import reference_section
 from report.sections.run_time import run_time_section
 from report.sections.scene import scene_needs_section
+from report.sections.skin import skin_section
 from report.sections.stability import stability_section
 from report.sections.surrogate import surrogate_speed_accuracy_section
 from report.sections.sweep import sweep_cost_section
@@ -69,6 +70,7 @@ SECTIONS: tuple[tuple[str, str, Callable[[Context], str]], ...] = (
     ("scene-needs", "Model no more than a scene needs", scene_needs_section),
     ("stability", "Stability", stability_section),
     ("corpus", "A corpus of anatomies", corpus_section),
+    ("skin", "What the skin changes", skin_section),
     ("reference", "From the imaged shape to the reference state", reference_section),
     ("paper", "The paper side by side", paper_section),
     ("sweep-cost", "Sweep cost", sweep_cost_section),

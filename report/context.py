@@ -26,6 +26,7 @@ from studies.postures import PostureEvaluation
 from studies.reference_roundtrip import RoundTripTable
 from studies.reference_state import ReferenceRecord
 from studies.run_log import run_time
+from studies.skin import SkinStudy
 from studies.stability import StabilityMap
 from studies.stability_audit import StabilityAudit
 from studies.stiffness import StiffnessResult
@@ -44,7 +45,7 @@ INPUT_NAMES = (
     "clinical", "extrapolation", "benchmark", "clinical_fields", "fe_clinical", "fe_speed_accuracy",
     "fe_stability", "corpus", "reference_roundtrip", "reference_record", "tracking", "stiffness",
     "viewer", "held_out", "postures", "off_grid", "fe_failure_edges", "fe_stability_audit",
-    "fe_fold_section", "warning_coverage", "run_log",
+    "fe_fold_section", "fe_skin", "warning_coverage", "run_log",
 )
 
 
@@ -66,6 +67,7 @@ RESULT_TYPES: dict[str, Callable[[Path], Any]] = {
     "fe_failure_edges": SweepEdges.read,
     "fe_stability_audit": StabilityAudit.read,
     "fe_fold_section": FoldSections.read,
+    "fe_skin": SkinStudy.read,
     "corpus": CorpusTable.read,
     "reference_roundtrip": RoundTripTable.read,
     "reference_record": ReferenceRecord.read,

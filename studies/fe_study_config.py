@@ -98,6 +98,38 @@ class FoldSectionConfig:
 
 
 @dataclass(frozen=True, slots=True)
+class SkinStudyConfig:
+    """What the skin changes (``fe_study.skin``): see :mod:`studies.skin`.
+
+    Attributes:
+        ratios: the skin's C1 over the fat's, each solved at the default thickness.
+        thicknesses: the skin's thicknesses (m), each solved at the default ratio.
+        tumour: the point whose prone-to-supine path is followed ([x, y, z] m, the project's
+            frame); None: the mesh's volume centroid.
+    """
+
+    ratios: tuple[float, ...] = (7.0, 18.5, 100.0)
+    thicknesses: tuple[float, ...] = (0.001, 0.0015, 0.0025)
+    tumour: tuple[float, float, float] | None = None
+
+    def __post_init__(self) -> None:
+        for name, values in (("ratios", self.ratios), ("thicknesses", self.thicknesses)):
+            if not all(np.isfinite(v) and v > 0 for v in values):
+                raise ValueError(f"{name} must be positive numbers, got {list(values)}")
+        if self.tumour is not None and (len(self.tumour) != 3
+                                        or not np.all(np.isfinite(self.tumour))):
+            raise ValueError(f"tumour is [x, y, z] in m, finite, or null; got {self.tumour}")
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, Any]) -> SkinStudyConfig:
+        """From the validated section."""
+        tumour = values["tumour"]
+        return cls(tuple(float(r) for r in values["ratios"]),
+                   tuple(float(t) for t in values["thicknesses"]),
+                   None if tumour is None else tuple(float(x) for x in tumour))
+
+
+@dataclass(frozen=True, slots=True)
 class FEStudyConfig:
     """The FE study (``fe_study``): what is compared with what.
 
@@ -110,6 +142,7 @@ class FEStudyConfig:
         failure_edges: how the sweep's failed cases are traced.
         stability_audit: which of the sweep's converged cases are judged for stability.
         fold_section: which cases are cut at the fold with and without self-contact.
+        skin: the skin's settings the clinical cases are solved with (:mod:`studies.skin`).
         default_variant: the variant the workflow's own mesh and ``fe`` settings amount to.
         base_config: the ``fe``, ``material`` and ``mesh`` sections that the reference and the
             variants depend on, without the default's discretisation and solver preset, which
@@ -124,6 +157,7 @@ class FEStudyConfig:
     failure_edges: FailureEdgesConfig
     stability_audit: StabilityAuditConfig
     fold_section: FoldSectionConfig
+    skin: SkinStudyConfig
     default_variant: Variant
     base_config: dict[str, Any]
 
@@ -148,9 +182,11 @@ class FEStudyConfig:
                                          study["stability_audit"]["jobs"])
         with config_section("fe_study.fold_section"):
             fold = FoldSectionConfig.from_mapping(study["fold_section"])
+        with config_section("fe_study.skin"):
+            skin = SkinStudyConfig.from_mapping(study["skin"])
         with config_section("mesh.size"):
             default = default_variant(sections["mesh"], sections["fe"])
         speed_accuracy = study["speed_accuracy"]
         return cls(reference, variants, speed_accuracy["target"], speed_accuracy["max_dofs"],
-                   stability_mesh, failure_edges, audit, fold, default,
+                   stability_mesh, failure_edges, audit, fold, skin, default,
                    Variant.base_config(sections))

@@ -312,6 +312,7 @@ REPORT_SECTIONS = (
     "Surrogate training",
     "From the imaged shape to the reference state",
     "The surrogate between its cases and in every posture",
+    "What the skin changes",
 )
 
 
@@ -631,6 +632,31 @@ def test_fe_study_rules_run_end_to_end(small_run: Path) -> None:
     assert on.max_disp_mm == pytest.approx(off.max_disp_mm, rel=1e-6)
     assert np.allclose(on.segments_mm, off.segments_mm, atol=1e-3)
     assert 'id="fold-section"' in page and (small_run / "results/report/fold_section.png").is_file()
+
+
+def test_the_clinical_cases_are_solved_without_and_with_the_skin(small_run: Path) -> None:
+    """fe_skin: homogeneous, the default skin, tests/config.yaml's extra ratio and thickness."""
+    from fem.sweep import Case
+    from studies.skin import SkinStudy
+
+    results = small_run / "results"
+    study = SkinStudy.read(results / "fe_study/skin.json")
+    assert [s.name for s in study.settings] == ["homogeneous", "skin", "ratio 7",
+                                                "thickness 2.5 mm"]
+    assert (results / "benchmarks/fe_study/skin.tsv").is_file()
+    page = (results / "report/index.html").read_text()
+    section = section_html(page, "skin")
+    clinical = yaml.safe_load((REPO / "tests/config.yaml").read_text())["clinical"]
+    for item in clinical:
+        cid = Case(item["C1"], item["phi"]).id
+        rows = html_table(section, f"skin-{cid}")
+        assert "<td>homogeneous</td><td>none</td><td>none</td><td>converged</td>" in rows
+        assert "<td>skin</td><td>18.5</td><td>1.5</td><td>converged</td>" in rows
+        # the membrane, 18.5 times stiffer than the fat, holds the breast: it sags less
+        assert study.case("skin", cid).max_disp_mm < study.case("homogeneous", cid).max_disp_mm
+    # the small config's clinical cases pair no prone with a supine case of one C1
+    assert not study.paths and "there is no way to follow" in section
+    assert (results / "report/skin.png").is_file()
 
 
 @pytest.mark.parametrize(

@@ -106,6 +106,7 @@ FE_STABILITY_JSON = f"{FE_STUDY_DIR}/stability.json"
 FE_FAILURE_EDGES_JSON = f"{FE_STUDY_DIR}/failure_edges.json"
 FE_STABILITY_AUDIT_JSON = f"{FE_STUDY_DIR}/stability_audit.json"
 FE_FOLD_SECTION_JSON = f"{FE_STUDY_DIR}/fold_section.json"
+FE_SKIN_JSON = f"{FE_STUDY_DIR}/skin.json"
 FE_STUDY_RESULTS = [FE_CLINICAL_JSON, FE_SPEED_ACCURACY_JSON, FE_STABILITY_JSON]
 CORPUS_DIR = "results/corpus"
 CORPUS_JSON = f"{CORPUS_DIR}/corpus.json"

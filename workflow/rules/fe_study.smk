@@ -233,3 +233,31 @@ rule fe_fold_section:
         ENV
     script:
         "../scripts/fe_fold_section.py"
+
+
+# What the skin changes (studies.skin): the clinical cases on the workflow's mesh homogeneous and
+# with the skin membrane at each of fe_study.skin's ratios and thicknesses, and a tumour point's
+# prone-to-supine path with each. Like the fold's cut it feeds the full report only, not the
+# first report, and is not part of `snakemake fe_study`.
+rule fe_skin:
+    input:
+        mesh=MESH,
+    output:
+        FE_SKIN_JSON,
+    params:
+        config=CONFIG.sections_of("fe", "material", "mesh"),
+        clinical=CONFIG.section("clinical"),
+        ratios=CONFIG.fe_study.skin.ratios,
+        thicknesses=CONFIG.fe_study.skin.thicknesses,
+        tumour=CONFIG.fe_study.skin.tumour,
+    log:
+        "results/logs/fe_study/skin.log",
+    benchmark:
+        "results/benchmarks/fe_study/skin.tsv"
+    threads: 1
+    resources:
+        mem_mb=4000,
+    conda:
+        ENV
+    script:
+        "../scripts/fe_skin.py"

@@ -35,6 +35,7 @@ rule report:
         fe_failure_edges=FE_FAILURE_EDGES_JSON,
         fe_stability_audit=FE_STABILITY_AUDIT_JSON,
         fe_fold_section=FE_FOLD_SECTION_JSON,
+        fe_skin=FE_SKIN_JSON,
         corpus=CORPUS_JSON,
         reference_roundtrip=REFERENCE_ROUNDTRIP_JSON,
         # the imaged chain's results where reference_state.imaged is set (else empty)
