@@ -253,6 +253,21 @@ def write_stl(path: Path, x: np.ndarray, tris: np.ndarray) -> None:
     meshio.write(str(path), meshio.Mesh(x, [("triangle", tris)]), binary=False)
 
 
+def mesh_job_refuses(workdir: Path, config: dict[str, Any], name: str, text: str) -> Outcome:
+    """The mesh job refuses ``config``, naming ``text``, and writes no mesh.
+
+    The config is written as ``name``, without the chest contact.
+    """
+    del config["fe"]["contact"]
+    path = workdir / name
+    path.write_text(yaml.safe_dump(config))
+    run = snakemake(workdir, path, "-j1", "results/mesh/mesh.xdmf")
+    outcome = expect(run, text, workdir / "results/logs/mesh.log")
+    if outcome.passed and (workdir / "results/mesh/mesh.xdmf").exists():
+        return Outcome(False, "a mesh was written")
+    return outcome
+
+
 def file_probe(
     make: Callable[[Path], None],
     text: str,
@@ -270,14 +285,7 @@ def file_probe(
             mesh__file={"path": f"breast{suffix}", "units": units,
                         "surfaces": {"rib": rib or RIB}},
         )
-        del config["fe"]["contact"]
-        path = workdir / "import.yaml"
-        path.write_text(yaml.safe_dump(config))
-        run = snakemake(workdir, path, "-j1", "results/mesh/mesh.xdmf")
-        outcome = expect(run, text, workdir / "results/logs/mesh.log")
-        if outcome.passed and (workdir / "results/mesh/mesh.xdmf").exists():
-            return Outcome(False, "a mesh was written")
-        return outcome
+        return mesh_job_refuses(workdir, config, "import.yaml", text)
 
     return probe
 
@@ -387,14 +395,7 @@ def image_probe(make: Callable[[Path], Path], text: str,
             mesh__image={"path": path.name, "breast_labels": [1, 2, 4], "chest_label": 3,
                          "side": "left", **image},
         )
-        del config["fe"]["contact"]
-        config_path = workdir / "image.yaml"
-        config_path.write_text(yaml.safe_dump(config))
-        run = snakemake(workdir, config_path, "-j1", "results/mesh/mesh.xdmf")
-        outcome = expect(run, text, workdir / "results/logs/mesh.log")
-        if outcome.passed and (workdir / "results/mesh/mesh.xdmf").exists():
-            return Outcome(False, "a mesh was written")
-        return outcome
+        return mesh_job_refuses(workdir, config, "image.yaml", text)
 
     return probe
 
@@ -432,15 +433,9 @@ def _cut_in_half(folder: Path) -> Path:
 
 def _two_breasts(folder: Path) -> Path:
     """The phantom twice, side by side along i: two equal breasts."""
-    import SimpleITK as sitk
+    from tests.test_image_headers import two_breasts
 
-    one = sitk.ReadImage(str(_phantom(folder)))
-    both = sitk.GetImageFromArray(np.concatenate([sitk.GetArrayFromImage(one)] * 2, axis=2))
-    both.SetSpacing(one.GetSpacing())
-    both.SetOrigin(one.GetOrigin())
-    both.SetDirection(one.GetDirection())
-    sitk.WriteImage(both, str(folder / "two.nii.gz"), True)
-    return folder / "two.nii.gz"
+    return two_breasts(folder)
 
 
 def _research_phantom(folder: Path) -> Path:
