@@ -210,7 +210,8 @@ def track_file(points_csv: Path, imaged: Path, reference: Path, model_folder: Pa
 
     Args:
         points_csv: ``name,x,y,z`` in the imaged shape, in the file's frame and units for an
-            import (``mesh_section``'s ``file``), else in the project's frame, m.
+            import (``mesh_section``'s ``file``), in the scanner's LPS mm for an image
+            (``mesh_section``'s ``image``), else in the project's frame, m.
         imaged: the imaged mesh.
         reference: its reference (:mod:`fem.reference`).
         model_folder: a surrogate trained on the sweep from ``reference``.
