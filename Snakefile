@@ -27,6 +27,7 @@ if not workflow.overwrite_configfiles:
 include: "workflow/rules/common.smk"
 include: "workflow/rules/mesh.smk"
 include: "workflow/rules/solve.smk"
+include: "workflow/rules/sweep.smk"
 include: "workflow/rules/fe_study.smk"
 include: "workflow/rules/corpus.smk"
 include: "workflow/rules/reference.smk"

@@ -95,7 +95,7 @@ positions (0° and 180°) are sampled exactly."""
 
 PHI_SAMPLINGS = ("paper", "uniform", "equal_area")
 
-CASE_KEYS = ("C1_kPa", "phi_deg", "theta_deg", "sphere", "refine")
+CASE_KEYS = ("C1_kPa", "phi_deg", "theta_deg", "sphere", "adaptive")
 """The keys of a ``sweep`` section that choose its cases (a preset sets all of them)."""
 
 SWEEP_PRESETS: dict[str, dict[str, Any]] = {
@@ -273,76 +273,17 @@ def grid(spec: Any, name: str) -> list[float]:
     return values
 
 
-@dataclass(frozen=True)
-class Refinement:
-    """One band of a sweep's ``refine``: extra gravity directions solved at soft C1 values.
-
-    Attributes:
-        C1_min: the softest C1 (kPa) they are solved at (0: from the sweep's softest).
-        C1_max: the stiffest.
-        directions: the extra directions, (Φ, θ) in degrees.
-    """
-
-    C1_min: float
-    C1_max: float
-    directions: tuple[tuple[float, float], ...]
-
-    def covers(self, c1: float) -> bool:
-        """Whether the directions are solved at ``c1`` (kPa)."""
-        return self.C1_min - 1e-9 <= c1 <= self.C1_max + 1e-9
-
-
-def refine_directions(sweep: dict[str, Any]) -> tuple[Refinement, ...]:
-    """A sweep's ``refine``: one band ``{C1_min, C1_max, directions}`` or a list of bands.
-
-    Returns:
-        The bands, in the config's order; none where the sweep has no ``refine``.
-
-    Raises:
-        InvalidParameterError: for a band that is not such a mapping, a C1_max that is not
-            positive, a C1_min above it, or a direction that is not a (Φ, θ) pair of finite
-            degrees.
-    """
-    refine = resolve_sweep(sweep).get("refine")
-    if not refine:
-        return ()
-    bands = [refine] if isinstance(refine, dict) else list(refine)
-    return tuple(_band(band, f"sweep.refine[{i}]" if len(bands) > 1 else "sweep.refine")
-                 for i, band in enumerate(bands))
-
-
-def _band(band: Any, name: str) -> Refinement:
-    """One ``refine`` band, checked (:func:`refine_directions`)."""
-    if not isinstance(band, dict) or "C1_max" not in band:
-        raise InvalidParameterError(
-            f"{name} must be a mapping {{C1_min, C1_max, directions}}, got {band!r}")
-    c1_min, c1_max = float(band.get("C1_min", 0.0)), float(band["C1_max"])
-    if not math.isfinite(c1_max) or c1_max <= 0:
-        raise InvalidParameterError(f"{name}.C1_max must be a positive kPa, got {c1_max}")
-    if not math.isfinite(c1_min) or not 0 <= c1_min <= c1_max:
-        raise InvalidParameterError(
-            f"{name}.C1_min must lie between 0 and C1_max = {c1_max:g} kPa, got {c1_min}")
-    directions = []
-    for pair in band.get("directions", []):
-        if len(pair) != 2 or not all(math.isfinite(float(v)) for v in pair):
-            raise InvalidParameterError(
-                f"{name}.directions: {pair!r} is not a [phi, theta] pair in degrees")
-        directions.append((float(pair[0]), float(pair[1])))
-    return Refinement(c1_min, c1_max, tuple(directions))
-
-
 def sweep_cases(sweep: dict[str, Any]) -> list[Case]:
-    """All cases of a sweep config section, sorted and without duplicates.
+    """The cases of a sweep config section that are known before any is solved, sorted.
 
     Args:
         sweep: the ``sweep`` section: ``C1_kPa`` (list or range) and ``phi_deg`` (list or
             sampling rule, see :func:`sample_phi`) × ``theta_deg`` (list, default ``[0]``),
             or ``sphere: {n, part}`` (directions over the whole sphere or its caudal half,
             :func:`sphere_directions`), or both: the plane's directions and the sphere's;
-            or a ``preset`` (:func:`resolve_sweep`). ``refine: {C1_min, C1_max, directions}``
-            (or a list of such bands) adds its directions at the C1 values from ``C1_min``
-            (default: the softest) to ``C1_max`` only: where a soft field changes fastest
-            with direction (:mod:`studies.direction_gaps` proposes them).
+            or a ``preset`` (:func:`resolve_sweep`). Every direction is solved at every C1.
+            With ``adaptive`` these are the start design, and the rounds of
+            :mod:`fem.adaptive` add directions to it as the workflow solves them.
 
     Raises:
         InvalidParameterError: if the sweep has more than :data:`MAX_CASES` cases, or two of
@@ -360,28 +301,15 @@ def sweep_cases(sweep: dict[str, Any]) -> list[Case]:
     if not directions:
         raise InvalidParameterError("sweep needs phi_deg or sphere")
     directions = _drop_aliases(directions)
-    refined: set[tuple[float, float, float]] = set()  # (C1, Φ, θ) of the bands' cases
-    for index, band in enumerate(refine_directions(sweep)):
-        soft = [c for c in c1s if band.covers(c)]
-        if band.directions and not soft:
-            raise InvalidParameterError(
-                f"sweep.refine band {index + 1}: no C1 of the sweep lies between C1_min = "
-                f"{band.C1_min:g} and C1_max = {band.C1_max:g} kPa: its directions would have "
-                "no case")
-        refined |= {(c, p, t) for c in soft for p, t in band.directions}
-    extra = sorted({(p, t) for _, p, t in refined})
-    n_cases = len(c1s) * len(directions) + len(refined)
+    n_cases = len(c1s) * len(directions)
     if n_cases > MAX_CASES:
-        more = f" and {len(refined)} refined cases" if refined else ""
         raise InvalidParameterError(
-            f"sweep: {len(c1s)} C1 values x {len(directions)} gravity directions{more} is "
+            f"sweep: {len(c1s)} C1 values x {len(directions)} gravity directions is "
             f"{n_cases} cases, more than {MAX_CASES}"
         )
     _distinct_folders("sweep.C1_kPa", c1s, 2, "kPa")
-    _distinct_folders("sweep gravity directions (phi, theta)", directions + extra, 1, "deg")
-    _one_label_per_direction(directions, extra)
-    return sorted({Case(c, p, t) for c in c1s for p, t in directions}
-                  | {Case(c, p, t) for c, p, t in refined})
+    _distinct_folders("sweep gravity directions (phi, theta)", directions, 1, "deg")
+    return sorted({Case(c, p, t) for c in c1s for p, t in directions})
 
 
 def _distinct_folders(name: str, values: Sequence[Any], digits: int, unit: str) -> None:
@@ -419,29 +347,6 @@ def _drop_aliases(directions: Sequence[tuple[float, float]]) -> list[tuple[float
                         "is the same pole, theta = +-180 mirrors phi, phi = 360 is 0): solved "
                         "once, as (%g, %g)", *pair, *first[str(key)], *first[str(key)])
     return kept
-
-
-def _one_label_per_direction(directions: Sequence[tuple[float, float]],
-                             extra: Sequence[tuple[float, float]]) -> None:
-    """Refuse a refined direction that another (Φ, θ) of the sweep or of a band already names.
-
-    One gravity direction has many names: θ = ±180° mirrors Φ ((75, -180) is (-75, 0)), and
-    at Φ = 0 or 180° every θ is the same pole. Listed twice, it is solved twice, in two case
-    folders.
-    """
-    pairs = [*directions, *extra]
-    keys = direction_keys(np.array([p for p, _ in pairs]), np.array([t for _, t in pairs]))
-    named: dict[str, tuple[float, float]] = {}
-    for key, pair in zip(keys, pairs, strict=True):
-        named.setdefault(str(key), pair)
-    for key, pair in zip(keys[len(directions):], extra, strict=True):
-        first = named[str(key)]
-        if first != pair:
-            raise InvalidParameterError(
-                f"sweep.refine: [{pair[0]:g}, {pair[1]:g}] is the gravity direction "
-                f"[{first[0]:g}, {first[1]:g}] (phi, theta) that the sweep already lists (theta "
-                "= +-180 mirrors phi; at phi = 0 or 180 every theta is the same pole): list it "
-                "once, under one name")
 
 
 def clinical_cases(clinical: list[dict[str, Any]]) -> list[Case]:

@@ -29,6 +29,7 @@ import jsonschema
 import numpy as np
 from jsonschema import validators
 
+from fem.adaptive import AdaptiveDesign
 from fem.configfile import ConfigFileError, check_expansion
 from fem.configfile import read_config_file as fem_read_config_file
 from fem.contact import resolve_obstacle
@@ -211,6 +212,7 @@ class WorkflowConfig:
         imaged: the mesh as an image of the loaded breast, or None (stress-free).
         sections: the validated mapping (defaults filled, keys sorted), the source of the
             rules' params; read it through :meth:`section`.
+        adaptive: the adaptive sweep (``cases`` is then its start design), or None.
     """
 
     mesh: MeshConfig
@@ -223,6 +225,7 @@ class WorkflowConfig:
     surrogate_study: SurrogateStudyConfig
     imaged: ImagedConfig | None
     sections: dict[str, Any]
+    adaptive: AdaptiveDesign | None = None
 
     @classmethod
     def from_mapping(
@@ -247,6 +250,7 @@ class WorkflowConfig:
             solve_fe = resolve_obstacle(sections["fe"], sections["mesh"])
         with config_section("sweep"):
             cases = tuple(sweep_cases(sections["sweep"]))
+            adaptive = AdaptiveDesign.from_sweep(sections["sweep"])
         with config_section("clinical"):
             clinical = tuple(clinical_cases(sections["clinical"]))
         with config_section("dataset.split"):  # checked here, not after every solve at aggregation
@@ -261,7 +265,7 @@ class WorkflowConfig:
         with config_section("reference_state"):
             imaged = ImagedConfig.fromconfig_section(sections["reference_state"])
         return cls(mesh, solver, solve_fe, cases, clinical, fe_study, surrogate, surrogate_study,
-                   imaged, sections)
+                   imaged, sections, adaptive)
 
     def section(self, *keys: str) -> Any:
         """A copy of the validated value at ``keys``, e.g. ``section("mesh", "fixed")``."""

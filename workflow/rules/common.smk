@@ -9,6 +9,7 @@ from studies.architecture import RepeatPlan
 from studies.config import ConfigError, WorkflowConfig
 from studies.fe_variants import MESH_ID_PATTERN, VARIANT_ID_PATTERN, Variant
 from studies.workdir import age_refused
+from fem.adaptive import RoundPlan
 from fem.sweep import ANGLE_PATTERN, C1_PATTERN
 
 # Every job's software under --use-conda (the env file says how it relates to `make setup`).
@@ -48,35 +49,60 @@ wildcard_constraints:
     theta=ANGLE_PATTERN,
 
 
+# The adaptive sweep (sweep.adaptive, fem.adaptive): the start design is CONFIG.cases; each
+# round's cases are known once the checkpoint `sweep_round` (sweep.smk) has planned it from the
+# cases before it, so the files of the whole sweep are an input function that walks the rounds.
+ADAPTIVE = CONFIG.adaptive
+SWEEP_ROUND = "results/sweep/round_{round}.json"
+
+
+def sweep_cases_through(last):
+    """The sweep's cases through round ``last`` (0: the start design), and whether it ended."""
+    cases = list(CONFIG.cases)
+    for k in range(1, last + 1):
+        plan = RoundPlan.read(checkpoints.sweep_round.get(round=str(k)).output[0])
+        if plan.done:
+            return cases, True
+        cases += plan.new_cases()
+    return cases, False
+
+
+def sweep_rounds(wildcards=None):
+    """Every round's plan file, through the one that ended the sweep (an input function's
+    list: asking for it runs the rounds)."""
+    k = 1
+    while not sweep_cases_through(k)[1]:
+        k += 1
+    return [SWEEP_ROUND.format(round=j) for j in range(1, k + 1)]
+
+
 def case_files(name):
-    """Path of file ``name`` in every case folder of the sweep."""
-    return [f"results/cases/{case.id}/{name}" for case in CONFIG.cases]
+    """Path of file ``name`` in every case folder of the sweep (with sweep.adaptive, an input
+    function over every round's cases)."""
+    if ADAPTIVE is None:
+        return [f"results/cases/{case.id}/{name}" for case in CONFIG.cases]
+
+    def every_round(wildcards):
+        cases = sweep_cases_through(len(sweep_rounds(wildcards)))[0]
+        return [f"results/cases/{case.id}/{name}" for case in cases]
+
+    return every_round
 
 
 # A chain job's cases: every C1 of the sweep at one direction (solve.smk). Its one wildcard,
 # {direction} = "phi=<deg>_theta=<deg>", matches the sweep's directions only (as pairs: a sphere's
 # Phi and theta values combine into directions it lacks), so a case at another direction is
-# solved alone. The directions of sweep.refine, solved at their bands' soft C1 values only, are
-# chains of those values: one rule for each set of C1 values (solve_refine_chain, then
-# solve_refine_chain_2, ... for further bands, the most directions first).
+# solved alone. With sweep.adaptive it matches any direction: the rounds' directions are not
+# known when the workflow is read, and each is solved as a chain of the sweep's C1 values.
 ChainRule = namedtuple("ChainRule", "name c1s direction")
 
 
 def _chain_rules():
-    c1_of = {}
-    for case in CONFIG.cases:
-        c1_of.setdefault(f"phi={case.phi:.1f}_theta={case.theta:.1f}", set()).add(
-            f"{case.C1:.2f}")
-    every = set().union(*c1_of.values())
-    groups = {}
-    for direction, c1s in c1_of.items():
-        groups.setdefault(frozenset(c1s), []).append(direction)
-    full = groups.pop(frozenset(every), [])
-    refined = sorted(groups.items(), key=lambda group: (-len(group[1]), sorted(group[0])))
-    names = ["solve_chain", "solve_refine_chain"] + [
-        f"solve_refine_chain_{i}" for i in range(2, len(refined) + 1)]
-    return [ChainRule(name, sorted(c1s, key=float), "|".join(map(re.escape, sorted(dirs))))
-            for name, (c1s, dirs) in zip(names, [(every, full)] + refined)]
+    c1s = sorted({f"{case.C1:.2f}" for case in CONFIG.cases}, key=float)
+    if ADAPTIVE is not None:
+        return [ChainRule("solve_chain", c1s, f"phi={ANGLE_PATTERN}_theta={ANGLE_PATTERN}")]
+    directions = sorted({f"phi={case.phi:.1f}_theta={case.theta:.1f}" for case in CONFIG.cases})
+    return [ChainRule("solve_chain", c1s, "|".join(map(re.escape, directions)))]
 
 
 CHAIN_RULES = _chain_rules()

@@ -1,0 +1,50 @@
+# The adaptive sweep's rounds (sweep.adaptive; fem.adaptive, docs/sweep.md).
+#
+# The start design (sweep.C1_kPa x its directions) is solved as any sweep is (solve.smk). Round
+# k is a checkpoint: from every case solved before it, it estimates where the error between the
+# cases is largest and writes results/sweep/round_<k>.json, the directions it adds (each solved
+# at every C1 value as one chain) or that the sweep is done. Once a round is written, the
+# workflow asks for its cases and, after them, for the next round. An interrupted run resumes
+# at the round it was in: the plans written and the chains solved are kept.
+
+
+if ADAPTIVE is not None:
+
+    checkpoint sweep_round:
+        input:
+            summaries=lambda wildcards: [f"results/cases/{c.id}/summary.json"
+                                         for c in sweep_cases_through(int(wildcards.round) - 1)[0]],
+            points=lambda wildcards: [f"results/cases/{c.id}/points.h5"
+                                      for c in sweep_cases_through(int(wildcards.round) - 1)[0]],
+        output:
+            SWEEP_ROUND,
+        params:
+            sweep=CONFIG.section("sweep"),
+        wildcard_constraints:
+            round="[1-9][0-9]*",
+        log:
+            "results/logs/sweep_round/{round}.log",
+        benchmark:
+            "results/benchmarks/sweep_round/{round}.tsv"
+        # the sweep before the studies
+        priority: 50
+        threads: 1
+        resources:
+            mem_mb=3000,
+        conda:
+            ENV
+        script:
+            "../scripts/sweep_round.py"
+
+    # Every round's plan in one record, for the report: how the estimate fell, round by round.
+    rule sweep_rounds:
+        input:
+            sweep_rounds,
+        output:
+            "results/sweep/rounds.json",
+        log:
+            "results/logs/sweep_rounds.log",
+        conda:
+            ENV
+        script:
+            "../scripts/sweep_rounds.py"
