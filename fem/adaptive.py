@@ -96,14 +96,10 @@ def load_points(C1: np.ndarray, phi: np.ndarray, theta: np.ndarray) -> np.ndarra
         C1, float)[:, None]
 
 
-def _kernel(r: np.ndarray) -> np.ndarray:
-    return r**3
-
-
-def _basis(y: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Rows [φ(|y − x_j|)_j, 1, y] of the interpolant at points ``y`` (Q, 3)."""
+def _basis(y: np.ndarray, x: np.ndarray, power: int) -> np.ndarray:
+    """Rows [φ(|y − x_j|)_j, 1, y] of the interpolant at points ``y`` (Q, 3), φ(r) = rᵖ."""
     r = np.linalg.norm(y[:, None, :] - x[None, :, :], axis=2)
-    return np.hstack([_kernel(r), np.ones((len(y), 1)), y])
+    return np.hstack([r**power, np.ones((len(y), 1)), y])
 
 
 class LoadSpaceInterpolant:
@@ -114,17 +110,22 @@ class LoadSpaceInterpolant:
         fields: their displacement fields (M, N, 3), mm.
         loo_mm: each case's leave-one-out error to use instead of computing it (a case counted
             as solved before it is, :func:`plan_round`, has 0).
+        power: the radial function rᵖ: 3 (cubic, the default) or 1 (linear, a cruder
+            interpolant that a committee sets beside it).
     """
 
     def __init__(self, x: np.ndarray, fields: np.ndarray | None,
-                 loo_mm: np.ndarray | None = None) -> None:
+                 loo_mm: np.ndarray | None = None, power: int = 3) -> None:
+        if power not in (1, 3):
+            raise InvalidParameterError(f"the radial function is r or r³, not r^{power}")
+        self.power = power
         self.x = np.asarray(x, dtype=float)
         m = len(self.x)
         if m < 5:
             raise InvalidParameterError(f"the load-space interpolant needs five cases, got {m}")
         matrix = np.zeros((m + 4, m + 4))
         tail = np.hstack([np.ones((m, 1)), self.x])
-        matrix[:m, :m] = _kernel(np.linalg.norm(self.x[:, None] - self.x[None], axis=2))
+        matrix[:m, :m] = np.linalg.norm(self.x[:, None] - self.x[None], axis=2) ** power
         matrix[:m, m:], matrix[m:, :m] = tail, tail.T
         self.inverse = np.linalg.inv(matrix)
         self.fields = fields
@@ -138,7 +139,7 @@ class LoadSpaceInterpolant:
 
     def cardinal(self, y: np.ndarray) -> np.ndarray:
         """Each case's cardinal function at points ``y`` (Q, 3): shape (Q, M)."""
-        return _basis(np.atleast_2d(y), self.x) @ self.inverse[:, : len(self.x)]
+        return _basis(np.atleast_2d(y), self.x, self.power) @ self.inverse[:, : len(self.x)]
 
     def predict(self, y: np.ndarray) -> np.ndarray:
         """The interpolated field at points ``y`` (Q, 3): shape (Q, N, 3), mm."""

@@ -54,6 +54,8 @@ wildcard_constraints:
 # cases before it, so the files of the whole sweep are an input function that walks the rounds.
 ADAPTIVE = CONFIG.adaptive
 SWEEP_ROUND = "results/sweep/round_{round}.json"
+SWEEP_ROUNDS_JSON = "results/sweep/rounds.json"
+SWEEP_ESTIMATE_JSON = "results/sweep/estimate.json"
 
 
 def sweep_cases_through(last):

@@ -41,10 +41,36 @@ if ADAPTIVE is not None:
         input:
             sweep_rounds,
         output:
-            "results/sweep/rounds.json",
+            SWEEP_ROUNDS_JSON,
         log:
             "results/logs/sweep_rounds.log",
         conda:
             ENV
         script:
             "../scripts/sweep_rounds.py"
+
+
+# Whether the sweep's error estimate finds where the surrogate errs (studies.sweep_estimate):
+# at the random cases off the grid and at the held-out splits' test cases, the estimate beside
+# the true error of the model that did not train on them.
+SWEEP_ESTIMATE_SPLITS = [s for s in ("by_direction", "by_case") if s in CONFIG.held_out_splits]
+
+
+rule sweep_estimate:
+    input:
+        dataset=DATASET,
+        off_grid=OFF_GRID_JSON,
+        off_grid_points=off_grid_files("points.h5"),
+        held_out=[f"{SURROGATE_DIR}/model_{s}/model.json" for s in SWEEP_ESTIMATE_SPLITS],
+        held_out_arrays=[f"{SURROGATE_DIR}/model_{s}/params.npz" for s in SWEEP_ESTIMATE_SPLITS],
+    output:
+        SWEEP_ESTIMATE_JSON,
+    log:
+        "results/logs/sweep_estimate.log",
+    threads: 1
+    resources:
+        mem_mb=3000,
+    conda:
+        ENV
+    script:
+        "../scripts/sweep_estimate.py"
