@@ -96,17 +96,30 @@ def load_points(C1: np.ndarray, phi: np.ndarray, theta: np.ndarray) -> np.ndarra
         C1, float)[:, None]
 
 
-def _basis(y: np.ndarray, x: np.ndarray, power: int) -> np.ndarray:
-    """Rows [φ(|y − x_j|)_j, 1, y] of the interpolant at points ``y`` (Q, 3), φ(r) = rᵖ."""
+def _tail_axes(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The origin and axes (K, 3) of the affine span of the points ``x``: the linear tail's.
+
+    A design in one plane (the paper's, θ = 0) has its load points in that plane; a tail in
+    all three coordinates would make the interpolant's matrix singular.
+    """
+    origin = x.mean(axis=0)
+    _, singular, axes = np.linalg.svd(x - origin, full_matrices=False)
+    return origin, axes[singular > 1e-9 * singular[0]]
+
+
+def _basis(y: np.ndarray, x: np.ndarray, power: int, origin: np.ndarray,
+           axes: np.ndarray) -> np.ndarray:
+    """Rows [φ(|y − x_j|)_j, 1, y in the tail's axes] at points ``y`` (Q, 3), φ(r) = rᵖ."""
     r = np.linalg.norm(y[:, None, :] - x[None, :, :], axis=2)
-    return np.hstack([r**power, np.ones((len(y), 1)), y])
+    return np.hstack([r**power, np.ones((len(y), 1)), (y - origin) @ axes.T])
 
 
 class LoadSpaceInterpolant:
     """The solved fields as a cubic RBF with a linear tail in the load space (the module).
 
     Args:
-        x: the cases' load points (M, 3), distinct, not all in one plane.
+        x: the cases' load points (M, 3), distinct (in one plane, or on one line, the tail
+            is linear within it).
         fields: their displacement fields (M, N, 3), mm.
         loo_mm: each case's leave-one-out error to use instead of computing it (a case counted
             as solved before it is, :func:`plan_round`, has 0).
@@ -123,8 +136,9 @@ class LoadSpaceInterpolant:
         m = len(self.x)
         if m < 5:
             raise InvalidParameterError(f"the load-space interpolant needs five cases, got {m}")
-        matrix = np.zeros((m + 4, m + 4))
-        tail = np.hstack([np.ones((m, 1)), self.x])
+        self.origin, self.axes = _tail_axes(self.x)
+        tail = np.hstack([np.ones((m, 1)), (self.x - self.origin) @ self.axes.T])
+        matrix = np.zeros((m + tail.shape[1], m + tail.shape[1]))
         matrix[:m, :m] = np.linalg.norm(self.x[:, None] - self.x[None], axis=2) ** power
         matrix[:m, m:], matrix[m:, :m] = tail, tail.T
         self.inverse = np.linalg.inv(matrix)
@@ -139,7 +153,8 @@ class LoadSpaceInterpolant:
 
     def cardinal(self, y: np.ndarray) -> np.ndarray:
         """Each case's cardinal function at points ``y`` (Q, 3): shape (Q, M)."""
-        return _basis(np.atleast_2d(y), self.x, self.power) @ self.inverse[:, : len(self.x)]
+        return _basis(np.atleast_2d(y), self.x, self.power, self.origin,
+                      self.axes) @ self.inverse[:, : len(self.x)]
 
     def predict(self, y: np.ndarray) -> np.ndarray:
         """The interpolated field at points ``y`` (Q, 3): shape (Q, N, 3), mm."""
