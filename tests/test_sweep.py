@@ -27,29 +27,30 @@ def test_case_id_rejects_garbage() -> None:
         Case.from_id("c1=1_phi=0")
 
 
-def test_default_config_is_the_papers_plane_the_caudal_half_and_66_soft_directions() -> None:
+def test_default_config_starts_over_the_plane_and_the_caudal_half_at_every_c1() -> None:
+    """The default sweep is adaptive: a start design that rounds add to (fem.adaptive)."""
+    from fem.adaptive import AdaptiveDesign
     from fem.sweep import sphere_directions
 
     config = yaml.safe_load((REPO / "config.yaml").read_text())
-    cases = sweep_cases(config["sweep"])
+    sweep = config["sweep"]
+    assert "refine" not in sweep  # no hand-listed directions
+    cases = sweep_cases(sweep)
     c1s = sorted({c.C1 for c in cases})
-    assert len(c1s) == 22 and c1s[0] == 0.8 and c1s[-1] == 5.0
-    assert np.allclose(np.diff(c1s), 0.2)
-    every_c1 = {(phi, theta) for phi, theta in {(c.phi, c.theta) for c in cases}
-                if sum(1 for c in cases if (c.phi, c.theta) == (phi, theta)) == 22}
-    refined = {(c.phi, c.theta) for c in cases} - every_c1
-    assert len(every_c1) == 32 and len(refined) == 38 + 28
-    assert len(cases) == 22 * 32 + 2 * 38 + 3 * 28
-    c1_of = {d: {c.C1 for c in cases if (c.phi, c.theta) == d} for d in refined}
-    assert sorted(map(sorted, c1_of.values())).count([1.0, 1.2]) == 38
-    assert sorted(map(sorted, c1_of.values())).count([0.8, 1.0, 1.2]) == 28
-    directions = every_c1
-    assert {(phi, 0.0) for phi in PAPER_PHI_DEG} <= directions  # the paper's plane, whole
-    lattice = (Case(1.0, phi, theta) for phi, theta in sphere_directions(16, "caudal"))
+    assert c1s == sorted(sweep["C1_kPa"]) and c1s[0] == 0.8 and c1s[-1] == 5.0
+    directions = {(c.phi, c.theta) for c in cases}
+    assert len(cases) == len(c1s) * len(directions)  # every direction at every C1
+    phis = {phi for phi, theta in directions if theta == 0.0}
+    assert {0.0, 180.0} <= phis  # the clinical cases (supine, prone) are sweep cases
+    n = sweep["sphere"]["n"]
+    lattice = (Case(1.0, phi, theta) for phi, theta in sphere_directions(n, "caudal"))
     caudal = {(case.phi, case.theta) for case in lattice}  # as the case folders round them
-    assert caudal <= directions and len(caudal) == 16
-    phis = sorted({c.phi for c in cases if c.theta == 0.0})
-    assert 0.0 in phis  # the supine clinical cases are part of the sweep
+    assert caudal <= directions and len(caudal) == n and len(directions) == len(phis) + n
+    design = AdaptiveDesign.from_sweep(sweep)
+    assert design is not None and design.start == tuple(cases)
+    assert design.levels == tuple(sorted(c1s, reverse=True))
+    assert design.domain.part == "caudal" and design.domain.plane == (min(phis), max(phis))
+    assert len(cases) + len(c1s) <= design.settings.max_cases  # room for a round
 
 
 @pytest.mark.parametrize(
@@ -211,73 +212,17 @@ def test_random_cases_are_seeded_within_the_range_and_uniform_in_compliance() ->
         random_cases(3, 1, (1.0, 2.0), "cranial")
 
 
-def test_refined_directions_are_solved_at_the_soft_c1_values_only() -> None:
-    base = {"C1_kPa": [0.8, 1.0, 1.2, 2.0, 5.0], "phi_deg": [0.0, 90.0, 180.0]}
-    extra = [[60.0, -90.0], [30.5, -45.25]]
-    cases = sweep_cases({**base, "refine": {"C1_max": 1.0, "directions": extra}})
-    refined = [c for c in cases if c.theta != 0.0]
-    assert len(cases) == 5 * 3 + 2 * 2
-    assert sorted({c.C1 for c in refined}) == [0.8, 1.0]
-    assert {(c.phi, c.theta) for c in refined} == {(60.0, -90.0), (30.5, -45.2)}
-    assert set(sweep_cases(base)) < set(cases)
-    # a refined direction that is one of the sweep's adds nothing
-    assert sweep_cases({**base, "refine": {"C1_max": 1.0, "directions": [[90.0, 0.0]]}}) == \
-        sweep_cases(base)
-    with pytest.raises(InvalidParameterError, match="no C1 of the sweep lies between"):
-        sweep_cases({**base, "refine": {"C1_max": 0.5, "directions": extra}})
-    # C1_min leaves out the softest values: 1.0 and 1.2 only
-    band = sweep_cases({**base, "refine": {"C1_min": 1.0, "C1_max": 1.2, "directions": extra}})
-    assert sorted({c.C1 for c in band if c.theta != 0.0}) == [1.0, 1.2]
-    with pytest.raises(InvalidParameterError, match="C1_min must lie between 0 and C1_max"):
-        sweep_cases({**base, "refine": {"C1_min": 2.0, "C1_max": 1.2, "directions": extra}})
-    with pytest.raises(InvalidParameterError, match="no C1 of the sweep lies between"):
-        sweep_cases({**base, "refine": {"C1_min": 1.3, "C1_max": 1.9, "directions": extra}})
-    with pytest.raises(InvalidParameterError, match="not a \\[phi, theta\\] pair"):
-        sweep_cases({**base, "refine": {"C1_max": 1.0, "directions": [[60.0]]}})
-    with pytest.raises(InvalidParameterError, match="share one case folder"):
-        sweep_cases({**base, "refine": {"C1_max": 1.0, "directions": [[90.01, 0.0]]}})
-    # the paper's preset replaces it
-    assert sweep_cases({**base, "refine": {"C1_max": 1.0, "directions": extra},
-                        "preset": "paper"}) == sweep_cases({"preset": "paper"})
-
-
-def test_refine_bands_each_add_their_directions_at_their_own_c1_values() -> None:
-    base = {"C1_kPa": [0.8, 1.0, 1.2, 2.0], "phi_deg": [0.0, 90.0, 180.0]}
-    one = {"C1_min": 1.0, "C1_max": 1.2, "directions": [[60.0, -90.0], [30.5, -45.25]]}
-    two = {"C1_max": 0.8, "directions": [[-47.5, 0.0], [60.0, -90.0]]}
-    cases = sweep_cases({**base, "refine": [one, two]})
-    c1_of: dict[tuple[float, float], set[float]] = {}
-    for case in cases:
-        c1_of.setdefault((case.phi, case.theta), set()).add(case.C1)
-    assert c1_of[(30.5, -45.2)] == {1.0, 1.2} and c1_of[(-47.5, 0.0)] == {0.8}
-    assert c1_of[(60.0, -90.0)] == {0.8, 1.0, 1.2}  # in both bands: the union, once each
-    assert len(cases) == 4 * 3 + 3 + 2 + 1
-    # one band in a list is that band
-    assert sweep_cases({**base, "refine": [one]}) == sweep_cases({**base, "refine": one})
-    with pytest.raises(InvalidParameterError, match=r"refine band 2: no C1 of the sweep"):
-        sweep_cases({**base, "refine": [one, {**two, "C1_min": 0.3, "C1_max": 0.5}]})
-    with pytest.raises(InvalidParameterError, match=r"sweep.refine\[1\] must be a mapping"):
-        sweep_cases({**base, "refine": [one, [[-47.5, 0.0]]]})
-    with pytest.raises(InvalidParameterError, match=r"sweep.refine\[0\].C1_min must lie"):
-        sweep_cases({**base, "refine": [{**one, "C1_min": 1.5}, two]})
-    with pytest.raises(InvalidParameterError, match="share one case folder"):
-        sweep_cases({**base, "refine": [one, {**two, "directions": [[60.01, -90.0]]}]})
-    # one direction under two names: theta = -180 mirrors phi; every theta at the pole
-    for pair, named in (([47.5, -180.0], "-47.5, 0"), ([0.0, -60.0], "0, 0")):
-        with pytest.raises(InvalidParameterError, match=rf"is the gravity direction \[{named}\]"):
-            sweep_cases({**base, "refine": [
-                one, {**two, "directions": [*two["directions"], pair]}]})
-
-
 def test_the_paper_preset_replaces_every_key_that_chooses_cases() -> None:
     from fem.sweep import resolve_sweep
 
     paper = sweep_cases({"preset": "paper"})
     assert len(paper) == 688 and {c.theta for c in paper} == {0.0}
     merged = {"C1_kPa": [1.0], "sphere": {"n": 64, "part": "caudal"}, "chains": False,
-              "preset": "paper"}  # as `--config sweep={preset: paper}` merges into a file's
+              "adaptive": {"target_mm": 0.5}, "preset": "paper"}  # as `--config sweep={preset:
+    # paper}` merges into a file's: the paper's fixed grid, no rounds added to it
     assert sweep_cases(merged) == paper
-    assert resolve_sweep(merged)["chains"] is False and "sphere" not in resolve_sweep(merged)
+    resolved = resolve_sweep(merged)
+    assert resolved["chains"] is False and "sphere" not in resolved and "adaptive" not in resolved
     with pytest.raises(InvalidParameterError, match="sweep.preset must be one of"):
         sweep_cases({"preset": "mammogram"})
 
