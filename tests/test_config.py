@@ -16,6 +16,7 @@ from typing import Any
 import pytest
 import yaml
 
+from fem.adaptive import AdaptiveSettings
 from fem.contact import Contact, Plane
 from fem.exceptions import InvalidParameterError
 from fem.parameters import Discretisation, Gravity, Loading, Material, SolverSettings
@@ -45,8 +46,13 @@ def read(name: str) -> dict[str, Any]:
 
 
 def test_the_default_config_parses_into_every_layer() -> None:
-    config = WorkflowConfig.from_mapping(read("config.yaml"))
-    assert len(config.cases) == 22 * 32 + 2 * 38 + 3 * 28
+    raw = read("config.yaml")
+    config = WorkflowConfig.from_mapping(raw)
+    # the adaptive sweep: the cases known before any solve are its start design
+    assert config.adaptive is not None and config.adaptive.start == config.cases
+    assert config.adaptive.settings == AdaptiveSettings.from_mapping(raw["sweep"]["adaptive"])
+    assert len(config.cases) == len(raw["sweep"]["C1_kPa"]) * (
+        len(sample_phi(raw["sweep"]["phi_deg"])) + raw["sweep"]["sphere"]["n"])
     assert config.cases == tuple(sorted(config.cases))
     assert [case.id for case in config.clinical] == [
         "c1=1.00_phi=180.0_theta=0.0", "c1=5.00_phi=180.0_theta=0.0",
@@ -58,9 +64,8 @@ def test_the_default_config_parses_into_every_layer() -> None:
     assert study.architectures[0] == "2x32" and len(study.architectures) == 9
     assert {v.name for v in study.variants} == {"paper_protocol", "vector_output", "separable",
                                                 "pointwise"}
-    # three extrapolation blocks: 6 x 2 + 2 x 6 + 2 x 1 cases, less those in the sweep (1.0 kPa
-    # at -105 deg, a refined direction)
-    assert len(study.extrapolation) == 25 and not set(study.extrapolation) & set(config.cases)
+    # three extrapolation blocks: 6 x 2 + 2 x 6 + 2 x 1 cases, none of them in the start design
+    assert len(study.extrapolation) == 26 and not set(study.extrapolation) & set(config.cases)
     assert config.fe_study.reference.element == "p2p1"
     assert config.fe_study.reference.mesh == MeshSpec(0.008, 0.0053, 2, 0.0025)
     assert len(config.fe_study.variants) == len({v.id for v in config.fe_study.variants})
@@ -321,6 +326,12 @@ def test_every_schema_violation_is_listed_by_key() -> None:
          "sweep.C1_kPa: 1.0 and 1.001 share one case folder"),
         ({"sweep": {"phi_deg": [0.0, 0.04, 180.0]}},
          "sweep gravity directions (phi, theta): (0.0, 0.0) and (0.04, 0.0) share one"),
+        # an adaptive sweep's budget must hold its start design (2 C1 values x 3 directions)
+        ({"sweep": {"adaptive": {"max_cases": 5}}},
+         "sweep.adaptive.max_cases = 5 is fewer than the start design's 6 cases"),
+        # the hand-listed directions the adaptive rounds replaced are refused, not ignored
+        ({"sweep": {"refine": {"C1_max": 1.2, "directions": [[81.0, -82.5]]}}},
+         "sweep: Additional properties are not allowed ('refine' was unexpected)"),
         # a sweep too large to plan is refused before it is expanded
         ({"sweep": {"C1_kPa": {"start": 0.8, "stop": 5.0, "step": 1e-5}}},
          "sweep.C1_kPa: 0.8 to 5 in steps of 1e-05 is 420001 values, more than 10000"),
@@ -576,7 +587,13 @@ def test_the_schema_bounds_are_finite_numbers() -> None:
 
 def test_sweep_cases_of_the_typed_config_are_the_sweeps() -> None:
     raw = read("tests/config.yaml")
-    assert WorkflowConfig.from_mapping(raw).cases == tuple(sweep_cases(raw["sweep"]))
+    config = WorkflowConfig.from_mapping(raw)
+    assert config.cases == tuple(sweep_cases(raw["sweep"])) and config.adaptive is None
+    raw["sweep"]["adaptive"] = {"max_cases": 12}  # the schema fills the other settings
+    config = WorkflowConfig.from_mapping(raw)
+    assert config.adaptive is not None and config.adaptive.start == config.cases
+    assert config.adaptive.settings == AdaptiveSettings(max_cases=12)
+    assert config.section("sweep", "adaptive")["per_round"] == AdaptiveSettings().per_round
 
 
 def test_the_conda_route_pins_the_versions_of_make_setup() -> None:
