@@ -42,6 +42,9 @@ if ADAPTIVE is not None:
             sweep_rounds,
         output:
             SWEEP_ROUNDS_JSON,
+        params:
+            # the target and the budget the rounds stopped by, beside them in the record
+            settings=ADAPTIVE.settings,
         log:
             "results/logs/sweep_rounds.log",
         conda:

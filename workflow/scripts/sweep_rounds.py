@@ -1,12 +1,10 @@
-"""Snakemake adapter: every round of the adaptive sweep in one record (fem.adaptive)."""
+"""Snakemake adapter: every round of the adaptive sweep in one record (studies.sweep_rounds)."""
 
-import json
-from pathlib import Path
-
-from fem.adaptive import RoundPlan, rounds_record
+from fem.adaptive import RoundPlan
 from studies.joblog import job_log
+from studies.sweep_rounds import SweepRounds
 
 job_log(snakemake.log[0])
 
-record = rounds_record([RoundPlan.read(path) for path in snakemake.input])
-Path(snakemake.output[0]).write_text(json.dumps(record, indent=1) + "\n")
+SweepRounds.of([RoundPlan.read(path) for path in snakemake.input],
+               snakemake.params.settings).write(snakemake.output[0])
