@@ -36,6 +36,7 @@ from report.sections.skin import skin_section
 from report.sections.stability import stability_section
 from report.sections.surrogate import surrogate_speed_accuracy_section
 from report.sections.sweep import sweep_cost_section
+from report.sections.sweep_design import sweep_design_section
 from report.sections.training import training_section
 
 log = logging.getLogger(__name__)
@@ -50,8 +51,8 @@ INTRO = (
 
 #: The first report's sections (ids): what the first results a run writes show (the mesh, the
 #: dataset, the selected model and Table 2, the run so far).
-FIRST_SECTIONS = ("mesh", "surrogate-speed-accuracy", "paper", "sweep-cost", "run-time",
-                  "training")
+FIRST_SECTIONS = ("mesh", "surrogate-speed-accuracy", "paper", "sweep-design", "sweep-cost",
+                  "run-time", "training")
 FIRST_NOTE = (
     "This is the run's first report, written as soon as the dataset, the selected model and "
     "the 3D view exist. The studies that take longest (the FE study, the variants, held-out "
@@ -73,6 +74,7 @@ SECTIONS: tuple[tuple[str, str, Callable[[Context], str]], ...] = (
     ("skin", "What the skin changes", skin_section),
     ("reference", "From the imaged shape to the reference state", reference_section),
     ("paper", "The paper side by side", paper_section),
+    ("sweep-design", "How the sweep chose its cases", sweep_design_section),
     ("sweep-cost", "Sweep cost", sweep_cost_section),
     ("run-time", "The time of this run", run_time_section),
     ("training", "Surrogate training", training_section),

@@ -33,6 +33,8 @@ from studies.stiffness import StiffnessResult
 from studies.surrogate_benchmark import SurrogateBenchmark
 from studies.surrogate_evaluation import ClinicalEvaluation, Extrapolation
 from studies.sweep_edges import SweepEdges
+from studies.sweep_estimate import SweepEstimateCheck
+from studies.sweep_rounds import SweepRounds
 from studies.tracking import TrackingResult
 from studies.warning_coverage import WarningCoverage
 from surrogate.checkpoint import read_history, read_model_card
@@ -45,7 +47,7 @@ INPUT_NAMES = (
     "clinical", "extrapolation", "benchmark", "clinical_fields", "fe_clinical", "fe_speed_accuracy",
     "fe_stability", "corpus", "reference_roundtrip", "reference_record", "tracking", "stiffness",
     "viewer", "held_out", "postures", "off_grid", "fe_failure_edges", "fe_stability_audit",
-    "fe_fold_section", "fe_skin", "warning_coverage", "run_log",
+    "fe_fold_section", "fe_skin", "warning_coverage", "run_log", "sweep_rounds", "sweep_estimate",
 )
 
 
@@ -76,6 +78,9 @@ RESULT_TYPES: dict[str, Callable[[Path], Any]] = {
     "postures": PostureEvaluation.read,
     "off_grid": OffGridEvaluation.read,
     "warning_coverage": WarningCoverage.read,
+    # the adaptive sweep's rounds (absent for a fixed design) and the check of its estimate
+    "sweep_rounds": SweepRounds.read,
+    "sweep_estimate": SweepEstimateCheck.read,
     # this run's own Snakemake log, up to the report (workflow/scripts/report.py)
     "run_log": run_time,
 }

@@ -9,6 +9,8 @@ FIRST_REPORT_INPUTS = dict(
     history=f"{SURROGATE_DIR}/model/history.json",
     table2=STUDY_TABLE,
     viewer=VIEWER,
+    # the adaptive sweep's rounds, gathered (sweep.smk); a fixed design has none
+    sweep_rounds=[SWEEP_ROUNDS_JSON] if ADAPTIVE is not None else [],
 )
 
 
@@ -42,6 +44,8 @@ rule report:
         reference_record=[REFERENCE_RECORD] if IMAGED else [],
         tracking=TRACKING_JSON,
         stiffness=[STIFFNESS_JSON] if IMAGED and IMAGED.observation else [],
+        # whether the sweep's error estimate ranks the surrogate's true error (sweep.smk)
+        sweep_estimate=SWEEP_ESTIMATE_JSON,
     output:
         html=REPORT,
     params:
