@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import json
+import os
 import re
+import time
 from pathlib import Path
 
 import h5py
@@ -16,49 +18,53 @@ from tests.conftest import REPO, job_counts, snakemake
 pytestmark = pytest.mark.workflow
 
 
-def test_full_config_plans_864_solves_in_98_chains_and_the_paper_preset_688_in_16(
+def test_full_config_plans_its_start_design_and_a_round_and_the_paper_preset_688_in_16(
     tmp_path: Path,
 ) -> None:
-    """The default: 22 C1 values x 32 directions, and refined ones at the soft end.
+    """The default is adaptive: the start design's chains, then the checkpoint of round 1.
 
-    38 refined directions at 1.0 and 1.2 kPa, 28 at 0.8 to 1.2 kPa.
+    The rounds' cases are planned once round 1 is written, as the run goes.
     """
+    from studies.config import WorkflowConfig
+
+    config = WorkflowConfig.from_mapping(yaml.safe_load((REPO / "config.yaml").read_text()))
+    start = {f"results/cases/{case.id}/summary.json" for case in config.cases}
+    directions = {(case.phi, case.theta) for case in config.cases}
     run = snakemake(tmp_path, "-n", "-j2", config=REPO / "config.yaml")
     assert run.returncode == 0, run.stderr
     text = run.stdout + run.stderr
     counts = job_counts(text)
-    assert counts["solve_chain"] == 32 and "solve" not in counts  # 16 in the plane, 16 caudal
-    assert counts["solve_refine_chain"] == 38 and counts["solve_refine_chain_2"] == 28
-    summaries = set(re.findall(r"results/cases/[^,\s]+/summary\.json", text))
-    assert len(summaries) == 22 * 32 + 2 * 38 + 3 * 28
-    for direction, c1s in (("phi=81.0_theta=-82.5", ("1.00", "1.20")),
-                           ("phi=-47.5_theta=0.0", ("0.80", "1.00", "1.20"))):
-        assert {s for s in summaries if direction in s} == {
-            f"results/cases/c1={c1}_{direction}/summary.json" for c1 in c1s}
-    # the paper's own sweep, on the same config
+    assert counts["solve_chain"] == len(directions) and "solve" not in counts
+    assert counts["sweep_round"] == 1 and "wildcards: round=1" in text
+    assert set(re.findall(r"results/cases/[^,\s]+/summary\.json", text)) == start
+    # the paper's own sweep, on the same config: its fixed grid, no rounds
     run = snakemake(tmp_path, "-n", "-j2", "--config", "sweep={preset: paper}",
                     config=REPO / "config.yaml")
     assert run.returncode == 0, run.stderr
     text = run.stdout + run.stderr
-    assert job_counts(text)["solve_chain"] == 16
+    counts = job_counts(text)
+    assert counts["solve_chain"] == 16 and "sweep_round" not in counts
     assert len(set(re.findall(r"results/cases/[^,\s]+/summary\.json", text))) == 688
     # chains off: one job per case
-    config = yaml.safe_load((REPO / "config.yaml").read_text())
-    config["sweep"]["chains"] = False
-    (tmp_path / "per_case.yaml").write_text(yaml.safe_dump(config))
+    raw = yaml.safe_load((REPO / "config.yaml").read_text())
+    raw["sweep"]["chains"] = False
+    (tmp_path / "per_case.yaml").write_text(yaml.safe_dump(raw))
     run = snakemake(tmp_path, "-n", "-j2", config=tmp_path / "per_case.yaml")
     assert run.returncode == 0, run.stderr
     counts = job_counts(run.stdout + run.stderr)
-    assert counts["solve"] == 22 * 32 + 2 * 38 + 3 * 28 and "solve_chain" not in counts
-    assert "solve_refine_chain" not in counts and "solve_refine_chain_2" not in counts
+    assert counts["solve"] == len(start) and "solve_chain" not in counts
+    assert counts["sweep_round"] == 1
     assert counts["mesh"] == counts["aggregate"] == counts["select_model"] == counts["report"] == 1
 
 
 def test_one_case_path_runs_its_chain_or_itself(tmp_path: Path) -> None:
-    """A sweep case's path runs its direction's chain; any other case is solved alone."""
-    for target, job in (("c1=2.20_phi=-150.0_theta=0.0", "solve_chain"),
+    """A case at a C1 value of the sweep runs its direction's chain; any other is solved alone.
+
+    With the default adaptive sweep, at any direction: a round may add it.
+    """
+    for target, job in (("c1=2.00_phi=-150.0_theta=0.0", "solve_chain"),
                         ("c1=2.30_phi=-150.0_theta=0.0", "solve"),
-                        ("c1=2.20_phi=-140.0_theta=0.0", "solve")):
+                        ("c1=2.00_phi=-140.0_theta=-20.0", "solve_chain")):
         run = snakemake(tmp_path, "-n", "-j2", f"results/cases/{target}/summary.json",
                         config=REPO / "config.yaml")
         assert run.returncode == 0, run.stderr
@@ -85,44 +91,82 @@ def test_a_sphere_sweep_chains_each_direction_and_only_its_directions(tmp_path: 
         assert job_counts(run.stdout + run.stderr) == {"mesh": 1, job: 1, "total": 2}
 
 
-def test_refined_directions_are_chains_of_their_soft_c1_values(tmp_path: Path) -> None:
-    """sweep.refine's directions: one chain each of their band's C1 values, a rule per set."""
+def planned(workdir: Path, config: Path, *targets: str) -> tuple[dict[str, int], set[str]]:
+    """The jobs of a dry run for ``targets``, and the case summaries it names."""
+    run = snakemake(workdir, "-n", "-j2", *targets, config=config)
+    assert run.returncode == 0, run.stderr
+    text = run.stdout + run.stderr
+    return job_counts(text), set(re.findall(r"results/cases/([^/,\s]+)/summary\.json", text))
+
+
+def test_a_chain_is_one_direction_at_every_c1_of_a_fixed_or_an_adaptive_sweep(
+    tmp_path: Path,
+) -> None:
+    """Fixed: the design's directions only. Adaptive: any direction, so a round's are chains."""
+    from fem.adaptive import RoundPlan
+    from fem.sweep import Case, sweep_cases
+
+    fixed = {"C1_kPa": [1.0, 1.2, 5.0], "phi_deg": [0.0, 90.0, 180.0],
+             "sphere": {"n": 4, "part": "caudal"}}
+    start = {case.id for case in sweep_cases(fixed)}
+    levels = (5.0, 1.2, 1.0)
+    assert len(start) == 3 * 7
+    new = (45.0, -30.0)  # no direction of the start design
     config = yaml.safe_load((REPO / "config.yaml").read_text())
-    config["sweep"] = {"C1_kPa": [1.0, 1.2, 1.4, 5.0], "phi_deg": [0.0, 90.0, 180.0],
-                       "refine": {"C1_max": 1.2, "directions": [[81.0, -82.5], [75.1, -101.3]]}}
-    (tmp_path / "refine.yaml").write_text(yaml.safe_dump(config))
-    # the dataset, and a refined direction's stiffer case, which is no sweep case
-    run = snakemake(tmp_path, "-n", "-j2", "results/dataset/dataset.h5",
-                    "results/cases/c1=1.40_phi=81.0_theta=-82.5/summary.json",
-                    config=tmp_path / "refine.yaml")
+    for name, sweep in (("fixed", fixed),
+                        ("adaptive", {**fixed, "adaptive": {"max_cases": 40, "per_round": 2}})):
+        config["sweep"] = sweep
+        (tmp_path / f"{name}.yaml").write_text(yaml.safe_dump(config))
+    fixed_config, adaptive_config = tmp_path / "fixed.yaml", tmp_path / "adaptive.yaml"
+    chain = {Case(c1, *new).id for c1 in levels}
+
+    counts, cases = planned(tmp_path, fixed_config, "results/dataset/dataset.h5")
+    assert counts["solve_chain"] == 7 and "solve" not in counts and "sweep_round" not in counts
+    assert cases == start
+    # a design's case runs its chain, every C1 of its direction; another direction's, alone
+    counts, cases = planned(tmp_path, fixed_config, "results/cases/c1=1.20_phi=90.0_theta=0.0/"
+                            "summary.json")
+    assert counts == {"mesh": 1, "solve_chain": 1, "total": 2}
+    assert cases == {Case(c1, 90.0).id for c1 in levels}
+    counts, cases = planned(tmp_path, fixed_config, f"results/cases/{Case(1.0, *new).id}/"
+                            "summary.json")
+    assert counts == {"mesh": 1, "solve": 1, "total": 2} and cases == {Case(1.0, *new).id}
+
+    # adaptive: the start design, then round 1's checkpoint
+    counts, cases = planned(tmp_path, adaptive_config, "results/dataset/dataset.h5")
+    assert counts["solve_chain"] == 7 and counts["sweep_round"] == 1 and "solve" not in counts
+    assert cases == start
+    # a direction outside the start design is a chain too; a C1 outside the sweep's is not
+    counts, cases = planned(tmp_path, adaptive_config, f"results/cases/{Case(1.0, *new).id}/"
+                            "summary.json")
+    assert counts == {"mesh": 1, "solve_chain": 1, "total": 2} and cases == chain
+    counts, cases = planned(tmp_path, adaptive_config, f"results/cases/{Case(2.0, *new).id}/"
+                            "summary.json")
+    assert counts == {"mesh": 1, "solve": 1, "total": 2}
+
+    # round 1 planned after the start design was solved: its direction is one chain, then
+    # round 2 (files stand in for the solved cases, older than the plan that read them)
+    for name in ("mesh.xdmf", "mesh.h5", "quality.json", "mesh.png"):
+        (tmp_path / "results" / "mesh").mkdir(parents=True, exist_ok=True)
+        (tmp_path / "results" / "mesh" / name).touch()
+    for case in start:
+        folder = tmp_path / "results" / "cases" / case
+        folder.mkdir(parents=True)
+        for name in ("summary.json", "points.h5", "fields.xdmf", "fields.h5"):
+            (folder / name).touch()
+    RoundPlan(1, 21, 21, 2.0, (1.0, *new), 0.1, 1.0, directions=[new],
+              cases=sorted(chain)).write(tmp_path / "results" / "sweep" / "round_1.json")
+    stamp = time.time()
+    for path in (tmp_path / "results").rglob("*"):
+        if path.is_file():
+            late = 10.0 if path.name == "round_1.json" else 0.0
+            os.utime(path, (stamp - 20.0 + late, stamp - 20.0 + late))
+    run = snakemake(tmp_path, "-n", "-j2", "results/dataset/dataset.h5", config=adaptive_config)
     assert run.returncode == 0, run.stderr
     text = run.stdout + run.stderr
-    counts = job_counts(text)
-    assert counts["solve_chain"] == 3 and counts["solve_refine_chain"] == 2
-    assert counts["solve"] == 1  # the stiffer case, alone
-    cases = set(re.findall(r"results/cases/[^,\s]+/summary\.json", text))
-    assert len(cases) == 4 * 3 + 2 * 2 + 1
-    assert "results/cases/c1=1.00_phi=81.0_theta=-82.5/summary.json" in cases
-    # bands: 1.0-1.2 kPa and 0.8 kPa. A rule for each set of C1 values, the most directions
-    # first: the 0.8 kPa band's (one case each), the 1.0-1.2 band's, and that of the direction
-    # in both bands (a chain of every C1 it has)
-    config["sweep"]["C1_kPa"] = [0.8, 1.0, 1.2, 1.4, 5.0]
-    config["sweep"]["refine"] = [{**config["sweep"]["refine"], "C1_min": 1.0}, {
-        "C1_max": 0.8, "directions": [[-47.5, 0.0], [-25.0, 0.0], [75.1, -101.3]]}]
-    (tmp_path / "bands.yaml").write_text(yaml.safe_dump(config))
-    run = snakemake(tmp_path, "-n", "-j2", "results/dataset/dataset.h5",
-                    config=tmp_path / "bands.yaml")
-    assert run.returncode == 0, run.stderr
-    text = run.stdout + run.stderr
-    counts = job_counts(text)
-    assert [counts[f"solve_{rule}"] for rule in (
-        "chain", "refine_chain", "refine_chain_2", "refine_chain_3")] == [3, 2, 1, 1]
-    assert "solve" not in counts
-    cases = set(re.findall(r"results/cases/[^,\s]+/summary\.json", text))
-    assert len(cases) == 5 * 3 + 2 + 2 + 3
-    assert "results/cases/c1=0.80_phi=75.1_theta=-101.3/summary.json" in cases
-    assert "results/cases/c1=0.80_phi=-47.5_theta=0.0/summary.json" in cases
-    assert "results/cases/c1=1.00_phi=-47.5_theta=0.0/summary.json" not in cases
+    assert job_counts(text) == {"solve_chain": 1, "sweep_round": 1, "aggregate": 1, "total": 3}
+    assert f"wildcards: direction=phi={new[0]:.1f}_theta={new[1]:.1f}" in text
+    assert "wildcards: round=2" in text and "wildcards: round=1" not in text
 
 
 @pytest.mark.parametrize(
