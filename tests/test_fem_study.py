@@ -119,8 +119,8 @@ def test_lowest_converging_reads_down_each_column() -> None:
     assert out["0.0"]["failed_below"]["C1"] == 0.5
     assert out["90.0"]["lowest_C1"] == 0.3 and out["90.0"]["failed_below"] is None
     assert out["all_phi"] == 1.0
-    # a refinement band's direction, solved from 1.0 kPa only, failed nowhere: it does not
-    # make the whole sweep's limit 1.0 kPa
+    # a direction solved at 2.0 and 1.0 kPa only, failing nowhere: it does not make the whole
+    # sweep's limit 1.0 kPa
     band = [{**rec(c1, 45.0, True)} for c1 in (2.0, 1.0)]
     assert lowest_converging(records[4:] + band)["adaptive"]["all_phi"] == 0.3
     assert lowest_converging(records + band)["adaptive"]["all_phi"] == 1.0

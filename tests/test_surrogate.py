@@ -422,9 +422,9 @@ def test_a_model_of_the_caudal_half_warns_by_direction(tmp_path: Path) -> None:
                       rf"θ = {nearest[1]:g}° \(beside C1 = 1.5 kPa, Φ = 90.0°, θ = -90.0°\) is at "
                       r"C1 = 3 kPa, so no FE solution backs C1 < 3 kPa there"):
         failed.predict(1.5, 90.0, -90.0)
-    # a direction the sweep never solved at 1 kPa (a refined band from a stiffer C1_min, or a
-    # by-C1 held-out model's training cases) warns below its softest trained C1 alone, though
-    # 1 kPa is inside the model's C1 range
+    # a direction the model was never trained on at 1 kPa (as a by-C1 held-out model's
+    # training cases leave it) warns below its softest trained C1 alone, though 1 kPa is inside
+    # the model's C1 range
     band = dataclasses.replace(result, train_cases=np.setdiff1d(
         result.train_cases, [ds.case_index(1.0, *nearest)]))
     save_model(tmp_path / "band", band, ds)
