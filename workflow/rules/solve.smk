@@ -1,10 +1,10 @@
 # One FE case: the breast under gravity at one (C1, Phi, theta), in its own folder.
 #
 # With sweep.chains (the default), the sweep's cases of one gravity direction are one job,
-# `solve_chain`: the stiffest first, each case from its neighbours' solutions (fem.chain), every
-# case still written to its own folder (`solve_refine_chain` for sweep.refine's directions, at
-# their band's soft C1 values; `solve_refine_chain_2`, ... for further bands). Asking for a
-# sweep case's file runs its direction's chain; `solve` runs any other case (and every case
+# `solve_chain`: every C1 value of the sweep, the stiffest first, each case from its
+# neighbours' solutions (fem.chain), every case still written to its own folder. Asking for a
+# sweep case's file runs its direction's chain (with sweep.adaptive, any direction's: the
+# rounds choose theirs as the run goes, sweep.smk); `solve` runs any other case (and every case
 # with chains off) alone, from rest.
 #
 # The case's files are update() outputs: Snakemake keeps a case's previous files while it is
@@ -39,10 +39,9 @@ rule solve:
         "../scripts/solve_case.py"
 
 
-# solve_chain, solve_refine_chain, ... (common.smk: CHAIN_RULES): one rule per set of C1
-# values that directions share, each preferred to `solve` for the cases it writes. (The loop
-# stands at the top level: Snakemake records a rule's `script` line with its indentation as
-# its code, and reruns every case already solved when that changes.)
+# solve_chain (common.smk: CHAIN_RULES, one rule), preferred to `solve` for the cases it
+# writes. (The loop stands at the top level: Snakemake records a rule's `script` line with its
+# indentation as its code, and reruns every case already solved when that changes.)
 for chain_rule in CHAIN_RULES if CONFIG.chains else ():
 
     rule:
