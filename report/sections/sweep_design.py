@@ -144,7 +144,7 @@ def estimate_check(check: SweepEstimateCheck) -> str:
               highlight, table_id="sweep-estimate")]
     overall = next((s for s in check.scores if s.set == "all" and s.estimator == check.chosen),
                    None)
-    if not check.rows:
+    if not check.scores:
         out.append(para("No held-out case could be compared: the random cases off the grid "
                         "failed and the sweep forms no held-out split.", "note"))
     elif overall is None:
