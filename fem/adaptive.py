@@ -258,10 +258,10 @@ class AdaptiveDesign:
         return cls(start, levels, Domain.of_sweep(sweep, start), settings)
 
     def plan(self, cases: Sequence[Case], converged: np.ndarray, fields: np.ndarray,
-             round_number: int) -> RoundPlan:
+             round_number: int, reserved: Sequence[tuple[float, float]] = ()) -> RoundPlan:
         """:func:`plan_round` of this design."""
         return plan_round(self.settings, self.levels, self.domain, cases, converged, fields,
-                          round_number)
+                          round_number, reserved)
 
 
 def direction_angles(g: np.ndarray) -> tuple[float, float]:
@@ -322,7 +322,7 @@ class RoundPlan:
 
 def plan_round(settings: AdaptiveSettings, levels: Sequence[float], domain: Domain,
                cases: Sequence[Case], converged: np.ndarray, fields: np.ndarray,
-               round_number: int) -> RoundPlan:
+               round_number: int, reserved: Sequence[tuple[float, float]] = ()) -> RoundPlan:
     """The next round of the sweep, from every case tried so far (the module).
 
     Args:
@@ -333,6 +333,9 @@ def plan_round(settings: AdaptiveSettings, levels: Sequence[float], domain: Doma
         converged: whether each converged (and does not pass through itself).
         fields: their displacement fields (M, N, 3), mm (rows of failed cases are ignored).
         round_number: 1 for the first round.
+        reserved: directions (Φ, θ) the rounds keep out of the sweep (within
+            :data:`SEPARATION_DEG`): those whose FE cases test the surrogate at directions it
+            never saw (``surrogate_study.extrapolation``).
     """
     converged = np.asarray(converged, dtype=bool)
     c1 = np.array([c.C1 for c in cases])
@@ -342,6 +345,9 @@ def plan_round(settings: AdaptiveSettings, levels: Sequence[float], domain: Doma
     levels = np.array(sorted(levels, reverse=True), dtype=float)
     pool = domain.candidates(settings.candidates)
     tried = gravity_direction(phi, theta)
+    if len(reserved):
+        kept = np.array(reserved, dtype=float).reshape(-1, 2)
+        tried = np.vstack([tried, gravity_direction(kept[:, 0], kept[:, 1])])
     # a candidate beside a direction already tried adds nothing new
     apart = np.max(pool @ np.unique(np.round(tried, 9), axis=0).T, axis=1) < math.cos(
         math.radians(SEPARATION_DEG))

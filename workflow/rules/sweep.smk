@@ -20,6 +20,8 @@ if ADAPTIVE is not None:
             SWEEP_ROUND,
         params:
             sweep=CONFIG.section("sweep"),
+            # the extrapolation study's directions stay unseen: no round adds them
+            reserved=sorted({(c.phi, c.theta) for c in CONFIG.surrogate_study.extrapolation}),
         wildcard_constraints:
             round="[1-9][0-9]*",
         log:
