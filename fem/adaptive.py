@@ -441,11 +441,3 @@ def read_cases(summary_paths: Sequence[str | Path], point_paths: Sequence[str | 
         fields.append(1e3 * np.asarray(points["u"], dtype=float))
     return cases, np.array(converged, dtype=bool), np.array(fields)
 
-
-def rounds_record(plans: Sequence[RoundPlan]) -> dict[str, Any]:
-    """Every round of a sweep in one record: the rounds, and the sweep's cases and end."""
-    last = plans[-1]
-    return {"rounds": [asdict(p) for p in plans],
-            "cases": last.cases_before + len(last.cases),
-            "added_directions": sum(len(p.directions) for p in plans),
-            "estimate_mm": last.estimate_mm, "done": last.done, "reason": last.reason}

@@ -37,12 +37,13 @@ from studies.results import Record, Result
 #: prefixes ending in ``*``) that belong to it; a rule of none is ``other``.
 STAGES: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("mesh", ("mesh", "reference_state", "self_contact_at_rest")),
-    ("sweep", ("solve", "solve_chain", "solve_refine_chain*")),
+    ("sweep", ("solve", "solve_chain", "sweep_round", "sweep_rounds")),
     ("dataset", ("aggregate",)),
     ("surrogate", ("train_study_run", "study_repeats", "architecture_study", "select_model")),
     ("surrogate studies", ("train_variant_run", "variants", "train_held_out", "held_out",
                            "clinical", "extrapolation", "postures", "off_grid",
-                           "warning_coverage", "surrogate_benchmark", "solve_outside")),
+                           "warning_coverage", "surrogate_benchmark", "solve_outside",
+                           "sweep_estimate")),
     ("FE study", ("fe_*",)),
     ("reference and tracking", ("reference_roundtrip", "tracking", "stiffness")),
     ("corpus", ("corpus_*",)),

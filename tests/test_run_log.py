@@ -17,7 +17,7 @@ job           count
 ----------  -------
 mesh              1
 solve_chain       2
-solve_refine_chain_2 1
+sweep_round 1
 aggregate         1
 report            1
 total             6
@@ -35,12 +35,12 @@ Finished jobid: 4 (Rule: mesh)
 localrule solve_chain:
     jobid: 7
 [Sun Nov 29 01:29:55 2026]
-rule solve_refine_chain_2:
+rule sweep_round:
     jobid: 8
 [Sun Nov 29 01:31:54 2026]
 Finished jobid: 7 (Rule: solve_chain)
 [Sun Nov 29 01:32:55 2026]
-Finished jobid: 8 (Rule: solve_refine_chain_2)
+Finished jobid: 8 (Rule: sweep_round)
 [Sun Nov 29 01:33:00 2026]
 localrule aggregate:
     jobid: 2
@@ -58,7 +58,7 @@ def test_a_run_log_gives_each_stage_its_jobs_and_times(tmp_path: Path) -> None:
     assert origin is not None and origin.minute == 29
     assert [(j.rule, j.jobid, j.start_s, j.end_s) for j in jobs] == [
         ("mesh", 4, 0.0, 3.0), ("solve_chain", 7, 3.0, 123.0),
-        ("solve_refine_chain_2", 8, 4.0, 184.0), ("aggregate", 2, 189.0, 219.0),
+        ("sweep_round", 8, 4.0, 184.0), ("aggregate", 2, 189.0, 219.0),
         ("report", 1, 220.0, None)]
     path = tmp_path / "run.snakemake.log"
     path.write_text(LOG)
@@ -79,13 +79,13 @@ def test_a_run_log_gives_each_stage_its_jobs_and_times(tmp_path: Path) -> None:
     assert RunTime.read(tmp_path / "run.json") == run
     # a job that a checkpoint added after the plan was printed still counts as planned
     added = tmp_path / "added.snakemake.log"
-    added.write_text(LOG.replace("solve_refine_chain_2 1\n", ""))
+    added.write_text(LOG.replace("sweep_round 1\n", ""))
     assert run_time(added).planned == 6
 
 
 def test_the_plan_is_the_first_job_stats_only() -> None:
     plan, cores = read_plan((LOG + "Job stats:\njob count\nreport 9\ntotal 9\n").splitlines())
-    assert plan == {"mesh": 1, "solve_chain": 2, "solve_refine_chain_2": 1, "aggregate": 1,
+    assert plan == {"mesh": 1, "solve_chain": 2, "sweep_round": 1, "aggregate": 1,
                     "report": 1} and cores == 2
 
 
