@@ -107,3 +107,18 @@ def test_a_killed_adaptive_run_resumes_and_solves_nothing_finished_again(
     assert f"results/cases/{case}/summary.json" in changed
     assert len(changed) == 2  # the two C1 values of its chain
     assert first_round.read_bytes() == plan_before
+
+
+def test_the_small_run_checks_its_estimate_and_reports_its_fixed_design(small_run: Path) -> None:
+    """The suite's shared run (a fixed design) writes the estimate check and the section."""
+    from studies.sweep_estimate import ESTIMATORS, SweepEstimateCheck
+
+    check = SweepEstimateCheck.read(small_run / "results" / "sweep" / "estimate.json")
+    assert check.chosen == ESTIMATORS[0]
+    assert {row.set for row in check.rows} <= {"off_grid", "by_direction", "by_case"}
+    assert all(set(row.estimates) == set(ESTIMATORS) for row in check.rows)
+    assert all(row.true_mm >= 0 and row.interpolant_mm >= 0 for row in check.rows)
+    html = (small_run / "results" / "report" / "index.html").read_text()
+    assert "How the sweep chose its cases" in html
+    assert "fixed design" in html
+    assert not (small_run / "results" / "sweep" / "rounds.json").exists()
