@@ -25,17 +25,17 @@ import jinja2
 from report.context import INPUT_NAMES, Context
 from report.html import para
 from report.sections.corpus import corpus_section
-from report.sections.fe import fe_speed_accuracy_section
+from report.sections.fe_speed_accuracy import fe_speed_accuracy_section
 from report.sections.generalisation import generalisation_section
 from report.sections.mesh import mesh_section
 from report.sections.paper import paper_section
 from report.sections.reference import reference_section
 from report.sections.run_time import run_time_section
-from report.sections.scene import scene_needs_section
+from report.sections.scene_needs import scene_needs_section
 from report.sections.skin import skin_section
 from report.sections.stability import stability_section
-from report.sections.surrogate import surrogate_speed_accuracy_section
-from report.sections.sweep import sweep_cost_section
+from report.sections.surrogate_speed_accuracy import surrogate_speed_accuracy_section
+from report.sections.sweep_cost import sweep_cost_section
 from report.sections.sweep_design import sweep_design_section
 from report.sections.training import training_section
 

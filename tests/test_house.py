@@ -22,3 +22,12 @@ def test_no_module_of_the_layers_passes_five_hundred_lines() -> None:
             for path in sorted((ROOT / package).rglob("*.py"))
             if (n := len(path.read_text().splitlines())) > LONGEST_MODULE}
     assert not long, long
+
+
+def test_each_report_section_lives_in_a_module_named_like_its_page_id() -> None:
+    """A reader who sees #scene-needs on the page finds it in report/sections/scene_needs.py."""
+    from report.build import SECTIONS
+
+    misplaced = {page_id: builder.__module__ for page_id, _, builder in SECTIONS
+                 if builder.__module__ != "report.sections." + page_id.replace("-", "_")}
+    assert not misplaced, misplaced

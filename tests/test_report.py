@@ -185,7 +185,7 @@ def test_the_solves_span_from_the_first_process_start_to_the_last_end() -> None:
     """The sweep's wall time from its cases' clocks; none where a case has no clock."""
     import numpy as np
 
-    from report.sections.sweep import solve_span
+    from report.sections.sweep_cost import solve_span
 
     start = np.array([100.0, 100.0, 130.0])  # two cases of one chain's process, then another
     end = np.array([110.0, 125.0, 160.0])
@@ -255,7 +255,7 @@ def test_each_need_names_the_cheapest_model_and_the_cheapest_fe_model() -> None:
     A need met by a surrogate and by two FE variants: the surrogate is the cheapest, the
     cheaper FE variant the FE answer; a need no FE meets says none, and the counts add up.
     """
-    from report.sections.scene import NEEDS_HEADER, Candidate, needs_rows
+    from report.sections.scene_needs import NEEDS_HEADER, Candidate, needs_rows
 
     cands = [Candidate("surrogate", 0.02, 0.001, 1e-4, "FE default solution"),
              Candidate("FE coarse", 2.0, 0.3, 0.5, "refined FE reference", fe=True),
@@ -275,7 +275,7 @@ def test_each_need_names_the_cheapest_model_and_the_cheapest_fe_model() -> None:
     # points or between them (a tumour's), its worst case mean; the failed FE solves left out
     from types import SimpleNamespace
 
-    from report.sections.scene import over_cases
+    from report.sections.scene_needs import over_cases
 
     def case(max_mm, mean_mm, between_mm=None):
         return SimpleNamespace(errors=SimpleNamespace(max_mm=max_mm, mean_mm=mean_mm),
@@ -299,7 +299,7 @@ def test_c1s_effect_is_judged_only_where_the_whole_c1_range_was_solved(tmp_path:
     import numpy as np
 
     from report.context import Context
-    from report.sections.scene import scene_needs_section
+    from report.sections.scene_needs import scene_needs_section
 
     n = 4
     X = np.linspace(0.0, 1.0, n)[:, None] * np.ones((1, 3))
