@@ -9,7 +9,7 @@ where the error is.
 
 **The estimate** (:class:`LoadSpaceInterpolant`): the solved fields are interpolated in x by a
 cubic radial basis function with a linear tail (exact for a field linear in x, the
-small-deformation limit), as :mod:`studies.direction_gaps` does in direction alone at one C1.
+small-deformation limit), as :mod:`benchmarks.direction_gaps` does in direction alone at one C1.
 Each case's leave-one-out error, the largest point error of the interpolant built without it,
 comes for every case at once from one inverse (Rippa's formula, e_k = c_k / (A⁻¹)ₖₖ). Removing
 case k changes the interpolant at any x by e_k·L_k(x), its cardinal function, so the

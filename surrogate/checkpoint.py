@@ -189,7 +189,7 @@ class Checkpoint:
 def in_memory(result: TrainResult, ds: Dataset) -> Checkpoint:
     """A trained surrogate's checkpoint in memory: what :func:`save_model` writes.
 
-    A study that fits models it does not keep (:mod:`studies.pod_basis`) queries it directly.
+    A study that fits models it does not keep (:mod:`benchmarks.pod_basis`) queries it directly.
     """
     cases = result.train_cases if result.train_cases is not None else np.flatnonzero(ds.converged)
     held_out = result.held_out_cases if result.held_out_cases is not None else []

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from benchmarks.direction_density import _batches, designs, random_caudal_directions
 from fem.directions import gravity_direction
 from fem.sweep import PAPER_PHI_DEG, Case
-from studies.direction_density import _batches, designs, random_caudal_directions
 
 pytestmark = pytest.mark.unit
 

@@ -5,10 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from benchmarks.direction_gaps import direction_gaps, leave_one_out, main
+from fem.adaptive import direction_angles
 from fem.dataset import Dataset
 from fem.directions import gravity_direction
 from fem.sweep import sphere_directions
-from studies.direction_gaps import direction_angles, direction_gaps, leave_one_out, main
 
 pytestmark = pytest.mark.unit
 

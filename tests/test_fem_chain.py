@@ -167,10 +167,10 @@ def test_a_chain_writes_every_case_as_run_case_does(coarse_mesh: Path, tmp_path:
 
 def test_the_rescue_benchmark_solves_the_chains_both_ways(coarse_mesh: Path,
                                                           tmp_path: Path) -> None:
-    """``studies.rescue_cost``: each way's chains in their own processes, compared case by case."""
+    """``benchmarks.rescue_cost``: each way's chains in fresh processes, compared case by case."""
     import yaml
 
-    from studies.rescue_cost import RescueCost, parse_against, run
+    from benchmarks.rescue_cost import RescueCost, parse_against, run
 
     config = {"fe": {"loading": {"stall_window": 6}}}
     result = run(coarse_mesh, config, [(-90.0, 0.0)], [1.5, 1.0], tmp_path)

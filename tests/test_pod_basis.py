@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from benchmarks.pod_basis import fit
 from fem.dataset import Dataset
 from fem.directions import gravity_direction
-from studies.pod_basis import fit
 from surrogate.config import SurrogateConfig
 
 
@@ -51,7 +51,7 @@ def test_the_benchmark_refuses_a_linear_mesh_for_the_centroids(
     small_run, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """The tests' small run has a linear mesh: ``--centroids`` names the problem, fits nothing."""
-    from studies.pod_basis import main
+    from benchmarks.pod_basis import main
 
     results = small_run / "results"
     code = main([str(results / "dataset/dataset.h5"), "--model", str(results / "surrogate/model"),

@@ -1,6 +1,6 @@
 """Benchmark: a ``pod`` surrogate on the held-out splits and between the mesh's nodes.
 
-    .venv/bin/python -m studies.pod_basis DATASET --model MODEL [--by-direction MODEL]
+    .venv/bin/python -m benchmarks.pod_basis DATASET --model MODEL [--by-direction MODEL]
         [--by-c1 MODEL] [--outside DIR] [--centroids] [--config config.yaml]
         [--set KEY=VALUE ...] [--json OUT]
 
@@ -122,7 +122,7 @@ def _quiet(model: Surrogate):
 
 def main(argv: list[str] | None = None) -> int:
     """Command line: see the module's docstring."""
-    parser = argparse.ArgumentParser(prog="python -m studies.pod_basis",
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.pod_basis",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("dataset", type=Path)
     parser.add_argument("--model", type=Path, required=True, help="the by-sample model")

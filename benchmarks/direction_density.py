@@ -19,7 +19,7 @@ Every case is solved by :func:`fem.chain.solve_chain` (a direction's C1 values i
 is already there is not solved again, so an interrupted run resumes. Trainings run in the same
 number of processes, one JAX thread each.
 
-``python -m studies.direction_density --config config.yaml [--n 16 32 64] [--test 24]
+``python -m benchmarks.direction_density --config config.yaml [--n 16 32 64] [--test 24]
 [--c1 1 2 5] [--out DIR] [--jobs 2]`` prints the table and writes ``DIR/direction_density.json``.
 """
 
@@ -254,7 +254,7 @@ def table(result: DirectionDensity) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Command line: see the module's docstring."""
-    parser = argparse.ArgumentParser(prog="python -m studies.direction_density",
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.direction_density",
                                      description=__doc__.splitlines()[0])
     parser.add_argument("--config", type=Path, default=REPO / "config.yaml")
     parser.add_argument("--n", type=int, nargs="+", default=list(DEFAULT_N),

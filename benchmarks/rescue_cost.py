@@ -13,7 +13,7 @@ way is the kernel's CPU count of its processes, so the other way's load does not
 case it reports the outcome, Newton iterations and solve CPU both ways, and the largest distance
 between the two answers.
 
-``python -m studies.rescue_cost MESH --direction -90 0 --direction 91.8 -104.2 --c1 1.2 1.0 0.8
+``python -m benchmarks.rescue_cost MESH --direction -90 0 --direction 91.8 -104.2 --c1 1.2 1.0 0.8
 [--against rescue_min_step=0.015625 ...] [--config config.yaml] [--out DIR]`` prints the table
 and writes ``DIR/rescue_cost.json``.
 """
@@ -188,7 +188,7 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point (see the module docstring)."""
     from studies.config import ConfigError, read_config_file
 
-    parser = argparse.ArgumentParser(prog="python -m studies.rescue_cost",
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.rescue_cost",
                                      description=__doc__.splitlines()[0])
     parser.add_argument("mesh", type=Path, help="mesh XDMF with facet tags")
     parser.add_argument("--direction", type=float, nargs=2, action="append", required=True,

@@ -19,7 +19,7 @@ them. ``--propose K`` prints K such directions (:func:`propose`): the midpoints 
 direction triangles' edges whose ends err most, over the C1 values where any direction exceeds
 the limit.
 
-``python -m studies.direction_gaps DATASET [--limit 0.5] [--propose K] [--json OUT]`` prints the
+``python -m benchmarks.direction_gaps DATASET [--limit 0.5] [--propose K] [--json OUT]`` prints the
 table.
 """
 
@@ -33,8 +33,9 @@ from pathlib import Path
 
 import numpy as np
 
+from fem.adaptive import direction_angles
 from fem.dataset import Dataset, read_dataset
-from fem.directions import direction_keys, gravity_angles
+from fem.directions import direction_keys
 from fem.exceptions import DatasetError
 from studies.results import Record, Result
 
@@ -183,15 +184,9 @@ def propose(ds: Dataset, gaps: DirectionGaps, k: int) -> list[tuple[float, float
     return [direction_angles(c) for c in chosen]
 
 
-def direction_angles(g: np.ndarray) -> tuple[float, float]:
-    """:func:`fem.directions.gravity_angles` of ``g`` to 0.1° (one in the plane as (Φ, 0))."""
-    phi, theta = (round(a, 1) + 0.0 for a in gravity_angles(g))
-    return (180.0 if phi == -180.0 else phi), theta
-
-
 def main(argv: list[str] | None = None) -> int:
     """Command line: see the module's docstring."""
-    parser = argparse.ArgumentParser(prog="python -m studies.direction_gaps",
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.direction_gaps",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("dataset", type=Path)
     parser.add_argument("--c1", type=float, nargs="+", help="these C1 values only (kPa)")
