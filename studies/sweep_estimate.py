@@ -24,6 +24,7 @@ correlation of 0.7.
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -39,9 +40,13 @@ from studies.off_grid import OffGridEvaluation
 from studies.results import Record, Result
 from surrogate.predict import Surrogate
 
+log = logging.getLogger(__name__)
+
 ESTIMATORS = ("jackknife", "nearest", "committee")
 """The estimates compared; the first is the one the rounds use."""
 RANK_CORRELATION_GOAL = 0.7
+FEWEST_CASES = 5
+"""The fewest cases an estimate is built from (the interpolant's linear tail needs four)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -150,14 +155,15 @@ def check_estimate(ds: Dataset, off_grid: OffGridEvaluation | None,
         held_out: the held-out models by the split they trained on (``by_direction``,
             ``by_case``; others are skipped).
 
-    A sweep with no held-out case to compare (a small test sweep whose off-grid cases failed
-    and that forms no held-out split) gives a check with no rows and no scores.
+    A set whose estimate would rest on fewer than :data:`FEWEST_CASES` cases is skipped (a
+    small test sweep's held-out split); a sweep with no set left gives a check with no rows
+    and no scores.
     """
     rows: list[EstimateRow] = []
     if off_grid is not None:
         compared = [(row, path) for row, path in zip(off_grid.rows, off_grid_points, strict=True)
                     if row.errors is not None]
-        if compared:
+        if compared and len(_good_cases(ds)) >= FEWEST_CASES:
             fe = np.array([1e3 * read_case(Path(p).parent / "summary.json", p)[1]["u"]
                            for _, p in compared])
             C1, phi, theta = (np.array([getattr(r, k) for r, _ in compared], dtype=float)
@@ -172,7 +178,9 @@ def check_estimate(ds: Dataset, off_grid: OffGridEvaluation | None,
         test = np.asarray(parts["test"], dtype=np.int64)
         test = test[ds.converged[test]]
         trained = np.sort(np.concatenate([parts["train"], parts["validation"]]))
-        if test.size == 0:
+        if test.size == 0 or trained.size < FEWEST_CASES:
+            log.info("estimate check: the %s split is skipped (%d test cases, %d trained on)",
+                     split, test.size, trained.size)
             continue
         est, own = _estimates(ds, trained, ds.C1[test], ds.phi[test], ds.theta[test],
                               ds.displacement[test])
