@@ -7,22 +7,25 @@ loads. A softer case lies farther out along its direction, so the soft end, wher
 largest and changes fastest, takes up most of the space: a design even in x puts its cases
 where the error is.
 
-**The estimate** (:class:`LoadSpaceInterpolant`): the solved fields are interpolated in x by a
-cubic radial basis function with a linear tail (exact for a field linear in x, the
-small-deformation limit), as :mod:`benchmarks.direction_gaps` does in direction alone at one C1.
-Each case's leave-one-out error, the largest point error of the interpolant built without it,
-comes for every case at once from one inverse (Rippa's formula, e_k = c_k / (A⁻¹)ₖₖ). Removing
-case k changes the interpolant at any x by e_k·L_k(x), its cardinal function, so the
-*jackknife* estimate J(x) = maxₖ |L_k(x)|·‖e_k‖ says how much the field at x still hangs on any
-one of its neighbours: it equals a case's own leave-one-out error at that case and grows in the
-holes between cases whose fields disagree with their neighbours. The workflow's benchmark
-(``python -m benchmarks.adaptive_estimate``) measures it and the alternatives against the
-surrogate's true error at held-out FE cases (docs/sweep.md).
+**The estimate** (:class:`LoadSpaceInterpolant`, :func:`committee`): the solved fields are
+interpolated in x by a cubic radial basis function with a linear tail (exact for a field linear
+in x, the small-deformation limit), as :mod:`benchmarks.direction_gaps` does in direction alone
+at one C1, and by a linear one (φ(r) = r, the same tail). Both pass through every solved case;
+between the cases they part where the field bends faster than the cases are spaced, and the
+*committee* estimate is the largest point distance between them. It vanishes at a solved case
+and grows in the holes between cases. Two other estimates are kept beside it for the check:
+each case's leave-one-out error (the largest point error of the cubic interpolant built
+without it, for every case at once from one inverse by Rippa's formula, e_k = c_k / (A⁻¹)ₖₖ)
+and the *jackknife* J(x) = maxₖ |L_k(x)|·‖e_k‖ (removing case k changes the interpolant at x by
+e_k·L_k(x), its cardinal function). Measured at FE cases left out, the committee ranked the true
+error best at the soft end, where the rounds add their cases (docs/sweep.md); the workflow
+checks it again at every run against the surrogate's true error
+(:mod:`studies.sweep_estimate`).
 
 **A round** (:func:`plan_round`): the estimate over a pool of candidate directions (a lattice
 of the design's part of the sphere and steps along its plane) at every C1 level; the round
-adds the candidates of largest estimate, greedily, each counted as solved (its cases join the
-interpolant with no error of their own) before the next is chosen, so that a round spreads
+adds the candidates of largest estimate, greedily, each counted as solved (its cases join both
+interpolants with the cubic one's fields) before the next is chosen, so that a round spreads
 over the holes rather than crowding one. A new direction is solved at every C1 level as one
 chain (stiffest first), its cases neighbours of each other on one load path. Where the
 nearest case already tried at a level failed to converge, that level is not scored: the FE
@@ -52,6 +55,9 @@ SEPARATION_DEG = 5.0
 """A candidate direction closer than this to a direction already tried is not added."""
 PLANE_STEP_DEG = 2.5
 """The candidates' step along the design's plane."""
+NEIGHBOURHOOD_DEG = 40.0
+"""Within a round, a chosen direction's cases count as solved for the estimate within this
+angle of it (farther, their effect on the interpolants is left out)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -341,7 +347,9 @@ def plan_round(settings: AdaptiveSettings, levels: Sequence[float], domain: Doma
     c1 = np.array([c.C1 for c in cases])
     phi, theta = np.array([c.phi for c in cases]), np.array([c.theta for c in cases])
     x_all = load_points(c1, phi, theta)
-    interpolant = LoadSpaceInterpolant(x_all[converged], np.asarray(fields)[converged])
+    fields = np.asarray(fields)[converged]
+    interpolant = LoadSpaceInterpolant(x_all[converged], fields)
+    linear = LoadSpaceInterpolant(x_all[converged], fields, power=1)
     levels = np.array(sorted(levels, reverse=True), dtype=float)
     pool = domain.candidates(settings.candidates)
     tried = gravity_direction(phi, theta)
@@ -353,7 +361,9 @@ def plan_round(settings: AdaptiveSettings, levels: Sequence[float], domain: Doma
         math.radians(SEPARATION_DEG))
     y = (pool[:, None, :] / levels[None, :, None]).reshape(-1, 3)
     scored = _scored(y, x_all, converged)
-    estimate = np.where(scored, interpolant.jackknife(y), 0.0).reshape(len(pool), len(levels))
+    cubic_at = interpolant.predict(y)
+    estimate = np.where(scored, committee(cubic_at, linear, y), 0.0).reshape(len(pool),
+                                                                             len(levels))
     worst = np.unravel_index(int(np.argmax(estimate)), estimate.shape)
     plan = dict(round=round_number, cases_before=len(cases),
                 converged_before=int(converged.sum()), estimate_mm=float(estimate.max()),
@@ -371,7 +381,7 @@ def plan_round(settings: AdaptiveSettings, levels: Sequence[float], domain: Doma
     if reason is not None:
         log.info("round %d: the sweep is done (%s)", round_number, reason)
         return RoundPlan(**plan, done=True, reason=reason)
-    chosen = _greedy(interpolant, pool, levels, estimate.max(axis=1), apart, scored,
+    chosen = _greedy(interpolant, linear, cubic_at, pool, levels, estimate, apart, scored,
                      min(settings.per_round, room), settings.target_mm)
     if not chosen:
         return RoundPlan(**plan, done=True, reason="no candidate left")
@@ -391,24 +401,43 @@ def _scored(y: np.ndarray, x_all: np.ndarray, converged: np.ndarray) -> np.ndarr
     return converged[nearest]
 
 
-def _greedy(interpolant: LoadSpaceInterpolant, pool: np.ndarray, levels: np.ndarray,
-            score: np.ndarray, apart: np.ndarray, scored: np.ndarray, k: int,
-            target_mm: float) -> list[int]:
+def committee(cubic_at: np.ndarray, linear: LoadSpaceInterpolant, y: np.ndarray,
+              chunk: int = 1024) -> np.ndarray:
+    """The committee estimate at points ``y`` (Q, 3), mm.
+
+    The largest point distance between the cubic interpolant's fields there, ``cubic_at``
+    (Q, N, 3), and the linear one's.
+    """
+    return np.concatenate([
+        np.linalg.norm(cubic_at[i:i + chunk] - linear.predict(y[i:i + chunk]), axis=2).max(1)
+        for i in range(0, len(y), chunk)])
+
+
+def _greedy(cubic: LoadSpaceInterpolant, linear: LoadSpaceInterpolant, cubic_at: np.ndarray,
+            pool: np.ndarray, levels: np.ndarray, estimate: np.ndarray, apart: np.ndarray,
+            scored: np.ndarray, k: int, target_mm: float) -> list[int]:
     """Up to ``k`` candidates, each the largest estimate once those before it count as solved.
 
-    A chosen candidate's cases join the interpolant with no error of their own.
+    A chosen candidate's cases join both interpolants with the cubic one's fields there: the
+    cubic interpolant is unchanged by them, and the linear one comes closer to it around them.
     """
     chosen: list[int] = []
-    x, loo = interpolant.x, interpolant.loo_mm
+    x, f = linear.x, np.asarray(linear.fields)
     y = (pool[:, None, :] / levels[None, :, None]).reshape(-1, 3)
-    score = np.where(apart, score, 0.0)
+    flat = estimate.reshape(-1).copy()  # each candidate at each level, taken again near a choice
+    score = np.where(apart, estimate.max(axis=1), 0.0)
     while len(chosen) < k and score.max() >= target_mm:
         best = int(np.argmax(score))
         chosen.append(best)
-        x = np.vstack([x, pool[best] / levels[:, None]])
-        loo = np.concatenate([loo, np.zeros(len(levels))])
-        estimate = LoadSpaceInterpolant(x, None, loo).jackknife(y)
-        score = np.where(scored, estimate, 0.0).reshape(len(pool), len(levels)).max(axis=1)
+        added = pool[best] / levels[:, None]
+        x, f = np.vstack([x, added]), np.concatenate([f, cubic.predict(added)])
+        # the new cases move the linear interpolant around them: the estimate is taken again
+        # within NEIGHBOURHOOD_DEG of them, and kept farther away
+        local = np.repeat(pool @ pool[best] >= math.cos(math.radians(NEIGHBOURHOOD_DEG)),
+                          len(levels))
+        updated = LoadSpaceInterpolant(x, f, loo_mm=np.zeros(len(x)), power=1)
+        flat[local] = np.where(scored[local], committee(cubic_at[local], updated, y[local]), 0.0)
+        score = flat.reshape(len(pool), len(levels)).max(axis=1)
         near = pool @ pool[best] >= math.cos(math.radians(SEPARATION_DEG))
         apart = apart & ~near
         score = np.where(apart, score, 0.0)

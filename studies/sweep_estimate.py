@@ -12,10 +12,11 @@ cases that no round chose and the model did not train on:
 At each case it sets the surrogate's true worst-point error beside three estimates (mm), and
 the error of the load-space interpolant itself (the data's own limit there):
 
-* ``jackknife``: :meth:`fem.adaptive.LoadSpaceInterpolant.jackknife`, what the rounds use;
+* ``committee``: the largest point distance between the cubic interpolant and a linear one
+  (:func:`fem.adaptive.committee`), what the rounds use;
+* ``jackknife``: :meth:`fem.adaptive.LoadSpaceInterpolant.jackknife`;
 * ``nearest``: the leave-one-out error of the nearest solved case in the load space (the
-  cross-validation Voronoi rule of sequential design);
-* ``committee``: the largest point distance between the cubic interpolant and a linear one.
+  cross-validation Voronoi rule of sequential design).
 
 Per set and estimator: Spearman's rank correlation with the true error, and the share of the
 true worst tenth of the cases that the estimate's worst tenth holds. The issue's bar is a rank
@@ -42,7 +43,7 @@ from surrogate.predict import Surrogate
 
 log = logging.getLogger(__name__)
 
-ESTIMATORS = ("jackknife", "nearest", "committee")
+ESTIMATORS = ("committee", "jackknife", "nearest")
 """The estimates compared; the first is the one the rounds use."""
 RANK_CORRELATION_GOAL = 0.7
 FEWEST_CASES = 5
@@ -188,12 +189,13 @@ def check_estimate(ds: Dataset, off_grid: OffGridEvaluation | None,
         rows += _rows(split, ds.ids[test], ds.C1[test], ds.phi[test], ds.theta[test], true,
                       est, own)
     sets = ("all", *dict.fromkeys(r.set for r in rows)) if rows else ()
-    scores = [_score(name, estimator, [r for r in rows if name in ("all", r.set)])
+    scores = [rank_score(name, estimator, [r for r in rows if name in ("all", r.set)])
               for name in sets for estimator in ESTIMATORS]
     return SweepEstimateCheck(ESTIMATORS[0], RANK_CORRELATION_GOAL, rows, scores)
 
 
-def _score(set_name: str, estimator: str, rows: Sequence[EstimateRow]) -> EstimateScore:
+def rank_score(set_name: str, estimator: str, rows: Sequence[EstimateRow]) -> EstimateScore:
+    """How ``estimator`` ranks the true error over ``rows`` (NaN correlation under 3 rows)."""
     from scipy.stats import spearmanr
 
     true = np.array([r.true_mm for r in rows])

@@ -165,14 +165,14 @@ def test_a_design_in_the_plane_alone_has_a_tail_in_the_plane() -> None:
 def test_a_round_adds_directions_where_the_field_has_a_bump(design: AdaptiveDesign) -> None:
     start = list(design.start)
     plan = design.plan(start, np.ones(len(start), bool), bumped(points_of(start)), 1)
-    assert not plan.done and plan.reason == "adding" and len(plan.directions) == 12
+    assert not plan.done and plan.reason == "adding" and 1 <= len(plan.directions) <= 12
     assert plan.estimate_mm > design.settings.target_mm
     assert plan.worst[0] == 0.8  # the soft end, where the bump is
     bump = unit([BUMP])
     added = degrees_between(unit(plan.directions), bump)[:, 0]
     tried = degrees_between(unit(start_directions(design)), bump)[:, 0]
     assert added.mean() < 0.5 * tried.mean()
-    assert np.sort(added)[:4].max() < 20.0  # the first around the bump, not merely nearer
+    assert np.sort(added)[:3].max() < 20.0  # the first around the bump, not merely nearer
     # every added direction at every C1 value, as one chain each
     assert plan.new_cases() == sorted(Case(c1, *d) for c1 in design.levels
                                       for d in plan.directions)
@@ -183,7 +183,9 @@ def test_a_round_keeps_its_directions_apart(design: AdaptiveDesign,
                                             monkeypatch: pytest.MonkeyPatch) -> None:
     """None within SEPARATION_DEG of a direction tried or of another added.
 
-    Without the rule (SEPARATION_DEG = 0) this design's round does crowd: the check can fail.
+    Without the rule (SEPARATION_DEG = 0) and without counting a chosen direction as solved
+    before the next is chosen (NEIGHBOURHOOD_DEG = 0) this design's round does crowd: the check
+    can fail.
     """
     start = list(design.start)
     fields = bumped(points_of(start))
@@ -199,6 +201,7 @@ def test_a_round_keeps_its_directions_apart(design: AdaptiveDesign,
     # the case folders' 0.1 degree rounding moves a direction by less than 0.1 degree
     assert to_tried >= SEPARATION_DEG - 0.1 and to_added >= SEPARATION_DEG - 0.1
     monkeypatch.setattr("fem.adaptive.SEPARATION_DEG", 0.0)
+    monkeypatch.setattr("fem.adaptive.NEIGHBOURHOOD_DEG", 0.0)
     crowded = closest(design.plan(start, np.ones(len(start), bool), fields, 1))
     assert min(crowded) < SEPARATION_DEG - 0.1
 
