@@ -23,8 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fem.adaptive import LoadSpaceInterpolant, load_points, read_cases
-from studies.sweep_estimate import ESTIMATORS, EstimateRow, rank_score
+from fem.adaptive import load_points, read_cases
+from studies.sweep_estimate import ESTIMATORS, EstimateRow, estimates_at, rank_score
 
 
 def rank(built: list[Path], held_out: list[Path], soft_kpa: float) -> dict:
@@ -37,15 +37,10 @@ def rank(built: list[Path], held_out: list[Path], soft_kpa: float) -> dict:
     keep = [i for i, c in enumerate(tests) if test_ok[i] and c not in built_cases]
     x = load_points(np.array([c.C1 for c in cases]), np.array([c.phi for c in cases]),
                     np.array([c.theta for c in cases]))[ok]
-    cubic = LoadSpaceInterpolant(x, fields[ok])
-    linear = LoadSpaceInterpolant(x, fields[ok], power=1)
     chosen = [tests[i] for i in keep]
     y = load_points(np.array([c.C1 for c in chosen]), np.array([c.phi for c in chosen]),
                     np.array([c.theta for c in chosen]))
-    guess = cubic.predict(y)
-    true = np.linalg.norm(guess - test_fields[keep], axis=2).max(axis=1)
-    estimates = {"jackknife": cubic.jackknife(y), "nearest": cubic.nearest(y),
-                 "committee": np.linalg.norm(guess - linear.predict(y), axis=2).max(axis=1)}
+    estimates, true = estimates_at(x, fields[ok], y, test_fields[keep])
     rows = [EstimateRow("held_out", c.id, c.C1, c.phi, c.theta, float(true[k]),
                         float(true[k]), {n: float(v[k]) for n, v in estimates.items()})
             for k, c in enumerate(chosen)]

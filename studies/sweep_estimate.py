@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fem.adaptive import LoadSpaceInterpolant, load_points
+from fem.adaptive import LoadSpaceInterpolant, committee, load_points
 from fem.case_files import read_case
 from fem.dataset import Dataset
 from studies.case_errors import CaseErrors
@@ -113,20 +113,26 @@ class SweepEstimateCheck(Result):
         return bool(self.scores) and self.score().rank_correlation >= self.goal
 
 
+def estimates_at(x: np.ndarray, fields: np.ndarray, y: np.ndarray,
+                 fe: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """Each estimate (:data:`ESTIMATORS`) at load points ``y``, and the interpolant's error.
+
+    The estimates come from solved cases at load points ``x`` with ``fields`` (M, N, 3), mm;
+    the error is the cubic interpolant's own worst-point error at ``y`` against the FE fields
+    ``fe`` (Q, N, 3).
+    """
+    cubic = LoadSpaceInterpolant(x, fields)
+    guess = cubic.predict(y)
+    return ({"committee": committee(guess, LoadSpaceInterpolant(x, fields, power=1), y),
+             "jackknife": cubic.jackknife(y), "nearest": cubic.nearest(y)},
+            np.linalg.norm(guess - fe, axis=2).max(axis=1))
+
+
 def _estimates(ds: Dataset, trained: np.ndarray, C1: np.ndarray, phi: np.ndarray,
                theta: np.ndarray, fe: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
-    """Each estimate at the cases (C1, Φ, θ), from the dataset's cases ``trained``.
-
-    Also the cubic interpolant's own error against their FE fields ``fe`` (Q, N, 3).
-    """
+    """:func:`estimates_at` the cases (C1, Φ, θ), from the dataset's cases ``trained``."""
     x = load_points(ds.C1[trained], ds.phi[trained], ds.theta[trained])
-    cubic = LoadSpaceInterpolant(x, ds.displacement[trained])
-    linear = LoadSpaceInterpolant(x, ds.displacement[trained], power=1)
-    y = load_points(C1, phi, theta)
-    guess = cubic.predict(y)
-    return ({"jackknife": cubic.jackknife(y), "nearest": cubic.nearest(y),
-             "committee": np.linalg.norm(guess - linear.predict(y), axis=2).max(axis=1)},
-            np.linalg.norm(guess - fe, axis=2).max(axis=1))
+    return estimates_at(x, ds.displacement[trained], load_points(C1, phi, theta), fe)
 
 
 def _rows(set_name: str, ids: Sequence[str], C1: np.ndarray, phi: np.ndarray, theta: np.ndarray,

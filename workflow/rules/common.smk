@@ -58,24 +58,23 @@ SWEEP_ROUNDS_JSON = "results/sweep/rounds.json"
 SWEEP_ESTIMATE_JSON = "results/sweep/estimate.json"
 
 
-def sweep_cases_through(last):
-    """The sweep's cases through round ``last`` (0: the start design), and whether it ended."""
-    cases = list(CONFIG.cases)
-    for k in range(1, last + 1):
+def sweep_cases_through(last=None):
+    """The sweep's cases through round ``last`` (0: the start design; None: through the round
+    that ended the sweep), and the number of the last round read."""
+    cases, k = list(CONFIG.cases), 0
+    while last is None or k < last:
+        k += 1
         plan = RoundPlan.read(checkpoints.sweep_round.get(round=str(k)).output[0])
         if plan.done:
-            return cases, True
+            break
         cases += plan.new_cases()
-    return cases, False
+    return cases, k
 
 
 def sweep_rounds(wildcards=None):
     """Every round's plan file, through the one that ended the sweep (an input function's
     list: asking for it runs the rounds)."""
-    k = 1
-    while not sweep_cases_through(k)[1]:
-        k += 1
-    return [SWEEP_ROUND.format(round=j) for j in range(1, k + 1)]
+    return [SWEEP_ROUND.format(round=j) for j in range(1, sweep_cases_through()[1] + 1)]
 
 
 def case_files(name):
@@ -85,8 +84,7 @@ def case_files(name):
         return [f"results/cases/{case.id}/{name}" for case in CONFIG.cases]
 
     def every_round(wildcards):
-        cases = sweep_cases_through(len(sweep_rounds(wildcards)))[0]
-        return [f"results/cases/{case.id}/{name}" for case in cases]
+        return [f"results/cases/{case.id}/{name}" for case in sweep_cases_through()[0]]
 
     return every_round
 
