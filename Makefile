@@ -66,7 +66,7 @@ test: setup lint
 	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadscope --no-loadscope-reorder --durations=15 $(PYTEST_ARGS) tests
 
 # The config is checked first (a YAML syntax error with its line, every bad value named), then
-# the run. Every run of the Snakefile holds the working directory's run lock (studies.workdir):
+# the run. Every run of the Snakefile holds the working directory's run lock (run.workdir):
 # a second run there is refused, and the Snakemake locks a killed run left are cleared, so
 # finished cases are kept and interrupted ones are redone without --unlock.
 #
@@ -80,7 +80,7 @@ FIRST_RESULTS := first_report
 reproduce: setup
 	@if [ -e "$(WORKDIR)" ] && [ ! -d "$(WORKDIR)" ]; then \
 		echo "error: WORKDIR=$(WORKDIR) is a file, not a folder to work in" >&2; exit 2; fi
-	$(PY) -m studies.config $(abspath $(CONFIG))
+	$(PY) -m run.config $(abspath $(CONFIG))
 	$(if $(SNAKEMAKE_ARGS),$(SNAKEMAKE) -j$(JOBS) $(SNAKEMAKE_ARGS) $(PRESET_ARGS),\
 		trap 'exit 130' INT TERM; $(SNAKEMAKE) -j$(JOBS) $(PRESET_ARGS) $(FIRST_RESULTS); first=$$?; \
 		$(SNAKEMAKE) -j$(JOBS) $(PRESET_ARGS); rest=$$?; exit $$(( first || rest )))

@@ -10,7 +10,8 @@ directions: seeded random directions over the caudal half, solved by FE at the s
 
 Per design the table gives the error inside its data and between its directions (mean, the
 95th percentile of the cases' 95th percentiles, the largest point error; mm and relative to the
-case's largest displacement, :class:`studies.held_out.ErrorSpread`), the FE cost of its cases,
+case's largest displacement, :class:`studies.surrogate_study.held_out.ErrorSpread`), the FE cost of
+its cases,
 and its training. The design is dense enough where the error between its directions is as
 small as inside them.
 
@@ -42,9 +43,9 @@ import numpy as np
 import yaml
 
 from fem.sweep import PAPER_PHI_DEG, Case, sphere_directions
-from studies.case_errors import CaseErrors, ErrorSpread
 from studies.machine import MachineState, machine_state
 from studies.results import Record, Result
+from studies.surrogate_study.case_errors import CaseErrors, ErrorSpread
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -156,7 +157,7 @@ def _batches(cases: list[Case], jobs: int) -> list[list[Case]]:
 def run(config_path: Path, ns: tuple[int, ...], n_test: int, c1: tuple[float, ...], out: Path,
         jobs: int = 2) -> DirectionDensity:
     """Solve, train and compare every design (see the module's docstring)."""
-    from studies.config import WorkflowConfig, read_config_file
+    from run.config import WorkflowConfig, read_config_file
 
     start = time.perf_counter()
     raw = read_config_file(config_path)

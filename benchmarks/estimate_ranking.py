@@ -5,7 +5,7 @@ the cases solved so far. Here the estimates are built from one set of solved cas
 sweep's, e.g. the start design's) and judged at another set that none of them was built from
 (e.g. cases of another design, solved by the same workflow on the same mesh): the *true* error
 there is that of the load-space interpolant of the first set, the error no model of those data
-can be sure to beat. For each estimate (:data:`studies.sweep_estimate.ESTIMATORS`), Spearman's
+can be sure to beat. For each estimate (:data:`studies.sweep.sweep_estimate.ESTIMATORS`), Spearman's
 rank correlation with the true worst-point error and the share of the true worst tenth it finds,
 over all the held-out cases and over those at or below ``--soft`` kPa.
 
@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from fem.adaptive import load_points, read_cases
-from studies.sweep_estimate import ESTIMATORS, EstimateRow, estimates_at, rank_score
+from studies.sweep.sweep_estimate import ESTIMATORS, EstimateRow, estimates_at, rank_score
 
 
 def rank(built: list[Path], held_out: list[Path], soft_kpa: float) -> dict:

@@ -17,7 +17,8 @@ fits such models with the ``surrogate`` settings of ``--config`` (structure forc
   solves' case folders) inside the training range, with ``--model`` beside.
 
 Errors per case: mean, 95th percentile and largest point error (mm); over cases: their mean, the
-95th percentile of the 95th percentiles and the largest (:class:`studies.held_out.ErrorSpread`).
+95th percentile of the 95th percentiles and the largest
+(:class:`studies.surrogate_study.held_out.ErrorSpread`).
 
 The pod models are fitted as the workflow fits them: at every node of a quadratic mesh where
 the dataset holds the fields there (``/nodes``). With ``--centroids`` (such a dataset), every
@@ -40,8 +41,8 @@ import numpy as np
 
 from fem.case_files import read_summary
 from fem.dataset import Dataset, read_dataset
-from studies.case_errors import CaseErrors, Centroids, ErrorSpread
-from studies.surrogate_evaluation import fe_in_model_order
+from studies.surrogate_study.case_errors import CaseErrors, Centroids, ErrorSpread
+from studies.surrogate_study.surrogate_evaluation import fe_in_model_order
 from surrogate.config import SurrogateConfig
 from surrogate.exceptions import ExtrapolationWarning
 from surrogate.predict import Surrogate

@@ -186,7 +186,7 @@ def _compare(case: Case, out: Path) -> CaseCost:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point (see the module docstring)."""
-    from studies.config import ConfigError, read_config_file
+    from run.config import ConfigError, read_config_file
 
     parser = argparse.ArgumentParser(prog="python -m benchmarks.rescue_cost",
                                      description=__doc__.splitlines()[0])

@@ -55,7 +55,7 @@ def make_mesh(config: dict[str, Any], anatomy: str, folder: Path) -> Path:
 
 def cases_of(config: dict[str, Any]) -> list[Case]:
     """The corpus's cases: the clinical ones, then the soft C1 at every soft direction."""
-    from studies.corpus import corpus_cases
+    from studies.fe_study.corpus import corpus_cases
 
     corpus = config.get("corpus") or {}
     return corpus_cases(config["clinical"], corpus.get("soft_C1", 0.8),

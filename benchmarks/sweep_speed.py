@@ -170,7 +170,7 @@ def run(config: dict, c1_values: list[float], directions: list[float], out: Path
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point (see the module docstring)."""
-    from studies.config import ConfigError, WorkflowConfig, read_config_file
+    from run.config import ConfigError, WorkflowConfig, read_config_file
 
     parser = argparse.ArgumentParser(prog="python -m benchmarks.sweep_speed",
                                      description=__doc__.splitlines()[0])

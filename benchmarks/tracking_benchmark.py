@@ -6,7 +6,8 @@
 ``MESH`` is the reference the surrogate was trained on (the sweep's mesh). The imaged shape is
 its FE solve in the observed posture; ``--points`` material points inside the breast (cell
 centroids drawn at random) are seen there, then carried to the target posture by both paths of
-:func:`studies.tracking.track_both`. Prints the largest and mean FE-to-surrogate distance, the
+:func:`studies.reference_state.tracking.track_both`. Prints the largest and mean FE-to-surrogate
+distance, the
 FE path's wall time and the surrogate query's median on one core, and where each point was.
 """
 
@@ -31,7 +32,7 @@ def main(argv: list[str] | None = None) -> int:
     from fem.sweep import Case
     from meshes.io import from_file_order, geometry_nodes, nodes_in_file_order
     from studies.machine import machine_state
-    from studies.tracking import check_model_on, track_both
+    from studies.reference_state.tracking import check_model_on, track_both
     from surrogate.predict import Surrogate
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])

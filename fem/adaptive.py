@@ -20,7 +20,7 @@ and the *jackknife* J(x) = maxₖ |L_k(x)|·‖e_k‖ (removing case k changes t
 e_k·L_k(x), its cardinal function). Measured at FE cases left out, the committee ranked the true
 error best at the soft end, where the rounds add their cases (docs/sweep.md); the workflow
 checks it again at every run against the surrogate's true error
-(:mod:`studies.sweep_estimate`).
+(:mod:`studies.sweep.sweep_estimate`).
 
 **A round** (:func:`plan_round`): the estimate over a pool of candidate directions (a lattice
 of the design's part of the sphere and steps along its plane) at every C1 level; the round

@@ -136,7 +136,7 @@ class Dataset:
 
         Their displacement becomes NaN (at the points and the nodes), ``converged`` False, and
         they leave every split; every other case keeps its place. A case whose FE state is no
-        answer (an unstable equilibrium, :mod:`studies.stability_audit`) is no sample.
+        answer (an unstable equilibrium, :mod:`studies.fe_study.stability_audit`) is no sample.
 
         Raises:
             DatasetError: naming an id the dataset does not have.

@@ -89,7 +89,7 @@ class ReferenceEstimate:
         """JSON-able summary, without the positions.
 
         Its keys are those ``reference.json`` shares with the workflow's record
-        (:class:`studies.reference_state.ReferenceRecord`).
+        (:class:`studies.reference_state.reference_state.ReferenceRecord`).
         """
         inverse = self.inverse
         return {

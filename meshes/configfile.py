@@ -2,7 +2,7 @@
 
 Every command that takes a config file reads it here: the two commands of ``meshes`` through
 :func:`meshes.config.read_mesh_config`, and those of ``fem`` and the layers above it through
-:mod:`fem.configfile`; the workflow's typed config (:mod:`studies.config`) is built from the
+:mod:`fem.configfile`; the workflow's typed config (:mod:`run.config`) is built from the
 same mapping.
 
 YAML's aliases let a few lines stand for a billion values (nine levels of ten aliases): PyYAML

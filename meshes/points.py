@@ -1,7 +1,8 @@
 """Named points as a CSV: a header ``name,x,y,z``, then one point per row.
 
 The form every command that takes or writes points uses: a tumour's centre and margin, points
-carried between frames (:mod:`meshes.frame`), tracked (:mod:`studies.tracking`) or predicted
+carried between frames (:mod:`meshes.frame`), tracked (:mod:`studies.reference_state.tracking`) or
+predicted
 (``python -m surrogate.cli predict --points``).
 """
 

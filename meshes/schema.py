@@ -1,7 +1,7 @@
 """The config's JSON schema (``workflow/schemas/config.schema.yaml``) and its check.
 
 One check for every entry point that takes a config: the workflow's typed config
-(:mod:`studies.config`), and the commands of the lower layers that read only their own section
+(:mod:`run.config`), and the commands of the lower layers that read only their own section
 (``python -m meshes.preview`` checks the ``mesh`` section by it, so that it refuses what the
 run would refuse). Besides the schema, a NaN or an infinity anywhere is refused: it passes
 every bound of a schema.

@@ -8,10 +8,10 @@ from typing import Any
 
 from fem.sweep import Case
 from report.html import finite
-from studies.architecture import RunSummary
-from studies.fe_timing import TimedSolve
+from studies.fe_study.fe_timing import TimedSolve
 from studies.figures import fe as fem_plots
-from studies.surrogate_benchmark import SurrogateBenchmark
+from studies.surrogate_study.architecture import RunSummary
+from studies.surrogate_study.surrogate_benchmark import SurrogateBenchmark
 
 #: Accuracy needs (mm) of the "model no more than a scene needs" section; the paper's
 #: clinically accepted error is 5 mm.

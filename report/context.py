@@ -14,29 +14,29 @@ from fem.dataset import read_case_columns, read_dataset
 from fem.self_contact_at_rest import MeshRestPairs
 from report.common import case_id
 from report.html import figure
-from studies.architecture import ArchitectureTable, VariantComparison
-from studies.corpus import CorpusTable
-from studies.fe_benchmark import ClinicalBenchmark
-from studies.fe_speed_accuracy import SpeedAccuracy
-from studies.fold_section import FoldSections
-from studies.held_out import HeldOutEvaluation
-from studies.mesh_quality import MeshQuality
-from studies.off_grid import OffGridEvaluation
-from studies.postures import PostureEvaluation
-from studies.reference_roundtrip import RoundTripTable
-from studies.reference_state import ReferenceRecord
-from studies.run_log import run_time
-from studies.skin import SkinStudy
-from studies.stability import StabilityMap
-from studies.stability_audit import StabilityAudit
-from studies.stiffness import StiffnessResult
-from studies.surrogate_benchmark import SurrogateBenchmark
-from studies.surrogate_evaluation import ClinicalEvaluation, Extrapolation
-from studies.sweep_edges import SweepEdges
-from studies.sweep_estimate import SweepEstimateCheck
-from studies.sweep_rounds import SweepRounds
-from studies.tracking import TrackingResult
-from studies.warning_coverage import WarningCoverage
+from run.run_log import run_time
+from studies.fe_study.corpus import CorpusTable
+from studies.fe_study.fe_benchmark import ClinicalBenchmark
+from studies.fe_study.fe_speed_accuracy import SpeedAccuracy
+from studies.fe_study.fold_section import FoldSections
+from studies.fe_study.mesh_quality import MeshQuality
+from studies.fe_study.skin import SkinStudy
+from studies.fe_study.stability import StabilityMap
+from studies.fe_study.stability_audit import StabilityAudit
+from studies.fe_study.sweep_edges import SweepEdges
+from studies.reference_state.reference_roundtrip import RoundTripTable
+from studies.reference_state.reference_state import ReferenceRecord
+from studies.reference_state.stiffness import StiffnessResult
+from studies.reference_state.tracking import TrackingResult
+from studies.surrogate_study.architecture import ArchitectureTable, VariantComparison
+from studies.surrogate_study.held_out import HeldOutEvaluation
+from studies.surrogate_study.off_grid import OffGridEvaluation
+from studies.surrogate_study.postures import PostureEvaluation
+from studies.surrogate_study.surrogate_benchmark import SurrogateBenchmark
+from studies.surrogate_study.surrogate_evaluation import ClinicalEvaluation, Extrapolation
+from studies.surrogate_study.warning_coverage import WarningCoverage
+from studies.sweep.sweep_estimate import SweepEstimateCheck
+from studies.sweep.sweep_rounds import SweepRounds
 from surrogate.checkpoint import read_history, read_model_card
 
 log = logging.getLogger(__name__)

@@ -2,8 +2,8 @@
 
 :class:`ConfigError` lists every problem as ``dotted.key: message``; :func:`config_section`
 turns a parsing error of one section (a library's ``ValueError``, a missing key) into one that
-names the section's dotted key. :mod:`studies.config` and the sections it builds from
-(:mod:`studies.fe_study_config`, :mod:`studies.surrogate_study_config`) raise it.
+names the section's dotted key. :mod:`run.config` and the sections it builds from
+(:mod:`studies.fe_study.config`, :mod:`studies.surrogate_study.config`) raise it.
 """
 
 from __future__ import annotations

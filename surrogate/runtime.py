@@ -5,7 +5,7 @@ runtime that jax 0.4.38 uses by default spends ~0.3 ms of overhead on the eight
 small kernels of a 3x32 whole-field prediction (0.53 ms for 2,286 points); the
 classic runtime runs the same program in 0.20 ms. Turning Eigen's multi-threading
 off costs a further ~30 % on one pinned core, so the one-core timing pins the
-process with ``sched_setaffinity`` instead (see :mod:`studies.timing`).
+process with ``sched_setaffinity`` instead (see :mod:`studies.surrogate_study.timing`).
 
 XLA reads ``XLA_FLAGS`` when the backend is created (at the first computation),
 so :func:`configure_cpu` works after ``import jax`` but not after JAX has run.

@@ -4,8 +4,9 @@
 
 Every probe runs a real entry point in a working directory of its own: the project's
 Snakefile (``snakemake -n`` for a config, the mesh job for a geometry file, the aggregation
-job for a case folder's files), ``python -m studies.config``, ``make reproduce``, or a
-command (``fem.cli``, ``fem.reference``, ``surrogate.cli predict``, ``studies.stiffness``,
+job for a case folder's files), ``python -m run.config``, ``make reproduce``, or a
+command (``fem.cli``, ``fem.reference``, ``surrogate.cli predict``,
+``studies.reference_state.stiffness``,
 ``report.viewer``) on a solved three-case sweep and a small model trained on it. A probe
 passes when the run stops (or, for an input that must be answered, answers), names the problem
 in the words given (on the console or in the job's log), writes
@@ -96,7 +97,7 @@ def config_probe(config: dict[str, Any] | str, text: str) -> Callable[[Path], Ou
     would have written.
     A mapping is given as ``--configfile``; a file's text (a syntax error) is the working
     directory's ``config.yaml``, which the Snakefile reads itself (Snakemake reads a
-    ``--configfile`` without naming a syntax error's line). ``python -m studies.config``, which
+    ``--configfile`` without naming a syntax error's line). ``python -m run.config``, which
     ``make reproduce`` runs first, must name ``text`` too.
     """
 
@@ -109,10 +110,10 @@ def config_probe(config: dict[str, Any] | str, text: str) -> Callable[[Path], Ou
         if outcome.passed and (workdir / "results").exists():
             return Outcome(False, "results/ was created")
         checked = subprocess.run(
-            [sys.executable, "-m", "studies.config", str(path)], capture_output=True, text=True
+            [sys.executable, "-m", "run.config", str(path)], capture_output=True, text=True
         )
         if outcome.passed and (checked.returncode != 2 or not re.search(text, checked.stderr)):
-            return Outcome(False, f"python -m studies.config: {checked.stderr.strip()[-300:]}")
+            return Outcome(False, f"python -m run.config: {checked.stderr.strip()[-300:]}")
         return outcome
 
     return probe
@@ -739,8 +740,8 @@ COMMAND_PROBES: dict[str, Callable[[Path, Path], Outcome]] = {
     "predict at an angle of 1e300 degrees": command_probe(
         ["surrogate.cli", "predict", MODEL, "--c1", "2", "--phi", "1e300"],
         r"argument --phi: 1e300 is not an angle"),
-    "studies.stiffness at Φ = 1000 degrees": command_probe(
-        ["studies.stiffness", MESH, "--model", MODEL, "--phi", "1000"],
+    "studies.reference_state.stiffness at Φ = 1000 degrees": command_probe(
+        ["studies.reference_state.stiffness", MESH, "--model", MODEL, "--phi", "1000"],
         r"argument --phi: 1000 is not an angle"),
     "predict with a truncated params.npz": command_probe(
         MODEL_QUERY, r"params\.npz is not a whole NumPy archive", prepare=_spoil_params),
@@ -773,8 +774,9 @@ COMMAND_PROBES: dict[str, Callable[[Path, Path], Outcome]] = {
     "fem.reference writing into a file": command_probe(
         ["fem.reference", MESH, "--c1", "1", "--phi", "180", "--out", "sweep.yaml"],
         r"argument --out: sweep\.yaml is a file, not a folder to write into"),
-    "studies.tracking on a mesh with a NaN node": command_probe(
-        ["studies.tracking", "points.csv", "--imaged", MESH, "--reference", MESH, "--model",
+    "studies.reference_state.tracking on a mesh with a NaN node": command_probe(
+        ["studies.reference_state.tracking", "points.csv", "--imaged", MESH, "--reference", MESH,
+            "--model",
          MODEL, "--c1", "1", "--phi", "0", "--out", "tracked.csv"],
         r"mesh\.xdmf: node \d+ .*? not finite numbers",
         prepare=lambda w: (_corner_points(w), _nan_node(w))),

@@ -111,7 +111,7 @@ def test_a_killed_adaptive_run_resumes_and_solves_nothing_finished_again(
 
 def test_the_small_run_checks_its_estimate_and_reports_its_fixed_design(small_run: Path) -> None:
     """The suite's shared run (a fixed design) writes the estimate check and the section."""
-    from studies.sweep_estimate import ESTIMATORS, SweepEstimateCheck
+    from studies.sweep.sweep_estimate import ESTIMATORS, SweepEstimateCheck
 
     check = SweepEstimateCheck.read(small_run / "results" / "sweep" / "estimate.json")
     assert check.chosen == ESTIMATORS[0]

@@ -6,7 +6,7 @@ name cannot be found from it. Under "One concept per module" each package has on
 ``report/sections``, ``report/viewer``), by their stems in backticks (`` `kinematics` ``, or
 `` `fe_skin.py` ``); "The workflow" names the rule files of ``workflow/rules/`` the same way. A
 stem counts only in its own package's bullet, so `` `config` `` under ``meshes/`` does not name
-``studies/config.py``.
+``run/config.py``.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ pytestmark = pytest.mark.unit
 
 ROOT = Path(__file__).resolve().parents[1]
 PAGE = ROOT / "docs" / "architecture.md"
-PACKAGES = ("meshes", "fem", "surrogate", "studies", "report", "benchmarks")
+PACKAGES = ("meshes", "fem", "surrogate", "studies", "run", "report", "benchmarks")
 """The layers, bottom up, as the import-linter contract in pyproject.toml lists them."""
 
 

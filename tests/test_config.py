@@ -1,4 +1,4 @@
-"""The configuration parsed once (studies.config); the schema's bounds and the dataclasses' agree.
+"""The configuration parsed once (run.config); the schema's bounds and the dataclasses' agree.
 
 No FE solve and no workflow run: these are unit checks.
 """
@@ -26,10 +26,10 @@ from meshes.exceptions import GeometryError
 from meshes.parametric import BreastGeometry
 from meshes.schema import SCHEMA_PATH, load_schema
 from meshes.sizing import MeshSize
-from studies.config import ConfigError, WorkflowConfig, canonical, read_config_file, validated
-from studies.fe_variants import ELEMENTS as STUDY_ELEMENTS
-from studies.fe_variants import MeshSpec, Variant
-from studies.surrogate_study_config import SurrogateStudyConfig
+from run.config import ConfigError, WorkflowConfig, canonical, read_config_file, validated
+from studies.fe_study.fe_variants import ELEMENTS as STUDY_ELEMENTS
+from studies.fe_study.fe_variants import MeshSpec, Variant
+from studies.surrogate_study.config import SurrogateStudyConfig
 from surrogate.config import SurrogateConfig, SurrogateConfigError
 from tests.conftest import REPO
 
@@ -140,7 +140,7 @@ def test_the_commands_name_a_config_file_they_cannot_use(
     """Each command stops on it by name, writing nothing.
 
     ``fem.cli``, ``fem.chain``, ``fem.reference``, ``meshes.preview`` and ``meshes.frame``: the
-    same reader as the workflow's (``studies.config.read_config_file`` wraps it).
+    same reader as the workflow's (``run.config.read_config_file`` wraps it).
     """
     from fem.chain import main as chain
     from fem.cli import main as one_case
@@ -701,9 +701,10 @@ def test_the_command_line_bounds_are_the_configs() -> None:
      "argument --c1: C1 = -1 kPa is not above 0 and at most 1000 kPa"),
     ("surrogate.cli", ["predict", "m", "--c1", "1", "--phi", "0", "--from-phi", "inf"],
      "argument --from-phi: 'inf' is not a finite number"),
-    ("studies.stiffness", ["obs.xdmf", "--model", "m", "--phi", "1000"],
+    ("studies.reference_state.stiffness", ["obs.xdmf", "--model", "m", "--phi", "1000"],
      "argument --phi: 1000 is not an angle from -180 to 360 degrees"),
-    ("studies.tracking", ["p.csv", "--imaged", "i", "--reference", "r", "--model", "m",
+    ("studies.reference_state.tracking", ["p.csv", "--imaged", "i", "--reference", "r", "--model",
+        "m",
                           "--c1", "1", "--phi", "0", "--out", "{folder}"],
      "argument --out: {folder} is a folder, not a file to write"),
 ])

@@ -18,8 +18,8 @@ import yaml
 from fem.configfile import ConfigFileError as FEConfigFileError
 from fem.configfile import read_config_file as fem_read_config_file
 from meshes.configfile import ConfigFileError, read_config_file
-from studies.config import ConfigError, WorkflowConfig
-from studies.config import read_config_file as studies_read_config_file
+from run.config import ConfigError, WorkflowConfig
+from run.config import read_config_file as studies_read_config_file
 from tests.conftest import REPO
 
 pytestmark = pytest.mark.unit

@@ -109,7 +109,7 @@ def test_the_corpus_study_solves_an_anatomy_with_both_paths_and_resumes_a_stoppe
     from fem.case import CaseRunner
     from fem.parameters import SolverSettings
     from fem.sweep import Case
-    from studies.corpus import (
+    from studies.fe_study.corpus import (
         EXACT,
         AnatomyRun,
         CorpusTable,
@@ -118,7 +118,7 @@ def test_the_corpus_study_solves_an_anatomy_with_both_paths_and_resumes_a_stoppe
         fingerprint,
         solve_anatomy,
     )
-    from studies.mesh_quality import MeshQuality
+    from studies.fe_study.mesh_quality import MeshQuality
 
     section, _ = _import("scan", tmp_path)
     config = yaml.safe_load((REPO / "config.yaml").read_text())
@@ -159,7 +159,7 @@ def test_the_corpus_study_solves_an_anatomy_with_both_paths_and_resumes_a_stoppe
 def test_the_failures_table_lists_each_case_a_path_did_not_converge_with_its_load_fraction(
 ) -> None:
     """A case both paths converged is left out; one either path failed shows both paths' λ."""
-    from studies.corpus import (
+    from studies.fe_study.corpus import (
         EXACT,
         FAILURES_HEADER,
         AnatomyRun,

@@ -414,7 +414,7 @@ def test_the_clock_is_the_processes_start_not_the_imports() -> None:
 def test_cases_set_aside_leave_every_split_and_keep_the_others(tmp_path: Path) -> None:
     """A case whose FE state is no answer is set aside as a failed one; nothing else moves."""
     from fem.dataset import read_dataset
-    from studies.stability_audit import AuditedCase, StabilityAudit, without_unstable
+    from studies.fe_study.stability_audit import AuditedCase, StabilityAudit, without_unstable
 
     c1s, phis = (1.0, 1.5, 2.0, 2.5, 3.0), (0.0, 45.0, 90.0, 135.0, 180.0)
     paths = [_write_case(tmp_path, c1, phi) for c1 in c1s for phi in phis]

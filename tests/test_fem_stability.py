@@ -73,7 +73,7 @@ def test_the_inertia_counts_the_dense_tangents_eigenvalues(tiny_mesh: Path) -> N
 @pytest.mark.unit
 def test_directions_on_the_great_circle() -> None:
     from fem.directions import gravity_angles as direction_angles
-    from studies.failure_edge import great_circle
+    from studies.fe_study.failure_edge import great_circle
 
     for phi, theta in ((-75.0, 0.0), (75.0, 0.0), (120.0, -30.0), (90.0, 90.0), (180.0, 0.0)):
         g = Gravity(phi, theta, magnitude=1.0).vector
@@ -93,7 +93,7 @@ def test_directions_on_the_great_circle() -> None:
 def test_turning_gravity_reaches_the_case_solved_alone(tiny_mesh: Path) -> None:
     """Where nothing fails, the turn ends on the target case's equilibrium, every state stable."""
     from fem.case import CaseRunner
-    from studies.failure_edge import turn
+    from studies.fe_study.failure_edge import turn
 
     edge = turn(tiny_mesh, SolverSettings(), 1.0, (180.0, 0.0), (150.0, 20.0), via=(2.0,),
                 step_deg=10.0, resolution_deg=1.0)
@@ -113,7 +113,7 @@ def test_turning_gravity_reaches_the_case_solved_alone(tiny_mesh: Path) -> None:
 @pytest.mark.solve
 def test_a_turn_whose_steps_fail_stops_at_the_resolution(tiny_mesh: Path) -> None:
     """Steps that cannot converge are halved down to the resolution; the edge is the start."""
-    from studies.failure_edge import turn
+    from studies.fe_study.failure_edge import turn
 
     edge = turn(tiny_mesh, SolverSettings(), 1.0, (180.0, 0.0), (120.0, 0.0), step_deg=8.0,
                 resolution_deg=1.0, newton={"snes_max_it": 1, "snes_linesearch_type": "basic"})
@@ -137,7 +137,7 @@ def _columns(rows: list[tuple[float, float, float, bool]]) -> dict[str, np.ndarr
 
 @pytest.mark.unit
 def test_the_sweeps_failures_are_traced_softest_first_from_the_nearest_converged_case() -> None:
-    from studies.sweep_edges import choose_traces
+    from studies.fe_study.sweep_edges import choose_traces
 
     columns = _columns([
         (1.2, -75.0, 0.0, True), (1.0, -75.0, 0.0, True), (0.9, -75.0, 0.0, False),
@@ -164,7 +164,7 @@ def test_the_sweeps_failures_are_traced_softest_first_from_the_nearest_converged
 def test_a_traced_sweep_is_written_read_and_shown(tiny_mesh: Path, tmp_path: Path) -> None:
     """The record of a sweep's traces round-trips, and the report's table shows it."""
     from report.sections.stability import failure_edges_section
-    from studies.sweep_edges import SweepEdges, sweep_edges
+    from studies.fe_study.sweep_edges import SweepEdges, sweep_edges
 
     # a "failed" case that the turn reaches: the record says so, and names its start
     columns = _columns([(1.0, 180.0, 0.0, True), (1.0, 160.0, 0.0, False)])
@@ -199,7 +199,7 @@ def test_turns_from_both_sides_meet_the_sweeps_solution_where_it_is_unique(
     tiny_mesh: Path, tmp_path: Path
 ) -> None:
     """Away from any fold the three ways to one direction find one equilibrium."""
-    from studies.failure_edge import Meeting, meet
+    from studies.fe_study.failure_edge import Meeting, meet
 
     meeting = meet(tiny_mesh, SolverSettings(), 1.0, ((180.0, 0.0), (140.0, 0.0)), (160.0, 0.0),
                    via=(2.0,), step_deg=10.0, resolution_deg=1.0)
@@ -219,8 +219,8 @@ def test_held_out_cases_are_banded_by_their_angle_to_the_nearest_failure() -> No
 
     from report.context import Context
     from report.sections.generalisation import held_out_part
-    from studies.case_errors import CaseErrors, ErrorSpread
-    from studies.held_out import (
+    from studies.surrogate_study.case_errors import CaseErrors, ErrorSpread
+    from studies.surrogate_study.held_out import (
         HeldOutBlock,
         HeldOutEvaluation,
         by_failure_distance,
@@ -257,7 +257,7 @@ def test_held_out_cases_are_banded_by_their_angle_to_the_nearest_failure() -> No
         out_dir=Path("."), clinical=[], paths={}, clinical_fields=[],
         results={"held_out": HeldOutEvaluation(blocks=[old], inside_all=result.inside_all)}))
     assert "unstable equilibrium" not in page  # no audit: nothing said
-    from studies.stability_audit import AuditedCase, StabilityAudit
+    from studies.fe_study.stability_audit import AuditedCase, StabilityAudit
 
     audit = StabilityAudit(C1=[0.8], cases=[AuditedCase("case0", 0.8, 0.0, 0.0, False),
                                              AuditedCase("case1", 0.8, 0.0, 0.0, True)])
@@ -270,7 +270,7 @@ def _vertex_field(runner) -> tuple[np.ndarray, np.ndarray]:
     """A solved case's displacement at the mesh's vertices (mm), as a dataset holds it."""
     from scipy.spatial import cKDTree
 
-    from studies.stability_audit import displacement_rows
+    from studies.fe_study.stability_audit import displacement_rows
 
     V, rows = displacement_rows(runner.problem)
     x = V.tabulate_dof_coordinates()[: len(rows)]
@@ -287,7 +287,7 @@ def test_a_sweeps_own_state_is_polished_and_judged(tiny_mesh: Path) -> None:
     A state Newton would leave, or points of another mesh, are not judged.
     """
     from fem.case import CaseRunner
-    from studies.stability_audit import audit_case, state_from_points
+    from studies.fe_study.stability_audit import audit_case, state_from_points
 
     case = Case(1.0, 160.0, 0.0)
     with CaseRunner(tiny_mesh) as runner:
@@ -313,7 +313,7 @@ def test_the_audit_of_a_sweep_reads_its_dataset(
     small_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """Every converged case of the asked C1 judged from the workflow's dataset; errors named."""
-    from studies.stability_audit import StabilityAudit, main
+    from studies.fe_study.stability_audit import StabilityAudit, main
 
     results = small_run / "results"
     args = [str(results / "mesh/mesh.xdmf"), str(results / "dataset/dataset.h5"),
@@ -331,7 +331,7 @@ def test_the_audit_of_a_sweep_reads_its_dataset(
 def test_the_audit_is_written_read_and_shown(tmp_path: Path) -> None:
     """The record round-trips; the report counts each C1's verdicts and lists the flagged."""
     from report.sections.stability import stability_audit_section
-    from studies.stability_audit import AuditedCase, StabilityAudit, softest_c1
+    from studies.fe_study.stability_audit import AuditedCase, StabilityAudit, softest_c1
 
     assert softest_c1(np.array([1.2, 0.8, 1.0, 0.8]), 2) == [0.8, 1.0]
     assert softest_c1(np.array([1.2]), 3) == [1.2] and softest_c1(np.array([1.2]), 0) == []
@@ -359,7 +359,7 @@ def test_the_audits_parts_join_in_the_audits_order() -> None:
     """Parts run side by side (every n-th case) join into the record one job would write."""
     from fem.exceptions import InvalidParameterError
     from fem.parameters import SolverSettings
-    from studies.stability_audit import AuditedCase, StabilityAudit, audit_sweep
+    from studies.fe_study.stability_audit import AuditedCase, StabilityAudit, audit_sweep
 
     with pytest.raises(InvalidParameterError, match="part 2 of 2: parts are numbered 0 to 1"):
         audit_sweep("mesh.xdmf", "dataset.h5", SolverSettings(), [1.0], part=2, parts=2)

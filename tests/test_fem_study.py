@@ -15,14 +15,14 @@ import pytest
 
 from fem.exceptions import InvalidParameterError
 from report.common import variant_label
-from studies.fe_speed_accuracy import (
+from studies.fe_study.fe_speed_accuracy import (
     SpeedAccuracy,
     VariantRecord,
     pareto_front,
     summarise_variants,
 )
-from studies.fe_variants import VARIANT_ID_PATTERN, MeshSpec, Variant, expand_variants
-from studies.stability import lowest_converging, sweep_records
+from studies.fe_study.fe_variants import VARIANT_ID_PATTERN, MeshSpec, Variant, expand_variants
+from studies.fe_study.stability import lowest_converging, sweep_records
 
 pytestmark = pytest.mark.solve
 
@@ -159,8 +159,8 @@ def test_stored_reference_is_rebuilt_exactly(coarse_mesh: Path, tmp_path: Path) 
     from fem.case import CaseRunner
     from fem.interpolation import evaluate
     from fem.sweep import Case
-    from studies.fe_reference import load_displacement, save_displacement
-    from studies.fe_timing import vertex_displacement
+    from studies.fe_study.fe_reference import load_displacement, save_displacement
+    from studies.fe_study.fe_timing import vertex_displacement
 
     runner = CaseRunner(coarse_mesh)
     runner.solve(Case(1.0, 180.0))
@@ -253,8 +253,8 @@ def test_error_falls_with_mesh_size_against_a_finer_reference(
     from fem.case import CaseRunner
     from fem.parameters import Discretisation, SolverSettings
     from fem.sweep import Case
-    from studies.accuracy import observed_rates
-    from studies.fe_benchmark import accuracy_at_vertices
+    from studies.fe_study.accuracy import observed_rates
+    from studies.fe_study.fe_benchmark import accuracy_at_vertices
 
     case = Case(5.0, 180.0)
     fine = CaseRunner(mesh_ladder[0.02], SolverSettings(discretisation=Discretisation(degree=3)))

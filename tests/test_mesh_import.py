@@ -351,7 +351,7 @@ def test_an_import_finer_than_the_default_mound_size_needs_only_its_global_size(
         MeshConfig.from_mapping({**config, "size": {"global_size": "fine"}})
     # the whole config, its defaults filled by the schema (the FE study's default variant
     # reads mesh.size too)
-    from studies.config import WorkflowConfig, validated
+    from run.config import WorkflowConfig, validated
 
     whole = file_config()
     whole["mesh"]["size"] = {"global_size": 0.008}

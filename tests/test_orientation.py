@@ -254,7 +254,7 @@ def test_the_preview_refuses_what_the_run_refuses(
     import yaml
 
     from meshes.preview import main
-    from studies.config import ConfigError, WorkflowConfig
+    from run.config import ConfigError, WorkflowConfig
 
     mesh, config = _import_config(tmp_path, orientation, rib)
     assert main([str(config)]) == 2

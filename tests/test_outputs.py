@@ -155,8 +155,11 @@ def test_output_file_names_a_file_in_the_way_of_its_folder(tmp_path: Path) -> No
 @pytest.mark.parametrize("out", ["picks.csv", "tracked.csv"])
 def test_tracking_refuses_to_write_over_its_inputs(tmp_path: Path, out: str,
                                                   capsys: pytest.CaptureFixture[str]) -> None:
-    """``studies.tracking --out`` and the JSON it writes beside it are checked the same way."""
-    from studies.tracking import main as tracking
+    """``tracking --out`` and the JSON it writes beside it are checked the same way.
+
+    The command is ``studies.reference_state.tracking``.
+    """
+    from studies.reference_state.tracking import main as tracking
 
     picks = tmp_path / "picks.csv"
     picks.write_text(PICKS)

@@ -68,7 +68,7 @@ def test_the_patient_page_runs_from_a_wrong_header_to_the_tumour_supine(tmp_path
 
     from meshes.phantom import TUMOUR, TUMOUR_CENTRE_M
     from meshes.points import read_points
-    from studies.tracking import TrackingResult
+    from studies.reference_state.tracking import TrackingResult
     from surrogate.predict import Surrogate
     from tests.test_image_headers import research_phantom
 

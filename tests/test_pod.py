@@ -409,8 +409,8 @@ def test_a_refit_trains_on_the_validation_cases_for_the_epochs_chosen(
     """
     import dataclasses
 
-    from studies.architecture import refit_model
-    from studies.held_out import trained_cases
+    from studies.surrogate_study.architecture import refit_model
+    from studies.surrogate_study.held_out import trained_cases
     from surrogate.pod import case_split
     from surrogate.predict import Surrogate
 

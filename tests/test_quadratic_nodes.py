@@ -168,8 +168,11 @@ def test_the_dataset_holds_the_fields_at_every_node(sweep) -> None:
 
 
 def test_a_cases_field_at_named_points_is_the_quadratic_field_there(sweep) -> None:
-    """``studies.case_points``: a case's field between the nodes, exactly where it is quadratic."""
-    from studies.case_points import fe_at_points
+    """A case's field between the nodes, exactly where it is quadratic.
+
+    The function is ``studies.reference_state.case_points``'s.
+    """
+    from studies.reference_state.case_points import fe_at_points
 
     folder, summaries, _, _ = sweep
     case = Path(summaries[7]).parent
@@ -257,9 +260,9 @@ def test_the_held_out_and_posture_errors_are_taken_between_the_points_too(
     the model fitted at every node answers them as well as its material points, the one fitted
     at the vertices misses the curvature, and the evaluations report both at the centroids.
     """
-    from studies.case_errors import Centroids
-    from studies.held_out import evaluate_held_out, trained_cases
-    from studies.postures import evaluate_postures
+    from studies.surrogate_study.case_errors import Centroids
+    from studies.surrogate_study.held_out import evaluate_held_out, trained_cases
+    from studies.surrogate_study.postures import evaluate_postures
 
     folder, summaries, points, fields = sweep
     models = models[0]
@@ -330,7 +333,7 @@ def test_the_off_grid_set_is_judged_against_its_goals_and_lists_failed_solves(
     """The off-grid evaluation spreads the compared cases' errors and names the failed ones."""
     from report.context import Context
     from report.sections.generalisation import off_grid_part
-    from studies.off_grid import GOALS_MM, OffGridEvaluation, evaluate_off_grid
+    from studies.surrogate_study.off_grid import GOALS_MM, OffGridEvaluation, evaluate_off_grid
 
     folder, summaries, points, fields = sweep
     failed = tmp_path / "failed.json"
@@ -366,10 +369,10 @@ def test_the_off_grid_set_is_judged_against_its_goals_and_lists_failed_solves(
 
 def test_the_off_grid_command_compares_a_model_folder_with_case_folders(
         sweep, models, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """``python -m studies.off_grid MODEL CASE...``: per case, per C1 and over all."""
+    """``python -m studies.surrogate_study.off_grid MODEL CASE...``: per case, C1 and overall."""
     import shutil
 
-    from studies.off_grid import OffGridEvaluation, main
+    from studies.surrogate_study.off_grid import OffGridEvaluation, main
 
     folder, summaries, points, fields = sweep
     failed = tmp_path / "failed"
@@ -400,8 +403,8 @@ def test_a_held_out_block_without_cases_the_by_sample_model_trained_on(
     """Where the by-sample model trained on none of a split's test cases, no row says it did."""
     from report.context import Context
     from report.sections.generalisation import held_out_part
-    from studies.case_errors import CaseErrors, ErrorSpread
-    from studies.held_out import HeldOutBlock, HeldOutEvaluation
+    from studies.surrogate_study.case_errors import CaseErrors, ErrorSpread
+    from studies.surrogate_study.held_out import HeldOutBlock, HeldOutEvaluation
 
     folder = sweep[0]
     ds = read_dataset(folder / "ds.h5")

@@ -191,7 +191,7 @@ def test_the_command_line_writes_the_reference_mesh_and_its_record(
     assert fixed["method"] == "anderson" and fixed["inverse_newton_iterations"] is None
     assert fixed["forward_solves"] > record["forward_solves"]
     # one format with the workflow's record, which adds the cost and the machine
-    from studies.reference_state import ReferenceRecord
+    from studies.reference_state.reference_state import ReferenceRecord
 
     fields = set(ReferenceRecord.__dataclass_fields__)
     assert set(record) <= fields and fields - set(record) == {"cold_forward_s", "cost", "machine"}
@@ -270,7 +270,7 @@ def test_the_tracking_command_carries_points_by_fe_and_by_the_surrogate(
     import csv
 
     from fem.interpolation import evaluate
-    from studies.tracking import TrackingResult, main
+    from studies.reference_state.tracking import TrackingResult, main
 
     reference = small_run / "results/mesh/mesh.xdmf"
     model = small_run / "results/surrogate/model"
@@ -326,8 +326,8 @@ def test_the_stiffness_is_found_from_a_noisy_second_observation(
     first, has the truth 0.5 % above its interval). An observation in other units, or in other
     axes, is refused by name.
     """
-    from studies.stiffness import Estimator, main
-    from studies.tracking import TrackingInputError
+    from studies.reference_state.stiffness import Estimator, main
+    from studies.reference_state.tracking import TrackingInputError
     from surrogate.stiffness import StiffnessError
 
     reference = small_run / "results/mesh/mesh.xdmf"
@@ -383,9 +383,9 @@ def test_the_workflow_runs_from_an_imaged_mesh_to_tracked_points_and_the_stiffne
 
     import yaml
 
-    from studies.reference_state import ReferenceRecord
-    from studies.stiffness import Estimator, StiffnessResult
-    from studies.tracking import TrackingResult
+    from studies.reference_state.reference_state import ReferenceRecord
+    from studies.reference_state.stiffness import Estimator, StiffnessResult
+    from studies.reference_state.tracking import TrackingResult
     from surrogate.export import decode_array
     from tests.conftest import REPO, snakemake
 
@@ -433,7 +433,7 @@ def test_the_workflow_runs_from_an_imaged_mesh_to_tracked_points_and_the_stiffne
     # posture, the table gives each point's way from where the image saw it (the surrogate's)
     assert data["starts"][-1] == {"name": "as imaged", "phi": 180.0, "theta": 0.0,
                                   "selected": True}
-    from studies.browser import open_page
+    from studies.surrogate_study.browser import open_page
 
     moved = (model.at(tracked.reference).predict(1.0, 0.0)
              - model.at(tracked.reference).predict(1.0, 180.0))

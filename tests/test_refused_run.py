@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from studies.run_log import newest_log, run_time
-from studies.workdir import RunLock
+from run.run_log import newest_log, run_time
+from run.workdir import RunLock
 from tests.conftest import snakemake
 from tests.test_run_log import LOG
 

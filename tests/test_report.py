@@ -14,11 +14,11 @@ from typing import Any
 
 import pytest
 
-from studies.fe_benchmark import ClinicalBenchmark
-from studies.fe_speed_accuracy import SpeedAccuracy
+from studies.fe_study.fe_benchmark import ClinicalBenchmark
+from studies.fe_study.fe_speed_accuracy import SpeedAccuracy
 from studies.machine import MachineState, machine_state
 from studies.results import Record, Result, ResultFormatError
-from studies.surrogate_benchmark import Goal
+from studies.surrogate_study.surrogate_benchmark import Goal
 
 pytestmark = pytest.mark.unit
 
@@ -202,8 +202,13 @@ def test_the_by_c1_cases_are_told_apart_by_whether_their_c1_is_interpolated() ->
 
     from report.context import Context
     from report.sections.generalisation import held_out_part
-    from studies.case_errors import CaseErrors, ErrorSpread
-    from studies.held_out import HeldOutBlock, HeldOutEvaluation, by_bracket, c1_bracketed
+    from studies.surrogate_study.case_errors import CaseErrors, ErrorSpread
+    from studies.surrogate_study.held_out import (
+        HeldOutBlock,
+        HeldOutEvaluation,
+        by_bracket,
+        c1_bracketed,
+    )
 
     # two directions: the plane's -90 at 0.8, 1.0 and 1.2; a band's direction at 1.0 and 1.2
     ds = SimpleNamespace(C1=np.array([0.8, 1.0, 1.2, 1.0, 1.2, 0.8]),
@@ -339,7 +344,7 @@ def test_the_extrapolation_and_training_tables_say_each_thing_once(tmp_path: Pat
     from report.context import Context
     from report.sections.extrapolation import extrapolation_section
     from report.sections.training import _training_range
-    from studies.surrogate_evaluation import Extrapolation, ExtrapolationBlock
+    from studies.surrogate_study.surrogate_evaluation import Extrapolation, ExtrapolationBlock
 
     failed = [{"case": "c1=0.50_phi=0.0_theta=0.0", "reason": "step cut below min_step"}]
     block = ExtrapolationBlock(rows=[], failed_fe=failed, by_kind={})

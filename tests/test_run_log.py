@@ -1,4 +1,4 @@
-"""A run's time by stage, read from Snakemake's run log (studies.run_log)."""
+"""A run's time by stage, read from Snakemake's run log (run.run_log)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from studies.run_log import RunTime, main, read_jobs, read_plan, run_time, stage_of, table
+from run.run_log import RunTime, main, read_jobs, read_plan, run_time, stage_of, table
 
 pytestmark = pytest.mark.unit
 

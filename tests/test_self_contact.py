@@ -291,7 +291,7 @@ def _crossings(segments: np.ndarray) -> int:
 
 @pytest.mark.unit
 def test_the_fold_section_cuts_the_boundary_where_each_state_moves_it() -> None:
-    from studies.fold_section import boundary_triangles, section_segments
+    from studies.fe_study.fold_section import boundary_triangles, section_segments
 
     box = dmesh.create_box(MPI.COMM_SELF, [np.zeros(3), np.ones(3)], [3, 3, 3],
                            dmesh.CellType.tetrahedron)
@@ -317,7 +317,7 @@ def test_the_fold_section_cuts_the_boundary_where_each_state_moves_it() -> None:
 def test_the_fold_is_cut_in_the_plane_the_mound_rolls_in() -> None:
     """Lying on the side: a transverse cut; gravity towards the feet or supine: sagittal."""
     from fem.sweep import Case
-    from studies.fold_section import cut_axis
+    from studies.fe_study.fold_section import cut_axis
 
     def axis(phi: float, theta: float = 0.0) -> str:
         return cut_axis(Case(0.8, phi, theta).gravity().vector)
@@ -330,7 +330,7 @@ def test_the_fold_is_cut_in_the_plane_the_mound_rolls_in() -> None:
 @pytest.mark.unit
 def test_the_fold_section_takes_the_named_cases_then_the_largest_forces() -> None:
     from fem.sweep import Case
-    from studies.fold_section import choose_cases
+    from studies.fe_study.fold_section import choose_cases
 
     columns = {"C1": np.array([1.0, 0.8, 0.8, 1.2]), "phi": np.array([0.0, -90.0, -75.0, 0.0]),
                "theta": np.zeros(4), "converged": np.array([True, True, False, True]),
@@ -349,8 +349,8 @@ def test_the_fold_section_shows_the_crease_crossing_itself_only_without_self_con
 ) -> None:
     from fem.sweep import Case
     from meshes.io import write_tagged_mesh
+    from studies.fe_study.fold_section import FoldSections, fold_sections
     from studies.figures.fe import plot_fold_section
-    from studies.fold_section import FoldSections, fold_sections
 
     mesh, facets = c_block(0.05, 4)
     cells = dmesh.meshtags(mesh, 3, np.arange(mesh.topology.index_map(3).size_local,

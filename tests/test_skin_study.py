@@ -1,4 +1,4 @@
-"""What the skin changes (studies.skin, fe_study.skin): the settings, the paths, the result.
+"""What the skin changes (fe_study/skin.py, config fe_study.skin): settings, paths, result.
 
 No solve: the settings come from the config, the result is written by hand and read back,
 the tumour point is located on the coarse mesh, and the report's section is built from it.
@@ -17,9 +17,8 @@ import yaml
 from fem.sweep import Case
 from fem.tissues import SkinLayer
 from meshes.schema import load_schema
-from studies.config import ConfigError, WorkflowConfig
-from studies.results import ResultFormatError
-from studies.skin import (
+from run.config import ConfigError, WorkflowConfig
+from studies.fe_study.skin import (
     SkinCase,
     SkinStudy,
     prone_supine_pairs,
@@ -28,6 +27,7 @@ from studies.skin import (
     tumour_paths,
     tumour_point,
 )
+from studies.results import ResultFormatError
 from tests.conftest import REPO
 
 pytestmark = pytest.mark.unit

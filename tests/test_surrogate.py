@@ -141,7 +141,7 @@ def test_a_separable_model_trains_on_whole_cases_with_the_loss_of_eq2(
     import jax.numpy as jnp
 
     from fem.dataset import read_dataset
-    from studies.architecture import count_parameters
+    from studies.surrogate_study.architecture import count_parameters
     from surrogate.data import tables
     from surrogate.model import grid_loss, init_params, network, samples_network, split_loss
     from surrogate.train import PART_FIELDS, case_grid, point_order, prepare
@@ -250,7 +250,7 @@ def test_prediction_warns_where_the_sweep_did_not_converge(
     import warnings
 
     from fem.dataset import read_dataset
-    from studies.architecture import copy_model
+    from studies.surrogate_study.architecture import copy_model
     from surrogate.checkpoint import save_model
     from surrogate.exceptions import ExtrapolationWarning
     from surrogate.predict import Surrogate
@@ -313,9 +313,10 @@ def test_prediction_warns_where_the_sweep_did_not_converge(
         warnings.simplefilter("error")
         for C1, phi in ((3.0, -90.0), (1.0, 90.0), (1.0, 45.0)):
             saved.predict(C1, phi)
-    # studies.warning_coverage on the plane: Φ drawn evenly, half of it beside -90°; there
+    # studies.surrogate_study.warning_coverage on the plane: Φ drawn evenly, half of it beside
+    # -90°; there
     # the failures warn up to 2 kPa and the softest solution (3 kPa) above it
-    from studies.warning_coverage import KINDS, warning_coverage
+    from studies.surrogate_study.warning_coverage import KINDS, warning_coverage
 
     coverage = warning_coverage(saved, draws=4000, seed=2, edges=(2.0, 3.0))
     assert coverage.queries == coverage.drawn == 4000 and coverage.kinds[KINDS[2]] == 0
@@ -325,7 +326,7 @@ def test_prediction_warns_where_the_sweep_did_not_converge(
     assert below_softest.warned == coverage.kinds[KINDS[1]]
     assert stiffer.warned == 0
     assert 0.4 < below_failure.share < 0.6 and 0.4 < below_softest.share < 0.6
-    from studies.warning_coverage import WarningCoverage, main
+    from studies.surrogate_study.warning_coverage import WarningCoverage, main
 
     assert main([str(tmp_path / "saved"), "--draws", "4000", "--seed", "2", "--bands", "2",
                  "3", "--json", str(tmp_path / "coverage.json")]) == 0
@@ -360,8 +361,8 @@ def test_a_model_of_the_caudal_half_warns_by_direction(tmp_path: Path) -> None:
 
     from fem.dataset import read_dataset
     from fem.sweep import sphere_directions
-    from studies.held_out import warns
-    from studies.surrogate_evaluation import extrapolation_kind
+    from studies.surrogate_study.held_out import warns
+    from studies.surrogate_study.surrogate_evaluation import extrapolation_kind
     from surrogate.checkpoint import save_model
     from surrogate.exceptions import ExtrapolationWarning
     from surrogate.predict import Surrogate
@@ -444,11 +445,12 @@ def test_a_model_of_the_caudal_half_warns_by_direction(tmp_path: Path) -> None:
         banded.predict(3.0, *nearest)
         banded.predict(1.0, 0.0, 0.0)
 
-    # studies.warning_coverage: the share of the trained range each model warns at, by drawing
+    # studies.surrogate_study.warning_coverage: the share of the trained range each model warns at,
+    # by drawing
     # queries over it. The model without a failure warns nowhere inside its directions; both
     # others warn below 3 kPa beside the one direction whose softest solution is 3 kPa (the
     # failed model's 1 kPa failure itself backs no query: C1 = 1 kPa exactly has no measure)
-    from studies.warning_coverage import KINDS, warning_coverage
+    from studies.surrogate_study.warning_coverage import KINDS, warning_coverage
 
     clear = warning_coverage(model, draws=3000, seed=1)
     assert clear.warned == 0 and 0.3 < clear.queries / clear.drawn < 0.8  # the caudal half
@@ -465,7 +467,11 @@ def test_a_model_of_the_caudal_half_warns_by_direction(tmp_path: Path) -> None:
 
 
 def test_selection_takes_the_most_accurate_architecture_within_the_prediction_budget() -> None:
-    from studies.architecture import StudyError, architecture_table, select_architecture
+    from studies.surrogate_study.architecture import (
+        StudyError,
+        architecture_table,
+        select_architecture,
+    )
 
     runs = [
         {
@@ -502,7 +508,7 @@ def test_selection_takes_the_most_accurate_architecture_within_the_prediction_bu
 
 def test_the_repeats_train_only_where_the_first_runs_are_close(tmp_path: Path) -> None:
     """surrogate_study.repeat_within: repeats for the architectures near the best first run."""
-    from studies.architecture import RepeatPlan, StudyError, plan_repeats
+    from studies.surrogate_study.architecture import RepeatPlan, StudyError, plan_repeats
 
     first = [{"folder": f"{a}/r0", "architecture": a, "validation_error_mm": e}
              for a, e in (("2x32", 0.0045), ("3x128", 0.00274), ("4x64", 0.00276),

@@ -1,7 +1,7 @@
 """The report's section on how the adaptive sweep chose its cases, from its typed results.
 
-The rounds (:class:`studies.sweep_rounds.SweepRounds`, built from the plans the rounds write)
-and the check of the estimate (:class:`studies.sweep_estimate.SweepEstimateCheck`) are written
+The rounds (:class:`studies.sweep.sweep_rounds.SweepRounds`, built from the plans the rounds write)
+and the check of the estimate (:class:`studies.sweep.sweep_estimate.SweepEstimateCheck`) are written
 to a folder through their classes and read back as the report reads them.
 """
 
@@ -20,8 +20,8 @@ from fem.directions import gravity_direction
 from fem.sweep import Case
 from report.context import Context
 from report.sections.sweep_design import sweep_design_section
-from studies.sweep_estimate import EstimateScore, SweepEstimateCheck
-from studies.sweep_rounds import START_ROUND, SweepRound, SweepRounds
+from studies.sweep.sweep_estimate import EstimateScore, SweepEstimateCheck
+from studies.sweep.sweep_rounds import START_ROUND, SweepRound, SweepRounds
 
 pytestmark = pytest.mark.unit
 

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from studies.browser import open_page
+from studies.surrogate_study.browser import open_page
 from surrogate.exceptions import ExtrapolationWarning
 from surrogate.export import decode_array, encode_array
 from surrogate.predict import Surrogate
@@ -260,7 +260,7 @@ def test_a_page_for_any_model_from_the_command_line(
     from fem.dataset import read_dataset
     from report.viewer import ViewerError, fe_cases
     from report.viewer.__main__ import main
-    from studies.case_points import fe_at_points
+    from studies.reference_state.case_points import fe_at_points
     from tests.conftest import REPO
 
     results = small_run / "results"
@@ -348,7 +348,7 @@ def test_movement_is_measured_from_a_posture_the_user_chooses(
     say which.
     """
     from report.viewer.__main__ import main
-    from studies.case_points import fe_at_points
+    from studies.reference_state.case_points import fe_at_points
     from tests.conftest import REPO
 
     results = small_run / "results"

@@ -25,7 +25,7 @@ def test_full_config_plans_its_start_design_and_a_round_and_the_paper_preset_688
 
     The rounds' cases are planned once round 1 is written, as the run goes.
     """
-    from studies.config import WorkflowConfig
+    from run.config import WorkflowConfig
 
     config = WorkflowConfig.from_mapping(yaml.safe_load((REPO / "config.yaml").read_text()))
     start = {f"results/cases/{case.id}/summary.json" for case in config.cases}
@@ -291,7 +291,9 @@ def test_the_movement_between_two_postures_is_written_for_paraview(
 def test_a_cases_fe_field_answers_at_named_points(
     small_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """``studies.case_points``: a case's FE displacement at material points, by its shape functions.
+    """A case's FE displacement at material points, by its shape functions.
+
+    The command is ``studies.reference_state.case_points``.
 
     At the mesh's vertices it is the case's own ``points.h5``; between them, at a cell's
     centroid, the field's value there (the quadratic field's on a quadratic mesh, the corners'
@@ -303,7 +305,7 @@ def test_a_cases_fe_field_answers_at_named_points(
     from fem.case_files import read_node_displacement
     from fem.dataset import read_dataset
     from meshes.points import read_points
-    from studies.case_points import CasePointsError, fe_at_points, main
+    from studies.reference_state.case_points import CasePointsError, fe_at_points, main
     from surrogate.interpolation import at_centroids
 
     ds = read_dataset(small_run / "results/dataset/dataset.h5")
@@ -484,7 +486,7 @@ def test_the_study_repeats_only_the_architectures_close_to_the_best(small_run: P
 
     tests/config.yaml sets surrogate_study.repeat_within to 0.
     """
-    from studies.architecture import ArchitectureTable, RepeatPlan, read_run
+    from studies.surrogate_study.architecture import ArchitectureTable, RepeatPlan, read_run
 
     study = small_run / "results/surrogate/study"
     plan = RepeatPlan.read(study / "repeats.json")
@@ -532,8 +534,8 @@ def test_held_out_models_and_postures_are_judged_against_fe(small_run: Path) -> 
     random case off the grid from a solve outside it.
     """
     from fem.dataset import read_dataset
-    from studies.held_out import HeldOutEvaluation
-    from studies.postures import PostureEvaluation
+    from studies.surrogate_study.held_out import HeldOutEvaluation
+    from studies.surrogate_study.postures import PostureEvaluation
 
     results = small_run / "results"
     ds = read_dataset(results / "dataset/dataset.h5")
@@ -570,7 +572,7 @@ def test_held_out_models_and_postures_are_judged_against_fe(small_run: Path) -> 
     assert "by-direction" in held_table and f"{direction.held_out_model.max_mm:.3g}" in held_table
 
     # the random case off the grid (surrogate_study.off_grid): solved outside the sweep
-    from studies.off_grid import OffGridEvaluation
+    from studies.surrogate_study.off_grid import OffGridEvaluation
 
     off_grid = OffGridEvaluation.read(results / "surrogate/off_grid.json")
     (row,) = off_grid.rows
@@ -580,7 +582,7 @@ def test_held_out_models_and_postures_are_judged_against_fe(small_run: Path) -> 
     assert f"{row.errors.max_mm:.3g}" in html_table(page, "off-grid")
 
     # where the selected model warns over its trained range (rule warning_coverage)
-    from studies.warning_coverage import WarningCoverage
+    from studies.surrogate_study.warning_coverage import WarningCoverage
 
     coverage = WarningCoverage.read(results / "surrogate/warning_coverage.json")
     assert coverage.queries > 0 and sum(b.queries for b in coverage.bands) == coverage.queries
@@ -589,8 +591,8 @@ def test_held_out_models_and_postures_are_judged_against_fe(small_run: Path) -> 
 
 
 def test_held_out_command_prints_the_workflows_figures(small_run: Path, capsys) -> None:
-    """``python -m studies.held_out`` gives a model's held-out errors as the workflow's JSON."""
-    from studies.held_out import HeldOutEvaluation, main
+    """``python -m studies.surrogate_study.held_out``: a model's held-out errors as JSON."""
+    from studies.surrogate_study.held_out import HeldOutEvaluation, main
 
     results = small_run / "results"
     dataset = results / "dataset/dataset.h5"
@@ -653,7 +655,7 @@ def test_fe_study_rules_run_end_to_end(small_run: Path) -> None:
     assert edges["failed"] == failed and len(edges["traced"]) <= min(failed, 2)
     assert "Where the sweep&#x27;s failures begin" in page
     # the softest C1 values' converged cases judged for stability (both of the small sweep's)
-    from studies.stability_audit import StabilityAudit
+    from studies.fe_study.stability_audit import StabilityAudit
 
     audit = StabilityAudit.read(study / "stability_audit.json")
     columns = read_case_columns(small_run / "results/dataset/dataset.h5")
@@ -667,7 +669,7 @@ def test_fe_study_rules_run_end_to_end(small_run: Path) -> None:
     assert "Are the sweep&#x27;s converged states stable?" in page
     assert 'id="stability-audit"' in page
     # the named prone case cut at the fold both ways: nothing touches, the same state
-    from studies.fold_section import FoldSections
+    from studies.fe_study.fold_section import FoldSections
 
     (fold,) = FoldSections.read(study / "fold_section.json").cases
     assert fold.case == "c1=2.00_phi=180.0_theta=0.0"
@@ -681,7 +683,7 @@ def test_fe_study_rules_run_end_to_end(small_run: Path) -> None:
 def test_the_clinical_cases_are_solved_without_and_with_the_skin(small_run: Path) -> None:
     """fe_skin: homogeneous, the default skin, tests/config.yaml's extra ratio and thickness."""
     from fem.sweep import Case
-    from studies.skin import SkinStudy
+    from studies.fe_study.skin import SkinStudy
 
     results = small_run / "results"
     study = SkinStudy.read(results / "fe_study/skin.json")

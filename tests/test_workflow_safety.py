@@ -198,7 +198,7 @@ def test_a_yaml_syntax_error_names_its_line(tmp_path: Path) -> None:
     assert run.returncode != 0
     assert f"config.yaml: YAML syntax error at line {line + 1}" in run.stdout + run.stderr
     check = subprocess.run(
-        [str(REPO / ".venv/bin/python"), "-m", "studies.config", "config.yaml"],
+        [str(REPO / ".venv/bin/python"), "-m", "run.config", "config.yaml"],
         cwd=tmp_path, capture_output=True, text=True,
     )
     assert check.returncode == 2 and f"YAML syntax error at line {line + 1}" in check.stderr

@@ -4,7 +4,13 @@ from __future__ import annotations
 
 from report.context import Context
 from report.html import missing, para, table
-from studies.corpus import CORPUS_HEADER, EXACT, FAILURES_HEADER, corpus_failures, corpus_rows
+from studies.fe_study.corpus import (
+    CORPUS_HEADER,
+    EXACT,
+    FAILURES_HEADER,
+    corpus_failures,
+    corpus_rows,
+)
 
 
 def corpus_section(ctx: Context) -> str:

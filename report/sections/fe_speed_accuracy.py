@@ -7,8 +7,8 @@ from typing import Any
 from report.common import COST_LABELS, TARGET_NAMES, meets, variant_label
 from report.context import Context
 from report.html import finite, fmt, h3, missing, para, pct, seconds, table, yes
-from studies.fe_speed_accuracy import SpeedAccuracy
-from studies.fe_timing import SelfOverlap
+from studies.fe_study.fe_speed_accuracy import SpeedAccuracy
+from studies.fe_study.fe_timing import SelfOverlap
 from studies.figures import fe as fem_plots
 
 

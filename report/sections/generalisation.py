@@ -8,10 +8,15 @@ from typing import Any
 
 from report.context import Context
 from report.html import fmt, h3, missing, para, pct, table
-from studies.case_errors import CaseErrors, ErrorSpread
-from studies.held_out import BRACKET_LABELS, HeldOutBlock, by_bracket, by_failure_distance
-from studies.off_grid import GOALS_MM
-from studies.postures import PostureRow
+from studies.surrogate_study.case_errors import CaseErrors, ErrorSpread
+from studies.surrogate_study.held_out import (
+    BRACKET_LABELS,
+    HeldOutBlock,
+    by_bracket,
+    by_failure_distance,
+)
+from studies.surrogate_study.off_grid import GOALS_MM
+from studies.surrogate_study.postures import PostureRow
 
 
 def held_out_part(ctx: Context) -> str:

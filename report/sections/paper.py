@@ -11,8 +11,8 @@ from report.common import GOAL_NAMES, case_id, predict_s
 from report.context import Context
 from report.html import finite, fmt, h3, missing, para, pm, seconds, span, table, times, yes
 from studies import paper
-from studies.architecture import ArchitectureTable
 from studies.figures import surrogate as surrogate_plots
+from studies.surrogate_study.architecture import ArchitectureTable
 from surrogate.config import parse_architecture
 
 STRUCTURE_WORDS = {

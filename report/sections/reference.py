@@ -7,7 +7,7 @@ import numpy as np
 from report.context import Context
 from report.html import missing, para, table
 from studies.figures.surrogate import plot_stiffness_misfit
-from studies.reference_roundtrip import HEADER, table_rows
+from studies.reference_state.reference_roundtrip import HEADER, table_rows
 
 
 def reference_section(ctx: Context) -> str:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from report.context import Context
 from report.html import para, table
-from studies.run_log import duration
+from run.run_log import duration
 
 
 def run_time_section(ctx: Context) -> str:
@@ -19,7 +19,7 @@ def run_time_section(ctx: Context) -> str:
         "ended. Each stage's jobs, the sum of their wall times (jobs that ran at once count "
         "each), and when the stage's first job started and its last ended, counted from the "
         "run's start. A run resumed from an earlier one counts only its own jobs; "
-        "python -m studies.run_log prints the same for any run's log.", "caption")]
+        "python -m run.run_log prints the same for any run's log.", "caption")]
     rows = [[s.stage, f"{s.finished} of {s.jobs}", duration(s.job_s),
              duration(s.first_start_s), duration(s.last_end_s)] for s in run.stages]
     out.append(table(["stage", "jobs ended", "job time", "started after", "ended after"], rows,

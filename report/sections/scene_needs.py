@@ -10,7 +10,7 @@ from report.common import NEEDS_MM, meets, predict_s, variant_label, worst_case
 from report.context import Context
 from report.html import finite, fmt, h3, missing, para, seconds, table
 from studies.figures import fe as fem_plots
-from studies.postures import PostureRow
+from studies.surrogate_study.postures import PostureRow
 
 
 @dataclass(frozen=True, slots=True)

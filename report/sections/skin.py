@@ -6,8 +6,8 @@ from collections.abc import Sequence
 
 from report.context import Context
 from report.html import fmt, h3, missing, para, table
+from studies.fe_study.skin import SkinCase, SkinSetting, SkinStudy, TumourPath
 from studies.figures.tissues import plot_skin
-from studies.skin import SkinCase, SkinSetting, SkinStudy, TumourPath
 
 HEADER = ["setting", "skin C1 / fat C1", "skin thickness (mm)", "outcome", "load steps",
           "Newton iterations", "solve (s)", "max |u| (mm)", "max |u| / homogeneous"]

@@ -110,7 +110,7 @@ def lowest_converging_table(lowest: Mapping[str, Any], table_id: str) -> str:
 
 def _sweep_stability(ctx: Context) -> str:
     """The sweep's convergence over (C1, Φ), on the mesh the dataset was solved on."""
-    from studies.stability import lowest_converging, sweep_records
+    from studies.fe_study.stability import lowest_converging, sweep_records
 
     columns = ctx.case_columns()
     if not columns:
@@ -215,7 +215,7 @@ def failure_edges_section(edges: Any) -> str:
         "of a patient rolling over: past the edge, Newton from the last state finds no "
         "equilibrium however short the step (down to the resolution). Near an edge two "
         "histories can end in different stable states at one direction (python -m "
-        "studies.failure_edge --meet compares them). "
+        "studies.fe_study.failure_edge --meet compares them). "
         f"{edges.seconds:.0f} s in all.", "caption")]
     rows = []
     for t in edges.traced:

@@ -7,8 +7,8 @@ from typing import Any
 from report.common import predict_s, variant_label, worst_case
 from report.context import Context
 from report.html import finite, fmt, h3, missing, para, pm, table
-from studies.architecture import RunSummary
 from studies.figures import surrogate as surrogate_plots
+from studies.surrogate_study.architecture import RunSummary
 
 
 def fe_points_for_surrogate(ctx: Context) -> list[dict[str, Any]]:

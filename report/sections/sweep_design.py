@@ -1,9 +1,10 @@
 """How the sweep chose its cases: the adaptive sweep's rounds, and whether its estimate ranks.
 
-The rounds come from ``results/sweep/rounds.json`` (:class:`studies.sweep_rounds.SweepRounds`),
+The rounds come from ``results/sweep/rounds.json``
+(:class:`studies.sweep.sweep_rounds.SweepRounds`),
 the directions and their failures from the dataset, and the check of the estimate against the
 surrogate's true error from ``results/sweep/estimate.json``
-(:class:`studies.sweep_estimate.SweepEstimateCheck`, the full report only).
+(:class:`studies.sweep.sweep_estimate.SweepEstimateCheck`, the full report only).
 """
 
 from __future__ import annotations
@@ -14,8 +15,8 @@ from fem.directions import direction_keys
 from report.context import Context
 from report.html import finite, fmt, h3, missing, para, table
 from studies.figures import sweep_design as design_plots
-from studies.sweep_estimate import SweepEstimateCheck
-from studies.sweep_rounds import SweepRounds
+from studies.sweep.sweep_estimate import SweepEstimateCheck
+from studies.sweep.sweep_rounds import SweepRounds
 
 ROUNDS_FILE = "results/sweep/rounds.json"
 ESTIMATE_FILE = "results/sweep/estimate.json"

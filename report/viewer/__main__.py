@@ -27,7 +27,7 @@ from fem.exceptions import DatasetError
 from meshes.exceptions import MeshInputError
 from meshes.points import read_points
 from report.viewer import LICENCE, ViewerError, build_viewer
-from studies.config import ConfigError, WorkflowConfig, read_config_file
+from run.config import ConfigError, WorkflowConfig, read_config_file
 from surrogate.exceptions import SurrogateError
 
 

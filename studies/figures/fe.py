@@ -229,7 +229,7 @@ def plot_stability_maps(
     is outlined and marked with a cross whose colour names its first failure.
 
     Args:
-        records: :func:`studies.stability.stability_map`'s records (``scheme``, ``C1``,
+        records: :func:`studies.fe_study.stability.stability_map`'s records (``scheme``, ``C1``,
             ``phi``, ``converged``, ``load_steps``, ``newton_iterations``,
             ``rejected_steps``, ``first_failure``, ``failure_kinds``).
         path: PNG to write.
@@ -398,7 +398,7 @@ def plot_fold_section(cases: Sequence[Mapping[str, Any]], path: str | Path,
                       zoom_mm: float = 35.0) -> None:
     """The fold's cross-section per case: reference, without and with self-contact.
 
-    ``cases`` are :class:`studies.fold_section.FoldCase` records as mappings. One row per
+    ``cases`` are :class:`studies.fe_study.fold_section.FoldCase` records as mappings. One row per
     case: the whole cut, and a window of ``zoom_mm`` either side of the focus (the node of the
     largest self-contact pressure where self-contact moves it).
     """

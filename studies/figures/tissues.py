@@ -32,7 +32,8 @@ def plot_skin(study: Mapping[str, Any], path: str | Path,
     """Max |u| and the tumour's way against the skin's ratio and thickness, in one PNG.
 
     Top: max |u|; bottom: the tumour's prone-to-supine distance; left: against the skin's
-    ratio, right: against its thickness. ``study`` is a :class:`studies.skin.SkinStudy` as a
+    ratio, right: against its thickness. ``study`` is a :class:`studies.fe_study.skin.SkinStudy` as
+    a
     mapping; ``labels`` names the clinical cases by id. One line per clinical case (per C1 for
     the tumour's path), the homogeneous model's value dotted in the same colour; a case that
     did not converge is a hollow marker at the load it reached, a path that lacks a converged

@@ -4,7 +4,7 @@
 # one is written to a temporary file and renamed) and restores it if the rebuild fails, e.g. on a
 # case file that aggregation refuses, so a bad case file costs no dataset. The restored file is
 # newer than the refused input, so after such a failure the run's end marks it out of date
-# (studies.workdir.age_refused): the next run refuses again until the input is fixed.
+# (run.workdir.age_refused): the next run refuses again until the input is fixed.
 
 
 onerror:

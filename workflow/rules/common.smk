@@ -1,16 +1,16 @@
-# The configuration, validated and parsed once (studies.config.WorkflowConfig), the wildcard
+# The configuration, validated and parsed once (run.config.WorkflowConfig), the wildcard
 # constraints, and the small helpers that derive targets, so that the rule files hold rules only.
 import re
 from collections import namedtuple
 
 from snakemake.exceptions import WorkflowError
 
-from studies.architecture import RepeatPlan
-from studies.config import ConfigError, WorkflowConfig
-from studies.fe_variants import MESH_ID_PATTERN, VARIANT_ID_PATTERN, Variant
-from studies.workdir import age_refused
 from fem.adaptive import RoundPlan
 from fem.sweep import ANGLE_PATTERN, C1_PATTERN
+from run.config import ConfigError, WorkflowConfig
+from run.workdir import age_refused
+from studies.fe_study.fe_variants import MESH_ID_PATTERN, VARIANT_ID_PATTERN, Variant
+from studies.surrogate_study.architecture import RepeatPlan
 
 # Every job's software under --use-conda (the env file says how it relates to `make setup`).
 ENV = "../envs/fenicsx-jax.yaml"

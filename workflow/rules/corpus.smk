@@ -1,4 +1,4 @@
-# The corpus of anatomies (meshes.corpus, studies.corpus): six geometries the project makes
+# The corpus of anatomies (meshes.corpus, studies.fe_study.corpus): six geometries the project makes
 # itself, from the config's breast to a scan-like surface in scanner axes and a volume mesh in
 # another axis convention, each imported as a user's file would be, then solved with the
 # config's solver and with exact Newton. A benchmark of the import and the solver on more than
@@ -47,7 +47,7 @@ rule corpus_solve:
         clinical=CONFIG.section("clinical"),
         soft_C1=CONFIG.section("corpus", "soft_C1"),
         soft_phi=CONFIG.section("corpus", "soft_phi"),
-        # each solve as it finishes: a stopped job resumes there (studies.corpus.Progress)
+        # each solve as it finishes: a stopped job resumes there (studies.fe_study.corpus.Progress)
         progress=lambda wildcards: f"{CORPUS_DIR}/{wildcards.anatomy}/progress.jsonl",
     log:
         f"results/logs/corpus/solve_{{anatomy}}.log",

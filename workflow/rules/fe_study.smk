@@ -140,7 +140,7 @@ rule fe_stability:
         "../scripts/fe_stability.py"
 
 
-# The sweep's failed cases traced from their nearest converged direction (studies.failure_edge):
+# The sweep's failed cases traced from their nearest converged direction (studies.fe_study.failure_edge):
 # where the solution ends, and whether every state before it is stable. It reads the sweep's
 # dataset, so it is not part of `snakemake fe_study`; the report asks for it.
 rule fe_failure_edges:
@@ -209,7 +209,7 @@ rule fe_stability_audit:
         "../scripts/fe_stability_audit_merge.py"
 
 
-# The fold with and without the skin's self-contact (studies.fold_section): the named cases and
+# The fold with and without the skin's self-contact (studies.fe_study.fold_section): the named cases and
 # the sweep's largest self-contact forces, each solved both ways and cut at the fold, for the
 # report's picture. It reads the sweep's dataset, so it is not part of `snakemake fe_study`.
 rule fe_fold_section:
@@ -235,7 +235,7 @@ rule fe_fold_section:
         "../scripts/fe_fold_section.py"
 
 
-# What the skin changes (studies.skin): the clinical cases on the workflow's mesh homogeneous and
+# What the skin changes (studies.fe_study.skin): the clinical cases on the workflow's mesh homogeneous and
 # with the skin membrane at each of fe_study.skin's ratios and thicknesses, and a tumour point's
 # prone-to-supine path with each. Like the fold's cut it feeds the full report only, not the
 # first report, and is not part of `snakemake fe_study`.

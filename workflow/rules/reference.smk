@@ -1,4 +1,4 @@
-# The unloaded reference state of an imaged shape (fem.reference, studies.reference_roundtrip):
+# The unloaded reference state of an imaged shape (fem.reference, studies.reference_state.reference_roundtrip):
 # the round trip on the config's mesh, the estimate from a loaded shape beside the naive
 # prediction that takes the loaded shape as stress-free. `snakemake -j2 reference_roundtrip`
 # runs it alone; the report shows its table. With reference_state.imaged, the chain from the

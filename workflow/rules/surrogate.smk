@@ -306,7 +306,7 @@ rule off_grid:
 
 
 # Where the selected model warns that no FE solution backs a query, over the range it was
-# trained on (studies.warning_coverage): queries drawn evenly, their checks run without the
+# trained on (studies.surrogate_study.warning_coverage): queries drawn evenly, their checks run without the
 # network, the share warned by C1 band and by kind.
 rule warning_coverage:
     input:

@@ -55,7 +55,7 @@ if ADAPTIVE is not None:
             "../scripts/sweep_rounds.py"
 
 
-# Whether the sweep's error estimate finds where the surrogate errs (studies.sweep_estimate):
+# Whether the sweep's error estimate finds where the surrogate errs (studies.sweep.sweep_estimate):
 # at the random cases off the grid and at the held-out splits' test cases, the estimate beside
 # the true error of the model that did not train on them.
 SWEEP_ESTIMATE_SPLITS = [s for s in ("by_direction", "by_case") if s in CONFIG.held_out_splits]

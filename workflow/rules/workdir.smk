@@ -1,11 +1,11 @@
-# One run at a time in a working directory (studies.workdir), included first by the Snakefile:
+# One run at a time in a working directory (run.workdir), included first by the Snakefile:
 # before the config is read, so that a refused run stops before it has written anything.
 from pathlib import Path
 
 from snakemake.exceptions import WorkflowError
 from snakemake.logging import logger
 
-from studies.workdir import RunLock
+from run.workdir import RunLock
 
 # Every run takes the kernel lock, and the run that gets it clears the Snakemake locks a killed
 # run left (no --unlock needed). A dry run that finds it taken goes on (it writes nothing). Any
@@ -13,7 +13,7 @@ from studies.workdir import RunLock
 # directory: stopped later, inside Snakemake's own lock, its exit would remove the lock folder
 # wholesale, the running run's locks with it. Snakemake opened this run's log before reading
 # the Snakefile: it is closed and removed, for the running run takes the newest log for its own
-# (studies.run_log: the report's time by stage).
+# (run.run_log: the report's time by stage).
 RUN_LOCK = RunLock()
 
 

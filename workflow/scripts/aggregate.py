@@ -3,8 +3,8 @@
 from fem.aggregate import build_dataset
 from fem.exceptions import DatasetError
 from fem.splits import SplitFractions
-from studies.joblog import job_log
-from studies.workdir import mark_refused
+from run.joblog import job_log
+from run.workdir import mark_refused
 
 job_log(snakemake.log[0])
 

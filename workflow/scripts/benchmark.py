@@ -5,10 +5,14 @@ from pathlib import Path
 
 from fem.parameters import SolverSettings
 from fem.sweep import clinical_cases
-from studies.architecture import ArchitectureTable, VariantComparison
-from studies.joblog import job_log
-from studies.surrogate_benchmark import SurrogateBenchmark, format_benchmark, run_benchmark
-from studies.surrogate_evaluation import ClinicalEvaluation
+from run.joblog import job_log
+from studies.surrogate_study.architecture import ArchitectureTable, VariantComparison
+from studies.surrogate_study.surrogate_benchmark import (
+    SurrogateBenchmark,
+    format_benchmark,
+    run_benchmark,
+)
+from studies.surrogate_study.surrogate_evaluation import ClinicalEvaluation
 
 job_log(snakemake.log[0])
 

@@ -6,7 +6,7 @@ import yaml
 
 from meshes.config import MeshConfig, make_mesh
 from meshes.corpus import write_anatomy
-from studies.joblog import job_log
+from run.joblog import job_log
 
 job_log(snakemake.log[0])
 

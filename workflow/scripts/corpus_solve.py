@@ -6,9 +6,9 @@ import yaml
 
 from fem.parameters import SolverSettings
 from meshes.corpus import ANATOMIES
-from studies.corpus import corpus_cases, solve_anatomy
-from studies.joblog import job_log
-from studies.mesh_quality import MeshQuality
+from run.joblog import job_log
+from studies.fe_study.corpus import corpus_cases, solve_anatomy
+from studies.fe_study.mesh_quality import MeshQuality
 
 job_log(snakemake.log[0])
 

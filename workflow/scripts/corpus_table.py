@@ -1,7 +1,7 @@
 """Snakemake adapter: gather the corpus's runs into one table."""
 
-from studies.corpus import AnatomyRun, CorpusTable
-from studies.joblog import job_log
+from run.joblog import job_log
+from studies.fe_study.corpus import AnatomyRun, CorpusTable
 
 job_log(snakemake.log[0])
 

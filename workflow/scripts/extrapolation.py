@@ -5,8 +5,8 @@ from surrogate.runtime import configure_cpu
 configure_cpu()
 
 from fem.dataset import read_dataset  # noqa: E402
-from studies.joblog import job_log  # noqa: E402
-from studies.surrogate_evaluation import Extrapolation, evaluate_extrapolation  # noqa: E402
+from run.joblog import job_log  # noqa: E402
+from studies.surrogate_study.surrogate_evaluation import Extrapolation, evaluate_extrapolation  # noqa: E402
 from surrogate.predict import Surrogate  # noqa: E402
 
 job_log(snakemake.log[0])

@@ -6,9 +6,9 @@ Time, factorisation equivalents, the fixed-step baseline, accuracy against the r
 import logging
 
 from fem.parameters import SolverSettings
-from studies.fe_benchmark import clinical_benchmark
-from studies.fe_reference import load_references
-from studies.joblog import job_log
+from run.joblog import job_log
+from studies.fe_study.fe_benchmark import clinical_benchmark
+from studies.fe_study.fe_reference import load_references
 from studies.machine import limit_blas_threads
 
 job_log(snakemake.log[0])

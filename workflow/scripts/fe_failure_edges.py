@@ -2,8 +2,8 @@
 
 from fem.dataset import read_case_columns
 from fem.parameters import SolverSettings
-from studies.joblog import job_log
-from studies.sweep_edges import sweep_edges
+from run.joblog import job_log
+from studies.fe_study.sweep_edges import sweep_edges
 
 job_log(snakemake.log[0])
 

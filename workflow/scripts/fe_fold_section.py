@@ -3,8 +3,8 @@
 from fem.dataset import read_case_columns
 from fem.parameters import SolverSettings
 from fem.sweep import Case
-from studies.fold_section import choose_cases, fold_sections
-from studies.joblog import job_log
+from run.joblog import job_log
+from studies.fe_study.fold_section import choose_cases, fold_sections
 
 job_log(snakemake.log[0])
 

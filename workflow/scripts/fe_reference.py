@@ -4,9 +4,9 @@ import logging
 
 from fem.parameters import SolverSettings
 from fem.sweep import Case
-from studies.fe_reference import solve_reference
-from studies.fe_variants import MeshSpec, Variant
-from studies.joblog import job_log
+from run.joblog import job_log
+from studies.fe_study.fe_reference import solve_reference
+from studies.fe_study.fe_variants import MeshSpec, Variant
 from studies.machine import limit_blas_threads
 
 job_log(snakemake.log[0])

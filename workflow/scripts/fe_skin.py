@@ -2,9 +2,9 @@
 
 from fem.parameters import SolverSettings
 from fem.sweep import clinical_cases
-from studies.fe_study_config import SkinStudyConfig
-from studies.joblog import job_log
-from studies.skin import skin_study
+from run.joblog import job_log
+from studies.fe_study.config import SkinStudyConfig
+from studies.fe_study.skin import skin_study
 
 job_log(snakemake.log[0])
 

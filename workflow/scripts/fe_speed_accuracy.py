@@ -3,8 +3,8 @@
 Also the cheapest variant meeting the accuracy target.
 """
 
-from studies.fe_speed_accuracy import VariantRecord, summarise_variants
-from studies.joblog import job_log
+from run.joblog import job_log
+from studies.fe_study.fe_speed_accuracy import VariantRecord, summarise_variants
 
 job_log(snakemake.log[0])
 

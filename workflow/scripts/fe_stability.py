@@ -1,8 +1,8 @@
 """Snakemake adapter: stability maps over (C1, Phi) for adaptive and fixed-step loading."""
 
 from fem.parameters import SolverSettings
-from studies.joblog import job_log
-from studies.stability import loading_schemes, stability_map
+from run.joblog import job_log
+from studies.fe_study.stability import loading_schemes, stability_map
 
 job_log(snakemake.log[0])
 

@@ -2,8 +2,8 @@
 
 from fem.dataset import read_case_columns
 from fem.parameters import SolverSettings
-from studies.joblog import job_log
-from studies.stability_audit import StabilityAudit, audit_sweep, softest_c1
+from run.joblog import job_log
+from studies.fe_study.stability_audit import StabilityAudit, audit_sweep, softest_c1
 
 job_log(snakemake.log[0])
 

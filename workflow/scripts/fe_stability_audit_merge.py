@@ -1,7 +1,7 @@
-"""Snakemake adapter: the audit's parts joined into one record (studies.stability_audit)."""
+"""Snakemake adapter: the audit's parts joined into one record (fe_study.stability_audit)."""
 
-from studies.joblog import job_log
-from studies.stability_audit import StabilityAudit
+from run.joblog import job_log
+from studies.fe_study.stability_audit import StabilityAudit
 
 job_log(snakemake.log[0])
 

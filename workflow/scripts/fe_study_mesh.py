@@ -1,8 +1,8 @@
 """Snakemake adapter: build one mesh of the FE study (the workflow's geometry at other sizes)."""
 
 from meshes.config import MeshConfig, make_mesh
-from studies.fe_variants import MeshSpec
-from studies.joblog import job_log
+from run.joblog import job_log
+from studies.fe_study.fe_variants import MeshSpec
 
 job_log(snakemake.log[0])
 

@@ -3,10 +3,10 @@
 import logging
 
 from fem.parameters import SolverSettings
-from studies.fe_reference import load_references
-from studies.fe_speed_accuracy import run_variant
-from studies.fe_variants import Variant
-from studies.joblog import job_log
+from run.joblog import job_log
+from studies.fe_study.fe_reference import load_references
+from studies.fe_study.fe_speed_accuracy import run_variant
+from studies.fe_study.fe_variants import Variant
 from studies.machine import limit_blas_threads
 
 job_log(snakemake.log[0])

@@ -7,9 +7,9 @@ from surrogate.runtime import configure_cpu
 configure_cpu()
 
 from fem.dataset import read_dataset  # noqa: E402
-from studies.held_out import evaluate_held_out  # noqa: E402
-from studies.joblog import job_log  # noqa: E402
-from studies.stability_audit import without_unstable  # noqa: E402
+from run.joblog import job_log  # noqa: E402
+from studies.fe_study.stability_audit import without_unstable  # noqa: E402
+from studies.surrogate_study.held_out import evaluate_held_out  # noqa: E402
 from surrogate.predict import Surrogate  # noqa: E402
 
 job_log(snakemake.log[0])

@@ -1,7 +1,7 @@
 """Snakemake adapter: build (or import) the tagged breast mesh, its quality report and picture."""
 
 from meshes.config import MeshConfig, make_mesh
-from studies.joblog import job_log
+from run.joblog import job_log
 
 job_log(snakemake.log[0])
 

@@ -4,8 +4,8 @@ from surrogate.runtime import configure_cpu
 
 configure_cpu()
 
-from studies.joblog import job_log  # noqa: E402
-from studies.postures import evaluate_postures  # noqa: E402
+from run.joblog import job_log  # noqa: E402
+from studies.surrogate_study.postures import evaluate_postures  # noqa: E402
 from surrogate.predict import Surrogate  # noqa: E402
 
 job_log(snakemake.log[0])

@@ -1,8 +1,8 @@
 """Snakemake adapter: the reference state's round trips on the config's mesh."""
 
 from fem.parameters import SolverSettings
-from studies.joblog import job_log
-from studies.reference_roundtrip import round_trips
+from run.joblog import job_log
+from studies.reference_state.reference_roundtrip import round_trips
 
 job_log(snakemake.log[0])
 

@@ -1,8 +1,8 @@
 """Snakemake adapter: the reference state of the imaged mesh, the workflow's mesh from here on."""
 
 from fem.parameters import SolverSettings
-from studies.joblog import job_log
-from studies.reference_state import reference_of_imaged
+from run.joblog import job_log
+from studies.reference_state.reference_state import reference_of_imaged
 
 job_log(snakemake.log[0])
 

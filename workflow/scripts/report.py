@@ -1,8 +1,8 @@
 """Snakemake adapter: write the HTML report and its figures (report.build)."""
 
 from report.build import build_report
-from studies.joblog import job_log
-from studies.run_log import newest_log
+from run.joblog import job_log
+from run.run_log import newest_log
 
 job_log(snakemake.log[0])
 inputs = dict(snakemake.input.items())

@@ -16,9 +16,9 @@ from surrogate.runtime import configure_cpu
 configure_cpu(single_thread=snakemake.threads == 1)  # before JAX starts: one core per job
 
 from fem.dataset import read_dataset  # noqa: E402
-from studies.architecture import copy_model, refit_model  # noqa: E402
-from studies.joblog import job_log  # noqa: E402
-from studies.stability_audit import without_unstable  # noqa: E402
+from run.joblog import job_log  # noqa: E402
+from studies.fe_study.stability_audit import without_unstable  # noqa: E402
+from studies.surrogate_study.architecture import copy_model, refit_model  # noqa: E402
 
 job_log(snakemake.log[0])
 log = logging.getLogger("select_model")

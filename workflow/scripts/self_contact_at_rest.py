@@ -2,7 +2,7 @@
 
 from fem.parameters import SolverSettings
 from fem.self_contact_at_rest import rest_pairs_of_mesh
-from studies.joblog import job_log
+from run.joblog import job_log
 
 job_log(snakemake.log[0])
 

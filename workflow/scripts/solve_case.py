@@ -5,7 +5,7 @@ from pathlib import Path
 from fem.case import run_case
 from fem.parameters import SolverSettings
 from fem.sweep import Case
-from studies.joblog import job_log
+from run.joblog import job_log
 
 job_log(snakemake.log[0])
 

@@ -3,8 +3,8 @@
 from pathlib import Path
 
 from fem.parameters import SolverSettings
-from studies.joblog import job_log
-from studies.stiffness import estimate_file
+from run.joblog import job_log
+from studies.reference_state.stiffness import estimate_file
 
 job_log(snakemake.log[0])
 

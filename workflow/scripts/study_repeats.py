@@ -2,8 +2,8 @@
 
 import logging
 
-from studies.architecture import plan_repeats, read_run
-from studies.joblog import job_log
+from run.joblog import job_log
+from studies.surrogate_study.architecture import plan_repeats, read_run
 
 job_log(snakemake.log[0])
 log = logging.getLogger("study_repeats")

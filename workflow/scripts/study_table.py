@@ -2,14 +2,14 @@
 
 import logging
 
-from studies.architecture import (
+from run.joblog import job_log
+from studies.surrogate_study.architecture import (
     ArchitectureTable,
     architecture_table,
     read_run,
     select_architecture,
 )
-from studies.joblog import job_log
-from studies.timing import time_on_one_core
+from studies.surrogate_study.timing import time_on_one_core
 
 job_log(snakemake.log[0])
 log = logging.getLogger("study_table")

@@ -7,9 +7,9 @@ from surrogate.runtime import configure_cpu
 configure_cpu()
 
 from fem.dataset import read_dataset  # noqa: E402
-from studies.joblog import job_log  # noqa: E402
-from studies.off_grid import OffGridEvaluation  # noqa: E402
-from studies.sweep_estimate import check_estimate  # noqa: E402
+from run.joblog import job_log  # noqa: E402
+from studies.surrogate_study.off_grid import OffGridEvaluation  # noqa: E402
+from studies.sweep.sweep_estimate import check_estimate  # noqa: E402
 from surrogate.predict import Surrogate  # noqa: E402
 
 job_log(snakemake.log[0])

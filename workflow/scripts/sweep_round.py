@@ -1,7 +1,7 @@
 """Snakemake adapter: plan one round of the adaptive sweep (fem.adaptive)."""
 
 from fem.adaptive import AdaptiveDesign, read_cases
-from studies.joblog import job_log
+from run.joblog import job_log
 
 job_log(snakemake.log[0])
 

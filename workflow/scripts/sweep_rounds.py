@@ -1,8 +1,8 @@
-"""Snakemake adapter: every round of the adaptive sweep in one record (studies.sweep_rounds)."""
+"""Snakemake adapter: every round of the adaptive sweep in one record (sweep.sweep_rounds)."""
 
 from fem.adaptive import RoundPlan
-from studies.joblog import job_log
-from studies.sweep_rounds import SweepRounds
+from run.joblog import job_log
+from studies.sweep.sweep_rounds import SweepRounds
 
 job_log(snakemake.log[0])
 

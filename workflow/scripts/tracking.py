@@ -3,8 +3,8 @@
 from pathlib import Path
 
 from fem.parameters import SolverSettings
-from studies.joblog import job_log
-from studies.tracking import track_file
+from run.joblog import job_log
+from studies.reference_state.tracking import track_file
 
 job_log(snakemake.log[0])
 

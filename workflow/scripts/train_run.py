@@ -8,8 +8,8 @@ from surrogate.runtime import configure_cpu
 configure_cpu(single_thread=snakemake.threads == 1)  # before JAX starts: one core per job
 
 from fem.dataset import read_dataset  # noqa: E402
-from studies.joblog import job_log  # noqa: E402
-from studies.stability_audit import without_unstable  # noqa: E402
+from run.joblog import job_log  # noqa: E402
+from studies.fe_study.stability_audit import without_unstable  # noqa: E402
 from surrogate.checkpoint import save_model  # noqa: E402
 from surrogate.config import SurrogateConfig  # noqa: E402
 from surrogate.train import train_and_evaluate  # noqa: E402

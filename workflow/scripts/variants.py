@@ -2,8 +2,13 @@
 
 from pathlib import Path
 
-from studies.architecture import ArchitectureTable, VariantComparison, compare_variants, read_run
-from studies.joblog import job_log
+from run.joblog import job_log
+from studies.surrogate_study.architecture import (
+    ArchitectureTable,
+    VariantComparison,
+    compare_variants,
+    read_run,
+)
 
 job_log(snakemake.log[0])
 

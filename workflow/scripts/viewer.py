@@ -7,8 +7,8 @@ from surrogate.runtime import configure_cpu
 configure_cpu()
 
 from report.viewer import build_viewer  # noqa: E402
-from studies.joblog import job_log  # noqa: E402
-from studies.tracking import TrackingResult  # noqa: E402
+from run.joblog import job_log  # noqa: E402
+from studies.reference_state.tracking import TrackingResult  # noqa: E402
 
 job_log(snakemake.log[0])
 points = []  # each tracked set's points at their material (reference) positions

@@ -4,8 +4,8 @@ from surrogate.runtime import configure_cpu
 
 configure_cpu()
 
-from studies.joblog import job_log  # noqa: E402
-from studies.warning_coverage import warning_coverage  # noqa: E402
+from run.joblog import job_log  # noqa: E402
+from studies.surrogate_study.warning_coverage import warning_coverage  # noqa: E402
 from surrogate.predict import Surrogate  # noqa: E402
 
 job_log(snakemake.log[0])
