@@ -1,5 +1,5 @@
 # Breast biomechanics under gravity: mesh -> FE sweep -> HDF5 dataset -> surrogate -> report.
-# Wiring only: the stages live in workflow/rules, the config is parsed once by studies/config.py,
+# Wiring only: the stages live in workflow/rules, the config is parsed once by run/config.py,
 # the science is in meshes/, fem/, surrogate/ and studies/.
 from snakemake.exceptions import WorkflowError
 from snakemake.utils import min_version
@@ -14,7 +14,7 @@ include: "workflow/rules/workdir.smk"
 # config.yaml is the study; a --configfile replaces it rather than being merged into it, so that
 # a config such as tests/config.yaml stands alone. A syntax error is reported with its line.
 if not workflow.overwrite_configfiles:
-    from studies.config import ConfigError, read_config_file
+    from run.config import ConfigError, read_config_file
 
     try:
         read_config_file("config.yaml")
