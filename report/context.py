@@ -15,13 +15,13 @@ from fem.self_contact_at_rest import MeshRestPairs
 from report.common import case_id
 from report.html import figure
 from run.run_log import run_time
+from studies.fe_study.convergence_map import ConvergenceMap
 from studies.fe_study.corpus import CorpusTable
 from studies.fe_study.fe_benchmark import ClinicalBenchmark
 from studies.fe_study.fe_speed_accuracy import SpeedAccuracy
 from studies.fe_study.fold_section import FoldSections
 from studies.fe_study.mesh_quality import MeshQuality
 from studies.fe_study.skin import SkinStudy
-from studies.fe_study.stability import StabilityMap
 from studies.fe_study.stability_audit import StabilityAudit
 from studies.fe_study.sweep_edges import SweepEdges
 from studies.reference_state.reference_roundtrip import RoundTripTable
@@ -44,10 +44,11 @@ log = logging.getLogger(__name__)
 #: Input names :func:`build_report` reads (the report rule's named inputs).
 INPUT_NAMES = (
     "dataset", "quality", "rest_pairs", "mesh_png", "model", "history", "table2", "variants",
-    "clinical", "extrapolation", "benchmark", "clinical_fields", "fe_clinical", "fe_speed_accuracy",
-    "fe_stability", "corpus", "reference_roundtrip", "reference_record", "tracking", "stiffness",
-    "viewer", "held_out", "postures", "off_grid", "fe_failure_edges", "fe_stability_audit",
-    "fe_fold_section", "fe_skin", "warning_coverage", "run_log", "sweep_rounds", "sweep_estimate",
+    "clinical", "extrapolation", "benchmark", "clinical_fields", "fe_clinical",
+    "fe_speed_accuracy", "fe_convergence_map", "corpus", "reference_roundtrip", "reference_record",
+    "tracking", "stiffness", "viewer", "held_out", "postures", "off_grid", "fe_failure_edges",
+    "fe_stability_audit", "fe_fold_section", "fe_skin", "warning_coverage", "run_log",
+    "sweep_rounds", "sweep_estimate",
 )
 
 
@@ -65,7 +66,7 @@ RESULT_TYPES: dict[str, Callable[[Path], Any]] = {
     "benchmark": SurrogateBenchmark.read,
     "fe_clinical": ClinicalBenchmark.read,
     "fe_speed_accuracy": SpeedAccuracy.read,
-    "fe_stability": StabilityMap.read,
+    "fe_convergence_map": ConvergenceMap.read,
     "fe_failure_edges": SweepEdges.read,
     "fe_stability_audit": StabilityAudit.read,
     "fe_fold_section": FoldSections.read,

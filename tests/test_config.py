@@ -316,8 +316,8 @@ def test_every_schema_violation_is_listed_by_key() -> None:
          "fe.loading.min_step must lie in (0, initial_step]"),
         ({"fe_study": {"reference": {"mesh": {"global_size": 0.01, "mound_size": 0.02}}}},
          "fe_study.reference: need 0 < mound_size <= global_size"),
-        ({"fe_study": {"stability": {"mesh": {"global_size": 0.01, "mound_size": 0.02}}}},
-         "fe_study.stability.mesh: need 0 < mound_size <= global_size"),
+        ({"fe_study": {"convergence_map": {"mesh": {"global_size": 0.01, "mound_size": 0.02}}}},
+         "fe_study.convergence_map.mesh: need 0 < mound_size <= global_size"),
         # found at start, not in aggregation after every solve
         ({"dataset": {"split": {"train": 0.9, "validation": 0.9, "test": 0.1}}},
          "dataset.split: split fractions must add up to 1, got 1.9"),

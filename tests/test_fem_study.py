@@ -15,6 +15,7 @@ import pytest
 
 from fem.exceptions import InvalidParameterError
 from report.common import variant_label
+from studies.fe_study.convergence_map import lowest_converging, sweep_records
 from studies.fe_study.fe_speed_accuracy import (
     SpeedAccuracy,
     VariantRecord,
@@ -22,7 +23,6 @@ from studies.fe_study.fe_speed_accuracy import (
     summarise_variants,
 )
 from studies.fe_study.fe_variants import VARIANT_ID_PATTERN, MeshSpec, Variant, expand_variants
-from studies.fe_study.stability import lowest_converging, sweep_records
 
 pytestmark = pytest.mark.solve
 

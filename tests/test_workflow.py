@@ -392,7 +392,7 @@ def test_small_sweep_report(small_run: Path) -> None:
     fig5 = [img for img in images if img.startswith("fig5_")]
     assert len(fig5) == len(config["clinical"])
     assert {"fe_speed_accuracy.png", "surrogate_speed_accuracy.png", "c1_effect.png",
-            "stability_maps.png", "extrapolation.png", "sweep_cost.png",
+            "convergence_maps.png", "extrapolation.png", "sweep_cost.png",
             "training_history.png"} <= set(images)
     for img in images:
         assert img.endswith(".png") and "/" not in img, img
@@ -424,7 +424,7 @@ def test_small_sweep_report(small_run: Path) -> None:
         assert trip["method"] == "inverse" and trip["inverse_newton_iterations"] > 0
         assert (f"1 inverse ({trip['inverse_newton_iterations']} Newton its) + "
                 f"{trip['forward_solves']} forward") in roundtrip
-    stability = json.loads((results / "fe_study/stability.json").read_text())
+    convergence = json.loads((results / "fe_study/convergence_map.json").read_text())
     sweep_lowest = html_table(page, "sweep-lowest-converging")
     assert "sweep: lowest converging C1" in sweep_lowest
     with h5py.File(results / "dataset/dataset.h5") as h5:
@@ -446,7 +446,7 @@ def test_small_sweep_report(small_run: Path) -> None:
             f"{'case ends' if touching == 1 else 'cases end'} in contact") in page
     assert ("No case ends passing through itself" in page) == (not overlap.any())
     lowest = html_table(page, "lowest-converging")
-    for scheme, per_phi in stability["lowest_converging"].items():
+    for scheme, per_phi in convergence["lowest_converging"].items():
         assert f"{scheme}: lowest converging C1" in lowest
         if per_phi["all_phi"] is not None:
             assert f"<td>{per_phi['all_phi']:g}</td>" in lowest
@@ -637,16 +637,16 @@ def test_fe_study_rules_run_end_to_end(small_run: Path) -> None:
         by_solver["iterative"]["max_relative_error"], rel=1e-5
     )
 
-    stability = json.loads((study / "stability.json").read_text())
-    schemes = {r["scheme"] for r in stability["records"]}
+    convergence = json.loads((study / "convergence_map.json").read_text())
+    schemes = {r["scheme"] for r in convergence["records"]}
     assert schemes == {"adaptive", "fixed-4"}
-    assert stability["schemes"]["adaptive"]["rescue"] and not stability["schemes"]["fixed-4"][
+    assert convergence["schemes"]["adaptive"]["rescue"] and not convergence["schemes"]["fixed-4"][
         "rescue"]
-    assert stability["schemes"]["adaptive"]["rescue_min_step"] == 1 / 16
+    assert convergence["schemes"]["adaptive"]["rescue_min_step"] == 1 / 16
     page = (small_run / "results" / "report" / "index.html").read_text()
     assert "down to 0.0156, then a last resort from rest down to 0.0625" in page
-    assert len(stability["records"]) == 2 * 2 * 2
-    assert stability["lowest_converging"]["adaptive"]["all_phi"] is not None
+    assert len(convergence["records"]) == 2 * 2 * 2
+    assert convergence["lowest_converging"]["adaptive"]["all_phi"] is not None
     # the sweep's failures traced (the small sweep's stiff cases converge: none to trace)
     from fem.dataset import read_case_columns
 
@@ -725,5 +725,5 @@ def test_the_default_discretisation_does_not_rerun_the_study_variants(
     assert run.returncode == 0, run.stderr[-3000:]
     counts = job_counts(run.stdout + run.stderr)
     assert counts["solve_chain"] == len(config["sweep"]["phi_deg"])
-    assert counts["fe_clinical"] == counts["fe_stability"] == 1
+    assert counts["fe_clinical"] == counts["fe_convergence_map"] == 1
     assert "fe_variant" not in counts and "fe_reference" not in counts

@@ -18,7 +18,7 @@ from studies.figures import fe as fem_plots
 
 
 def _scheme(s: Mapping[str, Any]) -> str:
-    """One loading scheme of the stability map, in words."""
+    """One loading scheme of the convergence map, in words."""
     if s.get("fixed_steps"):
         return f"{s.get('fixed_steps')} equal load steps"
     text = (f"adaptive steps from {s.get('initial_step', 'n/a')} of the load, "
@@ -29,11 +29,15 @@ def _scheme(s: Mapping[str, Any]) -> str:
 
 
 def stability_section(ctx: Context) -> str:
-    """The stability section: the study's grid, the sweep's own failures, extrapolation."""
+    """The stability section: where the FE solve fails, and whether its states are stable.
+
+    The convergence map of the study's grid and of the sweep, where the sweep's failures begin,
+    the fold, and the audit of the sweep's converged states.
+    """
     out = []
-    stab = ctx.results.get("fe_stability")
+    stab = ctx.results.get("fe_convergence_map")
     if stab is None:
-        out.append(missing("results/fe_study/stability.json"))
+        out.append(missing("results/fe_study/convergence_map.json"))
     else:
         records = stab.records
         described = "; ".join(f"{name}: {_scheme(s)}" for name, s in stab.schemes.items())
@@ -49,10 +53,10 @@ def stability_section(ctx: Context) -> str:
             f"{fmt(stab.dofs, 'd')} DOFs.", "caption"))
         if records:
             out.append(ctx.figure(
-                "stability_maps.png",
-                lambda p: fem_plots.plot_stability_maps([r.to_json() for r in records], p,
+                "convergence_maps.png",
+                lambda p: fem_plots.plot_convergence_maps([r.to_json() for r in records], p,
                                                         PAPER_C1_RANGE[0]),
-                "stability maps over C1 and gravity angle",
+                "convergence maps over C1 and gravity angle",
                 "Load steps, Newton iterations and rejected steps over (Φ, C1) per scheme."))
         lowest = stab.lowest_converging
         if lowest:
@@ -70,9 +74,10 @@ def stability_section(ctx: Context) -> str:
                   ", ".join(f"{k} {v}" for k, v in r.failure_kinds.items()) or "n/a",
                   r.reason] for r in failed], table_id="failed-cases"))
         else:
-            out.append(para("Every case of the stability grid converged under every scheme."))
+            out.append(para("Every case of the convergence map's grid converged under every "
+                            "scheme."))
     out.append(h3("The sweep on its own mesh"))
-    out.append(_sweep_stability(ctx))
+    out.append(_sweep_convergence(ctx))
     out.append(h3("Where the sweep's failures begin"))
     out.append(failure_edges_section(ctx.results.get("fe_failure_edges")))
     out.append(h3("The fold with and without self-contact"))
@@ -108,9 +113,9 @@ def lowest_converging_table(lowest: Mapping[str, Any], table_id: str) -> str:
     return table(header, rows, highlight=[len(rows) - 1], table_id=table_id)
 
 
-def _sweep_stability(ctx: Context) -> str:
+def _sweep_convergence(ctx: Context) -> str:
     """The sweep's convergence over (C1, Φ), on the mesh the dataset was solved on."""
-    from studies.fe_study.stability import lowest_converging, sweep_records
+    from studies.fe_study.convergence_map import lowest_converging, sweep_records
 
     columns = ctx.case_columns()
     if not columns:
@@ -126,7 +131,7 @@ def _sweep_stability(ctx: Context) -> str:
         return para("The sweep has no case at θ = 0, so there is no (C1, Φ) map of it.", "note")
     failed = ~cases["converged"].astype(bool)
     out = [para(
-        f"The sweep itself is a stability map at the paper's resolution, solved on the mesh "
+        f"The sweep itself is a convergence map at the paper's resolution, solved on the mesh "
         f"of the dataset: {int(failed.sum())} of {len(failed)} cases did not reach the full "
         "load. Per Φ: the lowest C1 from which every stiffer C1 of the sweep converged, and "
         "what failed first at the next C1 below it (\"—\": every C1 solved at that Φ "

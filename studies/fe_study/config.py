@@ -140,7 +140,7 @@ class FEStudyConfig:
         variants: the speed-accuracy variants, sorted, each once.
         target: the accuracy target of the speed-accuracy study (relative error).
         max_dofs: variants with more unknowns are skipped, not solved.
-        stability_mesh: the mesh sizes of the stability maps.
+        convergence_map_mesh: the mesh sizes of the convergence maps.
         failure_edges: how the sweep's failed cases are traced.
         stability_audit: which of the sweep's converged cases are judged for stability.
         fold_section: which cases are cut at the fold with and without self-contact.
@@ -155,7 +155,7 @@ class FEStudyConfig:
     variants: tuple[Variant, ...]
     target: float
     max_dofs: int
-    stability_mesh: MeshSpec
+    convergence_map_mesh: MeshSpec
     failure_edges: FailureEdgesConfig
     stability_audit: StabilityAuditConfig
     fold_section: FoldSectionConfig
@@ -173,8 +173,8 @@ class FEStudyConfig:
                                 ref["quadrature_degree"])
         with config_section("fe_study.speed_accuracy.variants"):
             variants = tuple(expand_variants(study["speed_accuracy"]["variants"]))
-        with config_section("fe_study.stability.mesh"):
-            stability_mesh = MeshSpec.from_mapping(study["stability"]["mesh"])
+        with config_section("fe_study.convergence_map.mesh"):
+            convergence_map_mesh = MeshSpec.from_mapping(study["convergence_map"]["mesh"])
         with config_section("fe_study.failure_edges"):
             edges = study["failure_edges"]
             failure_edges = FailureEdgesConfig(edges["n"], edges["step_deg"],
@@ -190,5 +190,5 @@ class FEStudyConfig:
             default = default_variant(sections["mesh"], sections["fe"])
         speed_accuracy = study["speed_accuracy"]
         return cls(reference, variants, speed_accuracy["target"], speed_accuracy["max_dofs"],
-                   stability_mesh, failure_edges, audit, fold, skin, default,
+                   convergence_map_mesh, failure_edges, audit, fold, skin, default,
                    Variant.base_config(sections))

@@ -1,4 +1,4 @@
-"""Figures about the FE model: the sweep, speed against accuracy, stability, C1's effect.
+"""Figures about the FE model: the sweep, speed against accuracy, convergence maps, C1's effect.
 
 Every function takes plain numbers (arrays, lists of mappings) and writes one PNG with
 matplotlib's Agg backend; which numbers go in is decided by the caller
@@ -218,7 +218,7 @@ def _failure_kind(record: Mapping[str, Any]) -> str:
     return str(kind)
 
 
-def plot_stability_maps(
+def plot_convergence_maps(
     records: Sequence[Mapping[str, Any]],
     path: str | Path,
     paper_C1_min: float | None = None,
@@ -229,8 +229,8 @@ def plot_stability_maps(
     is outlined and marked with a cross whose colour names its first failure.
 
     Args:
-        records: :func:`studies.fe_study.stability.stability_map`'s records (``scheme``, ``C1``,
-            ``phi``, ``converged``, ``load_steps``, ``newton_iterations``,
+        records: :func:`studies.fe_study.convergence_map.convergence_map`'s records
+            (``scheme``, ``C1``, ``phi``, ``converged``, ``load_steps``, ``newton_iterations``,
             ``rejected_steps``, ``first_failure``, ``failure_kinds``).
         path: PNG to write.
         paper_C1_min: the lower end of the paper's C1 range, marked by a line.
@@ -446,5 +446,5 @@ def plot_fold_section(cases: Sequence[Mapping[str, Any]], path: str | Path,
 
 __all__ = [
     "direction_axis", "plot_c1_effect", "plot_fold_section", "plot_speed_accuracy",
-    "plot_stability_maps", "plot_sweep_map",
+    "plot_convergence_maps", "plot_sweep_map",
 ]

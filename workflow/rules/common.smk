@@ -128,12 +128,12 @@ def all_cores():
 FE_STUDY_DIR = "results/fe_study"
 FE_CLINICAL_JSON = f"{FE_STUDY_DIR}/clinical.json"
 FE_SPEED_ACCURACY_JSON = f"{FE_STUDY_DIR}/speed_accuracy.json"
-FE_STABILITY_JSON = f"{FE_STUDY_DIR}/stability.json"
+FE_CONVERGENCE_MAP_JSON = f"{FE_STUDY_DIR}/convergence_map.json"
 FE_FAILURE_EDGES_JSON = f"{FE_STUDY_DIR}/failure_edges.json"
 FE_STABILITY_AUDIT_JSON = f"{FE_STUDY_DIR}/stability_audit.json"
 FE_FOLD_SECTION_JSON = f"{FE_STUDY_DIR}/fold_section.json"
 FE_SKIN_JSON = f"{FE_STUDY_DIR}/skin.json"
-FE_STUDY_RESULTS = [FE_CLINICAL_JSON, FE_SPEED_ACCURACY_JSON, FE_STABILITY_JSON]
+FE_STUDY_RESULTS = [FE_CLINICAL_JSON, FE_SPEED_ACCURACY_JSON, FE_CONVERGENCE_MAP_JSON]
 CORPUS_DIR = "results/corpus"
 CORPUS_JSON = f"{CORPUS_DIR}/corpus.json"
 CORPUS_ANATOMIES = CONFIG.section("corpus", "anatomies")

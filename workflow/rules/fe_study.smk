@@ -1,8 +1,8 @@
 # FE study: the clinical benchmark (time, factorisation equivalents, a fixed-step baseline,
 # accuracy against a refined reference), speed against accuracy over mesh sizes x elements x
-# solver presets, and stability maps over (C1, Phi) for adaptive and fixed-step loading.
+# solver presets, and convergence maps over (C1, Phi) for adaptive and fixed-step loading.
 # Benchmarks, not tests: `snakemake -j2 fe_study` runs them alone; the report needs them. The
-# library code is in studies/ (fe_benchmark, fe_speed_accuracy, stability); JSON results land
+# library code is in studies/ (fe_benchmark, fe_speed_accuracy, convergence_map); JSON results land
 # in results/fe_study/.
 wildcard_constraints:
     fe_mesh=MESH_ID_PATTERN,
@@ -121,23 +121,23 @@ rule fe_speed_accuracy:
         "../scripts/fe_speed_accuracy.py"
 
 
-rule fe_stability:
+rule fe_convergence_map:
     input:
-        mesh=fe_study_mesh(CONFIG.fe_study.stability_mesh),
+        mesh=fe_study_mesh(CONFIG.fe_study.convergence_map_mesh),
     output:
-        FE_STABILITY_JSON,
+        FE_CONVERGENCE_MAP_JSON,
     params:
         config=CONFIG.sections_of("fe", "material", "mesh"),
-        stability=CONFIG.section("fe_study", "stability"),
+        convergence_map=CONFIG.section("fe_study", "convergence_map"),
     log:
-        "results/logs/fe_study/stability.log",
+        "results/logs/fe_study/convergence_map.log",
     threads: 1
     resources:
         mem_mb=4000,
     conda:
         ENV
     script:
-        "../scripts/fe_stability.py"
+        "../scripts/fe_convergence_map.py"
 
 
 # The sweep's failed cases traced from their nearest converged direction (studies.fe_study.failure_edge):

@@ -33,7 +33,7 @@ rule report:
         clinical_fields=clinical_fields(),
         fe_clinical=FE_CLINICAL_JSON,
         fe_speed_accuracy=FE_SPEED_ACCURACY_JSON,
-        fe_stability=FE_STABILITY_JSON,
+        fe_convergence_map=FE_CONVERGENCE_MAP_JSON,
         fe_failure_edges=FE_FAILURE_EDGES_JSON,
         fe_stability_audit=FE_STABILITY_AUDIT_JSON,
         fe_fold_section=FE_FOLD_SECTION_JSON,

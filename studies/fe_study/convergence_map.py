@@ -30,8 +30,8 @@ log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True, slots=True)
-class StabilityRecord(Record):
-    """One solve of the stability grid (or one case of the sweep, ``scheme`` "sweep")."""
+class ConvergenceRecord(Record):
+    """One solve of the convergence map's grid (or one case of the sweep, ``scheme`` "sweep")."""
 
     scheme: str
     C1: float
@@ -53,12 +53,11 @@ class StabilityRecord(Record):
 
 
 @dataclass(frozen=True, slots=True)
-class StabilityMap(Result):
-    """``results/fe_study/stability.json``: every (scheme, C1, Φ) solved once from rest.
+class ConvergenceMap(Result):
+    """``results/fe_study/convergence_map.json``: every (scheme, C1, Φ) solved once from rest.
 
-    ``lowest_converging`` is :func:`studies.fe_study.stability.lowest_converging` of the records:
-    per scheme, per Φ (keys "%.1f") the lowest converging C1 and the first failure below
-    it, and ``all_phi``.
+    ``lowest_converging`` is :func:`lowest_converging` of the records: per scheme, per Φ (keys
+    "%.1f") the lowest converging C1 and the first failure below it, and ``all_phi``.
     """
 
     mesh: str
@@ -67,7 +66,7 @@ class StabilityMap(Result):
     schemes: dict[str, dict[str, Any]]
     C1_kPa: list[float]
     phi_deg: list[float]
-    records: list[StabilityRecord]
+    records: list[ConvergenceRecord]
     lowest_converging: dict[str, dict[str, Any]]
 
 
@@ -79,13 +78,13 @@ def loading_schemes(adaptive: Loading, fixed_steps: list[int]) -> dict[str, Load
     return schemes
 
 
-def stability_map(
+def convergence_map(
     mesh_path: str | Path,
     settings: SolverSettings,
     C1_kPa: list[float],
     phi_deg: list[float],
     schemes: dict[str, Loading],
-) -> StabilityMap:
+) -> ConvergenceMap:
     """Solve every (scheme, C1, Φ) once from rest and record how it went."""
     from fem.case import CaseRunner
 
@@ -146,13 +145,13 @@ def stability_map(
         "lowest_converging": lowest_converging(records),
     }
     runner.solver.destroy()
-    return StabilityMap.from_json(out)
+    return ConvergenceMap.from_json(out)
 
 
 def sweep_records(cases: Mapping[str, Sequence[Any]]) -> list[dict[str, Any]]:
     """The θ = 0 cases of a sweep as records of :func:`lowest_converging` (scheme ``"sweep"``).
 
-    The sweep is a stability map at the paper's own resolution, on the mesh the
+    The sweep is a convergence map at the paper's own resolution, on the mesh the
     dataset was solved on, which the FE study's coarse grid is not.
 
     Args:
@@ -218,4 +217,4 @@ def lowest_converging(records: list[dict[str, Any]]) -> dict[str, dict[str, Any]
     return out
 
 
-__all__ = ["loading_schemes", "lowest_converging", "stability_map", "sweep_records"]
+__all__ = ["loading_schemes", "lowest_converging", "convergence_map", "sweep_records"]

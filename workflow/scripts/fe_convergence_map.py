@@ -1,14 +1,14 @@
-"""Snakemake adapter: stability maps over (C1, Phi) for adaptive and fixed-step loading."""
+"""Snakemake adapter: convergence maps over (C1, Phi) for adaptive and fixed-step loading."""
 
 from fem.parameters import SolverSettings
 from run.joblog import job_log
-from studies.fe_study.stability import loading_schemes, stability_map
+from studies.fe_study.convergence_map import convergence_map, loading_schemes
 
 job_log(snakemake.log[0])
 
-study = snakemake.params.stability
+study = snakemake.params.convergence_map
 settings = SolverSettings.from_config(snakemake.params.config)
-result = stability_map(
+result = convergence_map(
     snakemake.input.mesh,
     settings,
     study["C1_kPa"],
