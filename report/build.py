@@ -55,7 +55,7 @@ FIRST_SECTIONS = ("mesh", "surrogate-speed-accuracy", "paper", "sweep-design", "
                   "run-time", "training")
 FIRST_NOTE = (
     "This is the run's first report, written as soon as the dataset, the selected model and "
-    "the 3D view exist. The studies that take longest (the FE study, the variants, held-out "
+    "the 3D view exist. The studies that take longest (the FE study, the ablations, held-out "
     "models and postures, stability, the corpus of anatomies, the reference state) follow; "
     "the full report, {full}, has every section when the run ends."
 )

@@ -28,7 +28,7 @@ from studies.reference_state.reference_roundtrip import RoundTripTable
 from studies.reference_state.reference_state import ReferenceRecord
 from studies.reference_state.stiffness import StiffnessResult
 from studies.reference_state.tracking import TrackingResult
-from studies.surrogate_study.architecture import ArchitectureTable, VariantComparison
+from studies.surrogate_study.architecture import AblationComparison, ArchitectureTable
 from studies.surrogate_study.held_out import HeldOutEvaluation
 from studies.surrogate_study.off_grid import OffGridEvaluation
 from studies.surrogate_study.postures import PostureEvaluation
@@ -43,7 +43,7 @@ log = logging.getLogger(__name__)
 
 #: Input names :func:`build_report` reads (the report rule's named inputs).
 INPUT_NAMES = (
-    "dataset", "quality", "rest_pairs", "mesh_png", "model", "history", "table2", "variants",
+    "dataset", "quality", "rest_pairs", "mesh_png", "model", "history", "table2", "ablations",
     "clinical", "extrapolation", "benchmark", "clinical_fields", "fe_clinical",
     "fe_speed_accuracy", "fe_convergence_map", "corpus", "reference_roundtrip", "reference_record",
     "tracking", "stiffness", "viewer", "held_out", "postures", "off_grid", "fe_failure_edges",
@@ -60,7 +60,7 @@ RESULT_TYPES: dict[str, Callable[[Path], Any]] = {
     "model": lambda path: read_model_card(path.parent),
     "history": lambda path: read_history(path.parent),
     "table2": ArchitectureTable.read,
-    "variants": VariantComparison.read,
+    "ablations": AblationComparison.read,
     "clinical": ClinicalEvaluation.read,
     "extrapolation": Extrapolation.read,
     "benchmark": SurrogateBenchmark.read,

@@ -40,7 +40,7 @@ STAGES: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("sweep", ("solve", "solve_chain", "sweep_round", "sweep_rounds")),
     ("dataset", ("aggregate",)),
     ("surrogate", ("train_study_run", "study_repeats", "architecture_study", "select_model")),
-    ("surrogate studies", ("train_variant_run", "variants", "train_held_out", "held_out",
+    ("surrogate studies", ("train_ablation_run", "ablations", "train_held_out", "held_out",
                            "clinical", "extrapolation", "postures", "off_grid",
                            "warning_coverage", "surrogate_benchmark", "solve_outside",
                            "sweep_estimate")),

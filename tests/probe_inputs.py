@@ -171,9 +171,9 @@ CONFIG_PROBES: dict[str, Callable[[Path], Outcome]] = {
         config_with(sweep__sphere={"n": 100000}, sweep__C1_kPa=[1.0, 2.0, 3.0]),
         r"more than 50000",
     ),
-    "a variant's bad value under its own key": config_probe(
-        config_with(surrogate_study__variants={"x": {"activation": "sigmoidish"}}),
-        r"surrogate_study\.variants\.x\.activation",
+    "an ablation's bad value under its own key": config_probe(
+        config_with(surrogate_study__ablations={"x": {"activation": "sigmoidish"}}),
+        r"surrogate_study\.ablations\.x\.activation",
     ),
     "density zero": config_probe(config_with(material__density=0.0), r"material\.density"),
     "network width zero": config_probe(config_with(surrogate__width=0), r"surrogate\.width"),

@@ -28,7 +28,7 @@ from meshes.schema import SCHEMA_PATH, load_schema
 from meshes.sizing import MeshSize
 from run.config import ConfigError, WorkflowConfig, canonical, read_config_file, validated
 from studies.fe_study.fe_variants import ELEMENTS as STUDY_ELEMENTS
-from studies.fe_study.fe_variants import MeshSpec, Variant
+from studies.fe_study.fe_variants import FEVariant, MeshSpec
 from studies.surrogate_study.config import SurrogateStudyConfig
 from surrogate.config import SurrogateConfig, SurrogateConfigError
 from tests.conftest import REPO
@@ -62,7 +62,7 @@ def test_the_default_config_parses_into_every_layer() -> None:
     assert config.surrogate.activation == "silu"  # the file's, not the dataclass default
     study = config.surrogate_study
     assert study.architectures[0] == "2x32" and len(study.architectures) == 9
-    assert {v.name for v in study.variants} == {"paper_protocol", "vector_output", "separable",
+    assert {v.name for v in study.ablations} == {"paper_protocol", "vector_output", "separable",
                                                 "pointwise"}
     # three extrapolation blocks: 6 x 2 + 2 x 6 + 2 x 1 cases, none of them in the start design
     assert len(study.extrapolation) == 26 and not set(study.extrapolation) & set(config.cases)
@@ -74,7 +74,7 @@ def test_the_default_config_parses_into_every_layer() -> None:
 def test_the_default_variant_is_the_workflows_own_discretisation() -> None:
     config = WorkflowConfig.from_mapping(read("tests/config.yaml"))
     default = config.fe_study.default_variant
-    assert default == Variant(MeshSpec(0.03, 0.02, 1, None), "p2p1", "direct", 0)
+    assert default == FEVariant(MeshSpec(0.03, 0.02, 1, None), "p2p1", "direct", 0)
     raw = read("tests/config.yaml")
     raw["fe"]["discretisation"] = {"element": "p1-penalty", "quadrature_degree": 3}
     raw["fe"]["solver"] = "iterative"
@@ -181,10 +181,10 @@ def test_the_mesh_commands_name_a_config_file_without_a_mesh_section(
     assert err == [f"error: {config}: the config file has no mesh section"] * 2, err
 
 
-def test_variants_override_the_surrogate_settings() -> None:
+def test_ablations_override_the_surrogate_settings() -> None:
     raw = read("config.yaml")
     config = WorkflowConfig.from_mapping(raw)
-    protocol = config.surrogate_study.variant("paper_protocol")
+    protocol = config.surrogate_study.ablation("paper_protocol")
     assert protocol.overrides["activation"] == "tanh" and protocol.settings.activation == "tanh"
     assert protocol.settings.max_epochs == 200 and protocol.settings.width == config.surrogate.width
     paper_optimiser = dict(learning_rate=0.01, beta1=0.5, beta2=0.9)
@@ -195,10 +195,10 @@ def test_variants_override_the_surrogate_settings() -> None:
                                      max_epochs=config.surrogate.max_epochs,
                                      patience=config.surrogate.patience) == config.surrogate
     assert protocol.settings.patience == 20  # the paper's early stopping, at its constant rate
-    vector = config.surrogate_study.variant("vector_output").settings
+    vector = config.surrogate_study.ablation("vector_output").settings
     assert vector == config.surrogate.replace(output_form="vector")
     for structure in ("separable", "pointwise"):
-        settings = config.surrogate_study.variant(structure).settings
+        settings = config.surrogate_study.ablation(structure).settings
         assert settings == config.surrogate.replace(structure=structure, max_epochs=100,
                                                     **paper_optimiser)
     assert config.held_out_splits == ("by_case", "by_direction", "by_c1")
@@ -211,7 +211,7 @@ def test_variants_override_the_surrogate_settings() -> None:
     with pytest.raises(KeyError, match="forms no 'by_c1' split"):
         small.surrogate_held_out("by_c1")
     with pytest.raises(KeyError, match="no 'nope'"):
-        config.surrogate_study.variant("nope")
+        config.surrogate_study.ablation("nope")
 
 
 def test_postures_come_from_the_sweep_where_it_has_them() -> None:
@@ -372,7 +372,7 @@ def test_an_imported_mesh_needs_an_explicit_obstacle() -> None:
 
 def test_an_architecture_listed_twice_is_refused() -> None:
     settings = SurrogateConfig()
-    study = {"architectures": ["2x32", "2X32"], "repeats": 1, "variants": {}, "extrapolation": [],
+    study = {"architectures": ["2x32", "2X32"], "repeats": 1, "ablations": {}, "extrapolation": [],
              "timing_repeats": 10, "prediction_budget_ms": None}
     with pytest.raises(ConfigError, match="surrogate_study.architectures lists one twice"):
         SurrogateStudyConfig.from_sections(study, settings, ())
@@ -380,11 +380,11 @@ def test_an_architecture_listed_twice_is_refused() -> None:
     assert SurrogateStudyConfig.from_sections(study, settings, ()).architectures == ("2x32", "3x16")
 
 
-def test_a_variant_with_a_bad_override_is_named() -> None:
-    study = {"architectures": ["2x32"], "repeats": 1, "variants": {"wide": {"alpha": -1.0}},
+def test_an_ablation_with_a_bad_override_is_named() -> None:
+    study = {"architectures": ["2x32"], "repeats": 1, "ablations": {"wide": {"alpha": -1.0}},
              "extrapolation": [], "timing_repeats": 10, "prediction_budget_ms": None}
-    # named by the variant's own key, not the surrogate section's
-    with pytest.raises(ConfigError, match=r"^surrogate_study\.variants\.wide\.alpha must be >= 0"):
+    # named by the ablation's own key, not the surrogate section's
+    with pytest.raises(ConfigError, match=r"^surrogate_study\.ablations\.wide\.alpha must be >= 0"):
         SurrogateStudyConfig.from_sections(study, SurrogateConfig(), ())
 
 
@@ -550,9 +550,9 @@ ENUMS: list[tuple[str, Callable[[Any], Any], type[Exception]]] = [
     ("definitions/study_mesh/properties/order", lambda value: MeshSpec(0.02, 0.01, value),
      InvalidParameterError),
     ("definitions/study_element",
-     lambda value: Variant(MeshSpec(0.02, 0.01), element=value), InvalidParameterError),
+     lambda value: FEVariant(MeshSpec(0.02, 0.01), element=value), InvalidParameterError),
     ("definitions/study_solver",
-     lambda value: Variant(MeshSpec(0.02, 0.01), solver=value).settings(SolverSettings()),
+     lambda value: FEVariant(MeshSpec(0.02, 0.01), solver=value).settings(SolverSettings()),
      InvalidParameterError),
     ("properties/sweep/properties/phi_deg/oneOf/1/properties/sampling",
      lambda value: sample_phi({"sampling": value}), InvalidParameterError),

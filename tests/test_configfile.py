@@ -94,9 +94,9 @@ def test_a_config_nested_too_deeply_is_refused_by_name(tmp_path: Path) -> None:
 def test_aliases_within_bounds_are_read_as_written(tmp_path: Path) -> None:
     """An anchor used a few times (and one just under the limit) is an ordinary config."""
     path = tmp_path / "anchors.yaml"
-    path.write_text("base: &b {width: 8, depth: 2}\nsurrogate_study:\n  variants:\n"
+    path.write_text("base: &b {width: 8, depth: 2}\nsurrogate_study:\n  ablations:\n"
                     "    a: *b\n    b: *b\n")
-    assert read_config_file(path)["surrogate_study"]["variants"]["b"] == {"width": 8, "depth": 2}
+    assert read_config_file(path)["surrogate_study"]["ablations"]["b"] == {"width": 8, "depth": 2}
     from meshes.configfile import check_expansion
 
     check_expansion({"x": [[0] * 999] * 99}, "near the limit")  # 99 × 1000 + 3 values

@@ -17,33 +17,39 @@ from fem.exceptions import InvalidParameterError
 from report.common import variant_label
 from studies.fe_study.convergence_map import lowest_converging, sweep_records
 from studies.fe_study.fe_speed_accuracy import (
+    FEVariantRecord,
     SpeedAccuracy,
-    VariantRecord,
     pareto_front,
-    summarise_variants,
+    summarise_fe_variants,
 )
-from studies.fe_study.fe_variants import VARIANT_ID_PATTERN, MeshSpec, Variant, expand_variants
+from studies.fe_study.fe_variants import (
+    FE_VARIANT_ID_PATTERN,
+    FEVariant,
+    MeshSpec,
+    expand_fe_variants,
+)
 
 pytestmark = pytest.mark.solve
 
 
 def test_variant_ids_round_trip_and_expand() -> None:
-    v = Variant(MeshSpec(0.015, 0.01, 2), "p3p2", "iterative", 3)
+    v = FEVariant(MeshSpec(0.015, 0.01, 2), "p3p2", "iterative", 3)
     assert v.id == "g=0.0150_m=0.0100_o=2_el=p3p2_solver=iterative_q=3"
-    assert Variant.from_id(v.id) == v
-    variants = expand_variants(
+    assert FEVariant.from_id(v.id) == v
+    variants = expand_fe_variants(
         [{"element": "p2p1", "mesh": [{"global_size": 0.03, "mound_size": 0.02},
                                       {"global_size": 0.02, "mound_size": 0.01}],
           "solver": ["direct", "iterative"]},
          {"element": "p2p1", "mesh": [{"global_size": 0.03, "mound_size": 0.02}]}]
     )
     assert len(variants) == 4  # the second entry repeats one of the first's
-    graded = Variant(
+    graded = FEVariant(
         MeshSpec.from_mapping({"global_size": 0.015, "mound_size": 0.01, "fold_size": 0.004})
     )
     assert graded.id == "g=0.0150_m=0.0100_f=0.0040_o=1_el=p2p1_solver=direct_q=0"
-    assert Variant.from_id(graded.id) == graded
-    assert re.fullmatch(VARIANT_ID_PATTERN, graded.id) and re.fullmatch(VARIANT_ID_PATTERN, v.id)
+    assert FEVariant.from_id(graded.id) == graded
+    assert re.fullmatch(FE_VARIANT_ID_PATTERN, graded.id)
+    assert re.fullmatch(FE_VARIANT_ID_PATTERN, v.id)
     assert graded.mesh.size_mapping()["fold_size"] == 0.004
     assert MeshSpec(0.015, 0.01).size_mapping()["fold_size"] is None  # overrides the workflow's
     assert variant_label(graded.id) == "P2/P1, h 15/10/4 mm, direct"
@@ -58,7 +64,7 @@ def test_pareto_front_and_cheapest_meeting_target() -> None:
     errors = [0.10, 0.02, 0.005, 0.03, 0.005]
     assert pareto_front(costs, errors) == [True, True, True, False, False]
     records = [
-        VariantRecord(
+        FEVariantRecord(
             variant=f"v{i}",
             mesh={},
             element="p2p1",
@@ -81,7 +87,7 @@ def test_pareto_front_and_cheapest_meeting_target() -> None:
         median_cpu_s=None,
         max_relative_error=None,
     )
-    summary = summarise_variants([*records, skipped], target=0.01, default_variant="v1")
+    summary = summarise_fe_variants([*records, skipped], target=0.01, default_variant="v1")
     assert summary.cheapest_meeting_target == "v2"
     assert summary.pareto_front == ["v0", "v1", "v2"]
     assert [v.pareto for v in summary.variants] == [True, True, True, False, False, None]

@@ -129,7 +129,7 @@ def test_nothing_to_do_when_nothing_changed(small_run: Path) -> None:
 
 def test_surrogate_change_reruns_training_only(small_run: Path) -> None:
     planned = _planned(small_run, {"surrogate.width": 16})
-    trainings = {"train_study_run", "train_variant_run", "train_held_out", "select_model"}
+    trainings = {"train_study_run", "train_ablation_run", "train_held_out", "select_model"}
     assert trainings <= set(planned)
     assert {"mesh", "solve", "solve_chain", "aggregate"}.isdisjoint(planned)
 

@@ -1,4 +1,4 @@
-"""Surrogate speed against accuracy: the architectures beside the FE, and the training variants."""
+"""Surrogate speed against accuracy: the architectures beside the FE, and the ablations."""
 
 from __future__ import annotations
 
@@ -33,7 +33,7 @@ def fe_points_for_surrogate(ctx: Context) -> list[dict[str, Any]]:
 
 
 def surrogate_speed_accuracy_section(ctx: Context) -> str:
-    """The surrogate speed-accuracy section: architectures beside the FE, and the variants."""
+    """The surrogate speed-accuracy section: architectures beside the FE, and the ablations."""
     study = ctx.results.get("table2")
     if study is None:
         return missing("results/surrogate/study/table2.json")
@@ -68,13 +68,13 @@ def surrogate_speed_accuracy_section(ctx: Context) -> str:
         out.append(para("The architecture study holds no complete row.", "note"))
     out.append(para(f"Selected architecture: {selected} (rule: {study.rule}); the "
                     f"paper selected {study.paper_selected_architecture}."))
-    variants = ctx.results.get("variants")
-    out.append(h3("Variants of the training settings at the selected architecture"))
-    if variants is None:
-        out.append(missing("results/surrogate/variants.json"))
+    ablations = ctx.results.get("ablations")
+    out.append(h3("Ablations: the training settings changed at the selected architecture"))
+    if ablations is None:
+        out.append(missing("results/surrogate/ablations.json"))
         return "".join(out)
     out.append(para(
-        "Each variant changes the listed settings of the selected model and is trained with "
+        "Each ablation changes the listed settings of the selected model and is trained with "
         "the same seeds; a ratio below 1 means smaller error (or shorter training) than the "
         "baseline.", "caption"))
 
@@ -82,16 +82,16 @@ def surrogate_speed_accuracy_section(ctx: Context) -> str:
         item = getattr(v, key)
         return pm(item.mean, item.sd)
 
-    base = variants.baseline
+    base = ablations.baseline
     rows = [["baseline", "none", stats(base, "validation_error_mm"),
              stats(base, "train_s"), fmt(base.parameters, "d"), "1", "1"]]
-    for name, v in variants.variants.items():
+    for name, v in ablations.ablations.items():
         changed = (", ".join(f"{k} = {val}" for k, val in v.changed.items())
                    if v.changed is not None else f"boundary = {v.boundary or 'n/a'}")
         rows.append([name, changed or "none", stats(v, "validation_error_mm"),
                      stats(v, "train_s"), fmt(v.parameters, "d"),
                      fmt(v.error_ratio_to_baseline, ".3g"),
                      fmt(v.time_ratio_to_baseline, ".3g")])
-    out.append(table(["variant", "settings changed", "validation error (mm)",
+    out.append(table(["ablation", "settings changed", "validation error (mm)",
                        "training time (s)", "parameters", "error ratio", "time ratio"], rows))
     return "".join(out)

@@ -14,16 +14,16 @@ import numpy as np
 
 from meshes.config import size_for_source
 from studies.config_errors import config_section
-from studies.fe_study.fe_variants import MeshSpec, Variant, expand_variants
+from studies.fe_study.fe_variants import FEVariant, MeshSpec, expand_fe_variants
 
 
-def default_variant(mesh: Mapping[str, Any], fe: Mapping[str, Any]) -> Variant:
+def default_variant(mesh: Mapping[str, Any], fe: Mapping[str, Any]) -> FEVariant:
     """The FE-study variant that the workflow's own ``mesh`` and ``fe`` sections amount to."""
     disc = fe["discretisation"]
     degree = disc["degree"]
     element = "p1-penalty" if disc["element"] == "p1-penalty" else f"p{degree}p{degree - 1}"
     size = size_for_source(mesh.get("source", "parametric"), mesh["size"])
-    return Variant(MeshSpec.from_mapping(size), element, fe["solver"], disc["quadrature_degree"])
+    return FEVariant(MeshSpec.from_mapping(size), element, fe["solver"], disc["quadrature_degree"])
 
 
 @dataclass(frozen=True, slots=True)
@@ -151,8 +151,8 @@ class FEStudyConfig:
             each variant sets (so changing those re-solves no study case).
     """
 
-    reference: Variant
-    variants: tuple[Variant, ...]
+    reference: FEVariant
+    variants: tuple[FEVariant, ...]
     target: float
     max_dofs: int
     convergence_map_mesh: MeshSpec
@@ -160,7 +160,7 @@ class FEStudyConfig:
     stability_audit: StabilityAuditConfig
     fold_section: FoldSectionConfig
     skin: SkinStudyConfig
-    default_variant: Variant
+    default_variant: FEVariant
     base_config: dict[str, Any]
 
     @classmethod
@@ -169,10 +169,10 @@ class FEStudyConfig:
         study = sections["fe_study"]
         ref = study["reference"]
         with config_section("fe_study.reference"):
-            reference = Variant(MeshSpec.from_mapping(ref["mesh"]), ref["element"], ref["solver"],
+            reference = FEVariant(MeshSpec.from_mapping(ref["mesh"]), ref["element"], ref["solver"],
                                 ref["quadrature_degree"])
         with config_section("fe_study.speed_accuracy.variants"):
-            variants = tuple(expand_variants(study["speed_accuracy"]["variants"]))
+            variants = tuple(expand_fe_variants(study["speed_accuracy"]["variants"]))
         with config_section("fe_study.convergence_map.mesh"):
             convergence_map_mesh = MeshSpec.from_mapping(study["convergence_map"]["mesh"])
         with config_section("fe_study.failure_edges"):
@@ -191,4 +191,4 @@ class FEStudyConfig:
         speed_accuracy = study["speed_accuracy"]
         return cls(reference, variants, speed_accuracy["target"], speed_accuracy["max_dofs"],
                    convergence_map_mesh, failure_edges, audit, fold, skin, default,
-                   Variant.base_config(sections))
+                   FEVariant.base_config(sections))

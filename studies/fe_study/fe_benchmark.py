@@ -9,7 +9,7 @@ Everything here is measured, nothing is assumed:
   process (so their ratio is free of machine speed), and compares the displacement
   with the reference;
 * :func:`run_variant` does the same for one point of the speed-accuracy study (a mesh
-  size × element × solver preset); :func:`summarise_variants` marks the Pareto front
+  size × element × solver preset); :func:`summarise_fe_variants` marks the Pareto front
   and the cheapest variant meeting the accuracy target.
 
 Timings are wall-clock seconds of the nonlinear solve (set-up, i.e. mesh reading and

@@ -2,7 +2,7 @@
 
 :func:`run_variant` times one variant (a mesh size x element x solver preset) on the
 clinical cases on one pinned core and measures its error at its own material points
-against the reference; :func:`summarise_variants` marks the Pareto front (cost against
+against the reference; :func:`summarise_fe_variants` marks the Pareto front (cost against
 the worst relative error) and the cheapest variant meeting the accuracy target.
 """
 
@@ -19,7 +19,7 @@ from fem.parameters import SolverSettings
 from fem.sweep import Case
 from studies.fe_study.fe_benchmark import TARGETS, accuracy_at_vertices
 from studies.fe_study.fe_timing import TimedSolve, timed_solve
-from studies.fe_study.fe_variants import Variant
+from studies.fe_study.fe_variants import FEVariant
 from studies.machine import machine_state, timed_on_one_core
 from studies.results import Result
 
@@ -27,7 +27,7 @@ log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True, slots=True)
-class VariantRecord(Result):
+class FEVariantRecord(Result):
     """``results/fe_study/speed_accuracy/<variant>.json``: one variant on the clinical cases.
 
     A variant above the study's DOF limit is recorded with ``skipped`` and no cases.
@@ -66,7 +66,7 @@ class SpeedAccuracy(Result):
 
     target_relative_max_error: float
     cost: str
-    variants: list[VariantRecord]
+    variants: list[FEVariantRecord]
     pareto_front: list[str]
     cheapest_meeting_target: str | None
     default_variant: str | None = None
@@ -75,12 +75,12 @@ class SpeedAccuracy(Result):
 @timed_on_one_core
 def run_variant(
     mesh_path: str | Path,
-    variant: Variant,
+    variant: FEVariant,
     base: SolverSettings,
     cases: list[Case],
     references: dict[str, tuple[Any, dict[str, Any]]],
     max_dofs: int | None = None,
-) -> VariantRecord:
+) -> FEVariantRecord:
     """Time one study variant on the clinical cases and measure its error at its material points.
 
     The material points of a variant are its own mesh's vertices (as the dataset's are
@@ -107,7 +107,7 @@ def run_variant(
     if max_dofs is not None and dofs > max_dofs:
         record["skipped"] = f"{dofs} dofs exceed fe_study.speed_accuracy.max_dofs = {max_dofs}"
         runner.solver.destroy()
-        return VariantRecord.from_json(record)
+        return FEVariantRecord.from_json(record)
     rows = []
     for case in cases:
         row = timed_solve(runner, case)
@@ -135,7 +135,7 @@ def run_variant(
         default=None,
     )
     runner.solver.destroy()
-    return VariantRecord.from_json(record)
+    return FEVariantRecord.from_json(record)
 
 
 def pareto_front(costs: list[float], errors: list[float]) -> list[bool]:
@@ -154,8 +154,8 @@ def pareto_front(costs: list[float], errors: list[float]) -> list[bool]:
     return flags
 
 
-def summarise_variants(
-    records: list[VariantRecord],
+def summarise_fe_variants(
+    records: list[FEVariantRecord],
     target: float = TARGETS["relative_max_error"],
     cost: str = "median_cpu_s",
     default_variant: str | None = None,

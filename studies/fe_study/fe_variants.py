@@ -1,7 +1,7 @@
 """The FE study's variants: a mesh size x element x solver preset x quadrature degree.
 
-Each variant has a folder-name id (:attr:`Variant.id`) that the workflow uses as a
-wildcard and that parses back (:meth:`Variant.from_id`), so a variant's result file
+Each variant has a folder-name id (:attr:`FEVariant.id`) that the workflow uses as a
+wildcard and that parses back (:meth:`FEVariant.from_id`), so a variant's result file
 names its settings.
 """
 
@@ -79,11 +79,11 @@ class MeshSpec:
 
 
 MESH_ID_PATTERN = r"g=[0-9]+\.[0-9]{4}_m=[0-9]+\.[0-9]{4}(?:_f=[0-9]+\.[0-9]{4})?_o=[12]"
-VARIANT_ID_PATTERN = MESH_ID_PATTERN + r"_el=(p1-penalty|p2p1|p3p2)_solver=[a-z-]+_q=[0-9]+"
+FE_VARIANT_ID_PATTERN = MESH_ID_PATTERN + r"_el=(p1-penalty|p2p1|p3p2)_solver=[a-z-]+_q=[0-9]+"
 
 
 @dataclass(frozen=True, slots=True)
-class Variant:
+class FEVariant:
     """One point of the speed-accuracy study.
 
     Attributes:
@@ -110,7 +110,7 @@ class Variant:
         return f"{self.mesh.id}_el={self.element}_solver={self.solver}_q={self.quadrature_degree}"
 
     @classmethod
-    def from_id(cls, variant_id: str) -> Variant:
+    def from_id(cls, variant_id: str) -> FEVariant:
         """Parse :attr:`id`."""
         mesh_part, rest = variant_id.split("_el=")
         element, rest = rest.split("_solver=")
@@ -142,22 +142,22 @@ class Variant:
         return replace(base, discretisation=disc, solver=self.solver)
 
 
-def expand_variants(entries: list[dict[str, Any]]) -> list[Variant]:
+def expand_fe_variants(entries: list[dict[str, Any]]) -> list[FEVariant]:
     """Cross products of the config's ``fe_study.speed_accuracy.variants`` entries.
 
     Each entry has ``element`` (one name), ``mesh`` (list of ``{global_size,
     mound_size, order, fold_size}``), ``solver`` (list of presets, default ``[direct]``) and
     ``quadrature_degree`` (list, default ``[0]``).
     """
-    out: set[Variant] = set()
+    out: set[FEVariant] = set()
     for entry in entries:
         for mesh in entry["mesh"]:
             spec = MeshSpec.from_mapping(mesh)
             for solver in entry.get("solver", ["direct"]):
                 for q in entry.get("quadrature_degree", [0]):
-                    out.add(Variant(spec, entry["element"], solver, int(q)))
+                    out.add(FEVariant(spec, entry["element"], solver, int(q)))
 
-    def key(v: Variant) -> tuple:
+    def key(v: FEVariant) -> tuple:
         m = v.mesh
         return (m.global_size, m.mound_size, m.order, m.fold_size or 0.0, v.element, v.solver,
                 v.quadrature_degree)

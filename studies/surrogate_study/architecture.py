@@ -1,4 +1,4 @@
-"""The architecture study (the paper's Table 2), model selection and variant comparisons.
+"""The architecture study (the paper's Table 2), model selection and the ablations.
 
 Each training run is a model folder (see :mod:`surrogate.checkpoint`) whose
 ``model.json`` holds its metrics. This module only reads those folders: it groups
@@ -45,11 +45,11 @@ class MeanSD(Record):
 
 @dataclass(frozen=True, slots=True)
 class RunSummary(Record):
-    """A group of training runs (one architecture, or one variant of the settings).
+    """A group of training runs (one architecture, or one ablation of the settings).
 
     The architecture study adds the paper's row, the one-core prediction timing and whether
-    it is within the budget; the variant comparison adds the ratios to the baseline and what
-    the variant changes.
+    it is within the budget; the ablations add the ratios to the baseline and what each
+    changes.
     """
 
     runs: int
@@ -91,11 +91,11 @@ class ArchitectureTable(Result):
 
 
 @dataclass(frozen=True, slots=True)
-class VariantComparison(Result):
-    """``results/surrogate/variants.json``: variants of the settings against the baseline."""
+class AblationComparison(Result):
+    """``results/surrogate/ablations.json``: ablations of the settings against the baseline."""
 
     baseline: RunSummary
-    variants: dict[str, RunSummary]
+    ablations: dict[str, RunSummary]
     architecture: str | None = None
 
 
@@ -289,30 +289,30 @@ def _paper_row(arch: str) -> dict[str, Any] | None:
     return {k: {"mean": v[0], "sd": v[1]} for k, v in row.items()}
 
 
-def compare_variants(
-    baseline: Sequence[dict[str, Any]], variants: dict[str, Sequence[dict[str, Any]]]
+def compare_ablations(
+    baseline: Sequence[dict[str, Any]], ablations: dict[str, Sequence[dict[str, Any]]]
 ) -> dict[str, Any]:
-    """Variants of the settings at one architecture against the baseline runs (same seeds).
+    """Ablations of the settings at one architecture against the baseline runs (same seeds).
 
-    ``ratio`` is the variant's mean validation error over the baseline's (< 1: better).
+    ``ratio`` is the ablation's mean validation error over the baseline's (< 1: better).
     """
     base = summarise(baseline)
     base_config = baseline[0].get("config") or {}
-    out = {"baseline": base, "variants": {}}
-    for name, runs in variants.items():
+    out = {"baseline": base, "ablations": {}}
+    for name, runs in ablations.items():
         s = summarise(runs)
         s["error_ratio_to_baseline"] = (
             s["validation_error_mm"]["mean"] / base["validation_error_mm"]["mean"]
         )
         s["time_ratio_to_baseline"] = s["train_s"]["mean"] / base["train_s"]["mean"]
         s["boundary"] = runs[0]["boundary"]
-        # what the variant changes (the seed differs between repeats, not between variants)
+        # what the ablation changes (the seed differs between repeats, not between ablations)
         s["changed"] = {
             k: v
             for k, v in (runs[0].get("config") or {}).items()
             if k != "seed" and base_config.get(k) != v
         }
-        out["variants"][name] = s
+        out["ablations"][name] = s
     return out
 
 

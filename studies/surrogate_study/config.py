@@ -1,4 +1,4 @@
-"""The surrogate study's config (``surrogate_study``): architectures, variants, postures.
+"""The surrogate study's config (``surrogate_study``): architectures, ablations, postures.
 
 Parsed from the validated config by :meth:`SurrogateStudyConfig.from_sections`
 (:meth:`run.config.WorkflowConfig.from_mapping` calls it).
@@ -16,8 +16,8 @@ from surrogate.config import SurrogateConfig, SurrogateConfigError, parse_archit
 
 
 @dataclass(frozen=True, slots=True)
-class SurrogateVariant:
-    """A named variant of the surrogate settings (``surrogate_study.variants``).
+class Ablation:
+    """A named ablation (``surrogate_study.ablations``): the surrogate settings, some keys changed.
 
     Attributes:
         name: its name, a wildcard of the workflow.
@@ -100,12 +100,12 @@ class SurrogateStudyConfig:
 
     Attributes:
         architectures: the architectures trained, ``<layers>x<width>``, each once.
-        repeats: trainings per architecture and per variant.
+        repeats: trainings per architecture and per ablation.
         repeat_within: the architectures that train their repeats beyond the first: those
             whose first run's validation error is within this fraction of the best first
             run's (:func:`studies.surrogate_study.architecture.plan_repeats`); None, every
             architecture.
-        variants: the named variants, in the config's (sorted) order.
+        ablations: the named ablations, in the config's (sorted) order.
         extrapolation: the FE cases of its extrapolation blocks that the sweep lacks, sorted.
         timing_repeats: timed predictions per model.
         prediction_budget_ms: the selection's time budget (None: by accuracy alone).
@@ -118,7 +118,7 @@ class SurrogateStudyConfig:
 
     architectures: tuple[str, ...]
     repeats: int
-    variants: tuple[SurrogateVariant, ...]
+    ablations: tuple[Ablation, ...]
     extrapolation: tuple[Case, ...]
     timing_repeats: int
     prediction_budget_ms: float | None
@@ -136,15 +136,15 @@ class SurrogateStudyConfig:
             parsed = [parse_architecture(a) for a in study["architectures"]]
             if len(set(parsed)) != len(parsed):
                 raise ConfigError("surrogate_study.architectures lists one twice")
-        variants = []
-        for name, overrides in study["variants"].items():
-            with config_section(f"surrogate_study.variants.{name}"):
+        ablations = []
+        for name, overrides in study["ablations"].items():
+            with config_section(f"surrogate_study.ablations.{name}"):
                 try:
                     settings = SurrogateConfig.from_mapping({**surrogate.as_dict(), **overrides})
-                except SurrogateConfigError as err:  # named as the variant's key, not surrogate's
-                    text = str(err).replace("surrogate.", f"surrogate_study.variants.{name}.", 1)
+                except SurrogateConfigError as err:  # named as the ablation's key, not surrogate's
+                    text = str(err).replace("surrogate.", f"surrogate_study.ablations.{name}.", 1)
                     raise ConfigError(text) from None
-            variants.append(SurrogateVariant(name, dict(overrides), settings))
+            ablations.append(Ablation(name, dict(overrides), settings))
         extra: set[Case] = set()
         for i, block in enumerate(study["extrapolation"]):
             with config_section(f"surrogate_study.extrapolation.{i}"):
@@ -152,7 +152,7 @@ class SurrogateStudyConfig:
         return cls(
             architectures=tuple(f"{layers}x{width}" for layers, width in parsed),
             repeats=study["repeats"],
-            variants=tuple(variants),
+            ablations=tuple(ablations),
             extrapolation=tuple(sorted(extra - set(sweep))),
             timing_repeats=study["timing_repeats"],
             prediction_budget_ms=study["prediction_budget_ms"],
@@ -162,9 +162,9 @@ class SurrogateStudyConfig:
             repeat_within=study.get("repeat_within"),
         )
 
-    def variant(self, name: str) -> SurrogateVariant:
-        """The variant called ``name``."""
-        for variant in self.variants:
-            if variant.name == name:
-                return variant
-        raise KeyError(f"surrogate_study.variants has no {name!r}")
+    def ablation(self, name: str) -> Ablation:
+        """The ablation called ``name``."""
+        for ablation in self.ablations:
+            if ablation.name == name:
+                return ablation
+        raise KeyError(f"surrogate_study.ablations has no {name!r}")

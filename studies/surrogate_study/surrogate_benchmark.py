@@ -74,7 +74,7 @@ class SurrogateBenchmark(Result):
     train_3x32_s: dict[str, Any] | None
     goals: dict[str, Goal]
     paper: dict[str, Any]
-    variants: dict[str, Any] | None = None
+    ablations: dict[str, Any] | None = None
 
 
 def fe_timings(mesh: str | Path, cases: Sequence[Any], settings: Any) -> dict[str, dict[str, Any]]:

@@ -9,7 +9,7 @@ from fem.adaptive import RoundPlan
 from fem.sweep import ANGLE_PATTERN, C1_PATTERN
 from run.config import ConfigError, WorkflowConfig
 from run.workdir import age_refused
-from studies.fe_study.fe_variants import MESH_ID_PATTERN, VARIANT_ID_PATTERN, Variant
+from studies.fe_study.fe_variants import MESH_ID_PATTERN, FE_VARIANT_ID_PATTERN, FEVariant
 from studies.surrogate_study.architecture import RepeatPlan
 
 # Every job's software under --use-conda (the env file says how it relates to `make setup`).
@@ -172,7 +172,7 @@ def fe_references(wildcards=None):
 
 def fe_variant_mesh(wildcards):
     """The study mesh of the variant in ``wildcards``."""
-    return fe_study_mesh(Variant.from_id(wildcards.fe_variant).mesh)
+    return fe_study_mesh(FEVariant.from_id(wildcards.fe_variant).mesh)
 
 
 # -- surrogate study (surrogate.smk) --------------------------------------------------------
@@ -180,12 +180,12 @@ SURROGATE_DIR = "results/surrogate"
 STUDY_DIR = f"{SURROGATE_DIR}/study"
 STUDY_TABLE = f"{STUDY_DIR}/table2.json"
 STUDY_REPEATS = f"{STUDY_DIR}/repeats.json"
-VARIANT_DIR = f"{SURROGATE_DIR}/variants"
+ABLATION_DIR = f"{SURROGATE_DIR}/ablations"
 MODEL_BY_CASE = f"{SURROGATE_DIR}/model_by_case/model.json"
 MODEL_BY_CASE_ARRAYS = f"{SURROGATE_DIR}/model_by_case/params.npz"
 CLINICAL_JSON = f"{SURROGATE_DIR}/clinical.json"
 EXTRAPOLATION_JSON = f"{SURROGATE_DIR}/extrapolation.json"
-VARIANTS_JSON = f"{SURROGATE_DIR}/variants.json"
+ABLATIONS_JSON = f"{SURROGATE_DIR}/ablations.json"
 BENCHMARK_JSON = f"{SURROGATE_DIR}/benchmark.json"
 HELD_OUT_JSON = f"{SURROGATE_DIR}/held_out.json"
 POSTURES_JSON = f"{SURROGATE_DIR}/postures.json"
@@ -221,16 +221,16 @@ def study_runs(name="model.json"):
     return planned
 
 
-def variant_runs(name="model.json"):
-    """File ``name`` of every run of every surrogate variant."""
+def ablation_runs(name="model.json"):
+    """File ``name`` of every run of every ablation."""
     study = CONFIG.surrogate_study
-    return expand(f"{VARIANT_DIR}/{{variant}}/r{{repeat}}/{name}",
-                  variant=[v.name for v in study.variants], repeat=range(study.repeats))
+    return expand(f"{ABLATION_DIR}/{{ablation}}/r{{repeat}}/{name}",
+                  ablation=[a.name for a in study.ablations], repeat=range(study.repeats))
 
 
-def variant_settings(wildcards):
-    """Settings of one variant (its architecture comes from the study's selection)."""
-    return CONFIG.surrogate_study.variant(wildcards.variant).settings.as_dict()
+def ablation_settings(wildcards):
+    """Settings of one ablation (its architecture comes from the study's selection)."""
+    return CONFIG.surrogate_study.ablation(wildcards.ablation).settings.as_dict()
 
 
 def posture_files(name):
@@ -259,5 +259,5 @@ def clinical_fields():
                   split=["by_sample", "by_case"], case=clinical_ids(), ext=["xdmf", "h5"])
 
 
-SURROGATE_RESULTS = [STUDY_TABLE, VARIANTS_JSON, CLINICAL_JSON, EXTRAPOLATION_JSON, BENCHMARK_JSON,
+SURROGATE_RESULTS = [STUDY_TABLE, ABLATIONS_JSON, CLINICAL_JSON, EXTRAPOLATION_JSON, BENCHMARK_JSON,
                      HELD_OUT_JSON, POSTURES_JSON, OFF_GRID_JSON, WARNING_COVERAGE_JSON]

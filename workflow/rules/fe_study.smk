@@ -6,7 +6,7 @@
 # in results/fe_study/.
 wildcard_constraints:
     fe_mesh=MESH_ID_PATTERN,
-    fe_variant=VARIANT_ID_PATTERN,
+    fe_variant=FE_VARIANT_ID_PATTERN,
     part=r"[0-9]+",
 
 

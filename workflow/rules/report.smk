@@ -22,7 +22,7 @@ FIRST_REPORT_INPUTS = dict(
 rule report:
     input:
         **FIRST_REPORT_INPUTS,
-        variants=VARIANTS_JSON,
+        ablations=ABLATIONS_JSON,
         clinical=CLINICAL_JSON,
         extrapolation=EXTRAPOLATION_JSON,
         held_out=HELD_OUT_JSON,

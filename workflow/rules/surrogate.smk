@@ -1,11 +1,11 @@
-# Surrogate: the architecture study (the paper's Table 2), the selected model, variants of the
-# settings (e.g. the exact Dirichlet condition), the held-out models, the clinical cases (Tables
+# Surrogate: the architecture study (the paper's Table 2), the selected model, ablations of
+# the settings (e.g. the paper's own protocol), the held-out models, the clinical cases (Tables
 # 3 and 4), extrapolation outside the sweep, and the benchmark of the goals.
 wildcard_constraints:
     arch=r"[0-9]+x[0-9]+",
     held_out="by_case|by_direction|by_c1",
     repeat=r"[0-9]+",
-    variant=r"[A-Za-z][A-Za-z0-9_]*",
+    ablation=r"[A-Za-z][A-Za-z0-9_]*",
 
 
 # One training per (architecture, repeat): one core each, so `-j2` runs two at once.
@@ -110,23 +110,23 @@ rule select_model:
         "../scripts/select_model.py"
 
 
-# One training per (variant, repeat), at the selected architecture.
-rule train_variant_run:
+# One training per (ablation, repeat), at the selected architecture.
+rule train_ablation_run:
     input:
         dataset=DATASET,
         audit=FE_STABILITY_AUDIT_JSON,
         table=STUDY_TABLE,
     output:
-        model=f"{VARIANT_DIR}/{{variant}}/r{{repeat}}/model.json",
-        params=f"{VARIANT_DIR}/{{variant}}/r{{repeat}}/params.npz",
-        history=f"{VARIANT_DIR}/{{variant}}/r{{repeat}}/history.json",
+        model=f"{ABLATION_DIR}/{{ablation}}/r{{repeat}}/model.json",
+        params=f"{ABLATION_DIR}/{{ablation}}/r{{repeat}}/params.npz",
+        history=f"{ABLATION_DIR}/{{ablation}}/r{{repeat}}/history.json",
     params:
-        surrogate=variant_settings,
+        surrogate=ablation_settings,
         holdout=[],
     log:
-        "results/logs/surrogate/variants/{variant}_r{repeat}.log",
+        "results/logs/surrogate/ablations/{ablation}_r{repeat}.log",
     benchmark:
-        "results/benchmarks/surrogate/variants/{variant}_r{repeat}.tsv"
+        "results/benchmarks/surrogate/ablations/{ablation}_r{repeat}.tsv"
     threads: 1
     resources:
         mem_mb=4000,
@@ -136,22 +136,22 @@ rule train_variant_run:
         "../scripts/train_run.py"
 
 
-rule variants:
+rule ablations:
     input:
         table=STUDY_TABLE,
         study_runs=study_runs(),
-        variant_runs=variant_runs(),
+        ablation_runs=ablation_runs(),
     output:
-        VARIANTS_JSON,
+        ABLATIONS_JSON,
     log:
-        "results/logs/surrogate/variants.log",
+        "results/logs/surrogate/ablations.log",
     threads: 1
     resources:
         mem_mb=500,
     conda:
         ENV
     script:
-        "../scripts/variants.py"
+        "../scripts/ablations.py"
 
 
 # The held-out models: the selected architecture trained on the dataset's splits that hold out
@@ -334,7 +334,7 @@ rule surrogate_benchmark:
         mesh=MESH,
         table=STUDY_TABLE,
         clinical=CLINICAL_JSON,
-        variants=VARIANTS_JSON,
+        ablations=ABLATIONS_JSON,
     output:
         BENCHMARK_JSON,
     params:

@@ -6,7 +6,7 @@ from pathlib import Path
 from fem.parameters import SolverSettings
 from fem.sweep import clinical_cases
 from run.joblog import job_log
-from studies.surrogate_study.architecture import ArchitectureTable, VariantComparison
+from studies.surrogate_study.architecture import AblationComparison, ArchitectureTable
 from studies.surrogate_study.surrogate_benchmark import (
     SurrogateBenchmark,
     format_benchmark,
@@ -33,7 +33,7 @@ bench = run_benchmark(
     ClinicalEvaluation.read(snakemake.input.clinical).to_json(),
     repeats=snakemake.params.repeats,
 )
-bench["variants"] = VariantComparison.read(snakemake.input.variants).to_json()
+bench["ablations"] = AblationComparison.read(snakemake.input.ablations).to_json()
 SurrogateBenchmark.from_json(bench).write(snakemake.output[0])
 text = format_benchmark(bench)
 logging.getLogger("benchmark").info("\n%s", text)

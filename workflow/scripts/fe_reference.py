@@ -6,14 +6,14 @@ from fem.parameters import SolverSettings
 from fem.sweep import Case
 from run.joblog import job_log
 from studies.fe_study.fe_reference import solve_reference
-from studies.fe_study.fe_variants import MeshSpec, Variant
+from studies.fe_study.fe_variants import FEVariant, MeshSpec
 from studies.machine import limit_blas_threads
 
 job_log(snakemake.log[0])
 logging.info("BLAS on %d threads: %s", snakemake.threads, limit_blas_threads(snakemake.threads))
 
 ref = snakemake.params.reference
-variant = Variant(
+variant = FEVariant(
     MeshSpec.from_mapping(ref["mesh"]), ref["element"], ref["solver"], ref["quadrature_degree"]
 )
 w = snakemake.wildcards

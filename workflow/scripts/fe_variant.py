@@ -6,7 +6,7 @@ from fem.parameters import SolverSettings
 from run.joblog import job_log
 from studies.fe_study.fe_reference import load_references
 from studies.fe_study.fe_speed_accuracy import run_variant
-from studies.fe_study.fe_variants import Variant
+from studies.fe_study.fe_variants import FEVariant
 from studies.machine import limit_blas_threads
 
 job_log(snakemake.log[0])
@@ -17,7 +17,7 @@ cases, references = load_references(
 )
 record = run_variant(
     snakemake.input.mesh,
-    Variant.from_id(snakemake.wildcards.fe_variant),
+    FEVariant.from_id(snakemake.wildcards.fe_variant),
     SolverSettings.from_config(snakemake.params.config),
     cases,
     references,

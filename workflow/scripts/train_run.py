@@ -1,4 +1,4 @@
-"""Snakemake adapter: one training run (a study repeat, a variant or the by-case model)."""
+"""Snakemake adapter: one training run (a study repeat, an ablation or the by-case model)."""
 
 import json
 from pathlib import Path
@@ -19,12 +19,12 @@ job_log(snakemake.log[0])
 wildcards = snakemake.wildcards
 if hasattr(wildcards, "arch"):
     architecture = wildcards.arch
-else:  # variants and the by-case model use the architecture the study selected
+else:  # ablations and the by-case model use the architecture the study selected
     architecture = json.loads(Path(snakemake.input.table).read_text())["selected_architecture"]
 config = SurrogateConfig.from_mapping(dict(snakemake.params.surrogate)).with_architecture(
     architecture
 )
-# repeat r trains with seed + r: the same seeds in the study and in every variant
+# repeat r trains with seed + r: the same seeds in the study and in every ablation
 config = config.replace(seed=config.seed + int(getattr(wildcards, "repeat", 0)))
 
 # a pod model takes its modes at every node of a quadratic mesh, where the dataset has them
