@@ -52,6 +52,28 @@ class SplitFractions:
         return {name: np.sort(p).astype(np.int64) for name, p in zip(SPLITS, parts, strict=True)}
 
 
+@dataclass(frozen=True, slots=True)
+class DatasetSplit:
+    """The config's ``dataset`` section: the split's fractions and the seed it is drawn with.
+
+    Attributes:
+        fractions: the train / validation / test fractions.
+        seed: the seed of the random split.
+    """
+
+    fractions: SplitFractions = SplitFractions()
+    seed: int = 0
+
+    @classmethod
+    def from_mapping(cls, section: dict[str, Any]) -> DatasetSplit:
+        """Parse the ``dataset`` section ``{seed?, split?: {train, validation, test}}``.
+
+        Raises:
+            DatasetError: for fractions that do not split (:class:`SplitFractions`).
+        """
+        return cls(SplitFractions(**section.get("split", {})), int(section.get("seed", 0)))
+
+
 def group_partition(
     cases: np.ndarray,
     key: np.ndarray,

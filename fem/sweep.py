@@ -14,7 +14,7 @@ import copy
 import logging
 import math
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -28,9 +28,41 @@ log = logging.getLogger(__name__)
 
 C1_PATTERN = r"[0-9]+\.[0-9]{2}"
 ANGLE_PATTERN = r"-?[0-9]+\.[0-9]"
-CASE_PATTERN = re.compile(
-    rf"c1=(?P<c1>{C1_PATTERN})_phi=(?P<phi>{ANGLE_PATTERN})_theta=(?P<theta>{ANGLE_PATTERN})"
-)
+
+
+def direction_id(phi: str, theta: str) -> str:
+    """The gravity direction's part of a case folder's name, from its two angles' text."""
+    return f"phi={phi}_theta={theta}"
+
+
+def case_id(c1: str, direction: str) -> str:
+    """A case folder's name from its C1 text and its direction's part (:func:`direction_id`).
+
+    The one place that spells a case folder's name: :attr:`Case.id` fills it with a case's
+    values, :data:`CASE_WILDCARDS` with Snakemake wildcards, :data:`CASE_PATTERN` with regular
+    expressions.
+    """
+    return f"c1={c1}_{direction}"
+
+
+DIRECTION_WILDCARDS = direction_id("{phi}", "{theta}")
+"""A direction's part of a case folder's name with its angles as wildcards ``{phi}``,
+``{theta}``; filled with :data:`ANGLE_PATTERN`, the expression of any direction."""
+CASE_WILDCARDS = case_id("{c1}", DIRECTION_WILDCARDS)
+"""A case folder's name with its values as Snakemake wildcards ``{c1}``, ``{phi}``, ``{theta}``
+(e.g. the solve rules' outputs, ``results/cases/`` + this): the pattern of :attr:`Case.id`."""
+CASE_PATTERN = re.compile(case_id(
+    rf"(?P<c1>{C1_PATTERN})",
+    direction_id(rf"(?P<phi>{ANGLE_PATTERN})", rf"(?P<theta>{ANGLE_PATTERN})")))
+
+
+def case_folder(root: str, case: Case | None = None) -> str:
+    """The folder of ``case`` under ``root`` (e.g. ``results/cases``).
+
+    Without a case, the pattern of every case folder there (:data:`CASE_WILDCARDS`), as a
+    rule's output names it.
+    """
+    return f"{root}/{CASE_WILDCARDS if case is None else case.id}"
 
 
 @dataclass(frozen=True, slots=True, order=True)
@@ -60,8 +92,13 @@ class Case:
 
     @property
     def id(self) -> str:
-        """Folder name of the case."""
-        return f"c1={self.C1:.2f}_phi={self.phi:.1f}_theta={self.theta:.1f}"
+        """Folder name of the case (:func:`case_id`)."""
+        return case_id(f"{self.C1:.2f}", self.direction_id)
+
+    @property
+    def direction_id(self) -> str:
+        """The gravity direction's part of :attr:`id` (:func:`direction_id`)."""
+        return direction_id(f"{self.phi:.1f}", f"{self.theta:.1f}")
 
     @classmethod
     def from_id(cls, case_id: str) -> Case:
@@ -76,6 +113,11 @@ class Case:
                 f"{case_id!r} is not a case identifier like 'c1=1.00_phi=180.0_theta=0.0'"
             )
         return cls(float(match["c1"]), float(match["phi"]), float(match["theta"]))
+
+    @classmethod
+    def from_summary(cls, summary: Mapping[str, Any]) -> Case:
+        """The case a solved case's ``summary.json`` describes (its numbers, not its folder)."""
+        return cls(float(summary["C1"]), float(summary["phi"]), float(summary["theta"]))
 
     def material(self, density: float = TISSUE_DENSITY) -> Material:
         """The case's material (C1 converted to Pa)."""
@@ -349,6 +391,30 @@ def _drop_aliases(directions: Sequence[tuple[float, float]]) -> list[tuple[float
     return kept
 
 
-def clinical_cases(clinical: list[dict[str, Any]]) -> list[Case]:
-    """The config's ``clinical`` list as cases."""
-    return [Case(float(c["C1"]), float(c["phi"]), float(c.get("theta", 0.0))) for c in clinical]
+@dataclass(frozen=True, slots=True)
+class ClinicalCase:
+    """One of the config's ``clinical`` cases: the setup and its label in tables and figures.
+
+    Attributes:
+        case: the setup (C1, Φ, θ).
+        label: the config's ``label``, else the case's folder name.
+    """
+
+    case: Case
+    label: str
+
+    @classmethod
+    def from_mapping(cls, item: Mapping[str, Any]) -> ClinicalCase:
+        """Parse one entry ``{C1, phi, theta?, label?}`` of the config's ``clinical`` list."""
+        case = Case(float(item["C1"]), float(item["phi"]), float(item.get("theta", 0.0)))
+        return cls(case, str(item.get("label", case.id)))
+
+
+def clinical_list(clinical: Sequence[Mapping[str, Any]]) -> list[ClinicalCase]:
+    """The config's ``clinical`` list, parsed (the one place that reads its entries)."""
+    return [ClinicalCase.from_mapping(item) for item in clinical]
+
+
+def clinical_cases(clinical: Sequence[Mapping[str, Any]]) -> list[Case]:
+    """The config's ``clinical`` list as cases (:func:`clinical_list` without the labels)."""
+    return [item.case for item in clinical_list(clinical)]

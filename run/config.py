@@ -35,7 +35,7 @@ from fem.configfile import read_config_file as fem_read_config_file
 from fem.contact import resolve_obstacle
 from fem.directions import direction_keys
 from fem.parameters import SolverSettings
-from fem.splits import SplitFractions
+from fem.splits import DatasetSplit, SplitFractions
 from fem.sweep import Case, clinical_cases, sweep_cases
 from meshes.config import MeshConfig
 from meshes.parametric import BreastGeometry
@@ -213,6 +213,7 @@ class WorkflowConfig:
         sections: the validated mapping (defaults filled, keys sorted), the source of the
             rules' params; read it through :meth:`section`.
         adaptive: the adaptive sweep (``cases`` is then its start design), or None.
+        dataset: the dataset's split and its seed.
     """
 
     mesh: MeshConfig
@@ -226,6 +227,7 @@ class WorkflowConfig:
     imaged: ImagedConfig | None
     sections: dict[str, Any]
     adaptive: AdaptiveDesign | None = None
+    dataset: DatasetSplit = DatasetSplit()
 
     @classmethod
     def from_mapping(
@@ -254,9 +256,9 @@ class WorkflowConfig:
         with config_section("clinical"):
             clinical = tuple(clinical_cases(sections["clinical"]))
         with config_section("dataset.split"):  # checked here, not after every solve at aggregation
-            split = SplitFractions(**sections["dataset"].get("split", {}))
+            dataset = DatasetSplit.from_mapping(sections["dataset"])
         with config_section("sweep"):
-            check_sweep_splits(cases, clinical, split)
+            check_sweep_splits(cases, clinical, dataset.fractions)
         fe_study = FEStudyConfig.from_sections(sections)
         with config_section("surrogate"):
             surrogate = SurrogateConfig.from_mapping(sections["surrogate"])
@@ -265,7 +267,7 @@ class WorkflowConfig:
         with config_section("reference_state"):
             imaged = ImagedConfig.fromconfig_section(sections["reference_state"])
         return cls(mesh, solver, solve_fe, cases, clinical, fe_study, surrogate, surrogate_study,
-                   imaged, sections, adaptive)
+                   imaged, sections, adaptive, dataset)
 
     def section(self, *keys: str) -> Any:
         """A copy of the validated value at ``keys``, e.g. ``section("mesh", "fixed")``."""
@@ -277,6 +279,16 @@ class WorkflowConfig:
     def sections_of(self, *names: str) -> dict[str, Any]:
         """Copies of the top-level sections ``names``, in that order."""
         return {name: self.section(name) for name in names}
+
+    @property
+    def solver_params(self) -> dict[str, Any]:
+        """What a solve job's settings depend on, as its rule's ``params`` (``**`` them).
+
+        ``fe`` as the solve jobs receive it (:attr:`solve_fe`), ``material`` and ``mesh.fixed``:
+        the job builds its settings from them with one call, :func:`solver_settings`.
+        """
+        return {"fe": copy.deepcopy(self.solve_fe), "material": self.section("material"),
+                "fixed": self.section("mesh", "fixed")}
 
     @property
     def fe_self_contact(self) -> dict[str, Any]:
@@ -319,6 +331,17 @@ class WorkflowConfig:
             )
             if enough
         )
+
+
+def solver_settings(params: Any) -> SolverSettings:
+    """A job's solver settings from its rule's ``params`` (:attr:`WorkflowConfig.solver_params`).
+
+    Args:
+        params: anything with the attributes ``fe``, ``material`` and ``fixed`` (a job's
+            ``snakemake.params``).
+    """
+    return SolverSettings.from_config(
+        {"fe": params.fe, "material": params.material, "mesh": {"fixed": params.fixed}})
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -243,6 +243,37 @@ def test_the_solve_jobs_get_the_chest_obstacle_written_out() -> None:
     assert config.solve_fe == config.section("fe") and config.solver.contact is None
 
 
+def test_a_job_builds_the_solver_settings_of_the_config_from_its_params() -> None:
+    """A solve job's one call makes the config's solver settings of its rule's params.
+
+    With and without contact, for each config file.
+    """
+    from types import SimpleNamespace
+
+    from run.config import solver_settings
+
+    for raw in (read("config.yaml"), read("tests/config.yaml")):
+        for contact in (True, False):
+            if not contact:
+                raw["fe"].pop("contact", None)
+            config = WorkflowConfig.from_mapping(raw)
+            params = config.solver_params
+            assert set(params) == {"fe", "material", "fixed"}
+            assert params["fe"] == config.solve_fe
+            assert solver_settings(SimpleNamespace(**params)) == config.solver
+
+
+def test_the_dataset_section_parses_into_its_split_and_seed() -> None:
+    from fem.splits import DatasetSplit, SplitFractions
+
+    raw = read("tests/config.yaml")
+    raw["dataset"] = {"seed": 3, "split": {"train": 0.6, "validation": 0.2, "test": 0.2}}
+    split = DatasetSplit(SplitFractions(0.6, 0.2, 0.2), 3)
+    assert WorkflowConfig.from_mapping(raw).dataset == split
+    del raw["dataset"]
+    assert WorkflowConfig.from_mapping(raw).dataset == DatasetSplit(SplitFractions(), 0)
+
+
 def test_defaults_are_filled_as_snakemake_fills_them() -> None:
     """The rules' params come from this mapping.
 

@@ -22,6 +22,40 @@ def test_case_id_round_trips() -> None:
     assert Case.from_id(case.id) == case
 
 
+def test_the_rules_patterns_name_a_case_folder_as_its_id() -> None:
+    """One spelling of a case folder: the rules' patterns, filled, are Case.id.
+
+    The solve rules' (fem.sweep.CASE_WILDCARDS) and a chain's (one C1, {direction} left open).
+    """
+    from fem.sweep import CASE_WILDCARDS, DIRECTION_WILDCARDS, case_folder, case_id
+
+    case = Case(1.0, -150.0, 90.0)
+    assert CASE_WILDCARDS.format(c1="1.00", phi="-150.0", theta="90.0") == case.id
+    assert case_id("1.00", "{direction}").format(direction=case.direction_id) == case.id
+    assert DIRECTION_WILDCARDS.format(phi="-150.0", theta="90.0") == case.direction_id
+    assert case_folder("results/cases", case) == f"results/cases/{case.id}"
+    assert case_folder("results/outside") == f"results/outside/{CASE_WILDCARDS}"
+
+
+def test_a_summary_gives_its_case_by_its_numbers() -> None:
+    from fem.sweep import case_id
+
+    summary = {"case": "c1=0.50_phi=0.0_theta=0.0", "C1": 5.0, "phi": 180.0, "theta": -90.0}
+    assert Case.from_summary(summary) == Case(5.0, 180.0, -90.0)  # not its folder's text
+    assert case_id("5.00", "phi=180.0_theta=-90.0") == Case.from_summary(summary).id
+
+
+def test_the_clinical_cases_are_parsed_once_with_their_labels() -> None:
+    from fem.sweep import ClinicalCase, clinical_cases, clinical_list
+
+    section = [{"C1": 1.0, "phi": 180.0, "label": "prone"}, {"C1": 5.0, "phi": 0.0, "theta": 45.0}]
+    assert clinical_list(section) == [
+        ClinicalCase(Case(1.0, 180.0, 0.0), "prone"),
+        ClinicalCase(Case(5.0, 0.0, 45.0), "c1=5.00_phi=0.0_theta=45.0"),
+    ]
+    assert clinical_cases(section) == [Case(1.0, 180.0), Case(5.0, 0.0, 45.0)]
+
+
 def test_case_id_rejects_garbage() -> None:
     with pytest.raises(InvalidParameterError, match="not a case identifier"):
         Case.from_id("c1=1_phi=0")

@@ -6,7 +6,8 @@ from collections import namedtuple
 from snakemake.exceptions import WorkflowError
 
 from fem.adaptive import RoundPlan
-from fem.sweep import ANGLE_PATTERN, C1_PATTERN
+from fem.sweep import (ANGLE_PATTERN, C1_PATTERN, CASE_WILDCARDS, DIRECTION_WILDCARDS, case_folder,
+                       case_id)
 from run.config import ConfigError, WorkflowConfig
 from run.workdir import age_refused
 from studies.fe_study.fe_variants import MESH_ID_PATTERN, FE_VARIANT_ID_PATTERN, FEVariant
@@ -30,8 +31,12 @@ config.clear()
 config.update(CONFIG.section())
 
 
-CASE_DIR = "results/cases/c1={c1}_phi={phi}_theta={theta}"
-OUTSIDE_DIR = "results/outside/c1={c1}_phi={phi}_theta={theta}"
+# A case's folder: the sweep's under results/cases, the others' (extrapolation, off the grid)
+# under results/outside; its name is fem.sweep.Case.id, with wildcards in the rules' patterns.
+CASES_ROOT = "results/cases"
+OUTSIDE_ROOT = "results/outside"
+CASE_DIR = case_folder(CASES_ROOT)
+OUTSIDE_DIR = case_folder(OUTSIDE_ROOT)
 MESH = "results/mesh/mesh.xdmf"
 DATASET = "results/dataset/dataset.h5"
 MODEL = "results/surrogate/model/model.json"
@@ -77,20 +82,25 @@ def sweep_rounds(wildcards=None):
     return [SWEEP_ROUND.format(round=j) for j in range(1, sweep_cases_through()[1] + 1)]
 
 
+def case_file(case, name, root=CASES_ROOT):
+    """Path of file ``name`` in the folder of ``case`` (a fem.sweep.Case) under ``root``."""
+    return f"{case_folder(root, case)}/{name}"
+
+
 def case_files(name):
     """Path of file ``name`` in every case folder of the sweep (with sweep.adaptive, an input
     function over every round's cases)."""
     if ADAPTIVE is None:
-        return [f"results/cases/{case.id}/{name}" for case in CONFIG.cases]
+        return [case_file(case, name) for case in CONFIG.cases]
 
     def every_round(wildcards):
-        return [f"results/cases/{case.id}/{name}" for case in sweep_cases_through()[0]]
+        return [case_file(case, name) for case in sweep_cases_through()[0]]
 
     return every_round
 
 
 # A chain job's cases: every C1 of the sweep at one direction (solve.smk). Its one wildcard,
-# {direction} = "phi=<deg>_theta=<deg>", matches the sweep's directions only (as pairs: a sphere's
+# {direction} = "phi=<deg>_theta=<deg>" (fem.sweep.direction_id), matches the sweep's directions only (as pairs: a sphere's
 # Phi and theta values combine into directions it lacks), so a case at another direction is
 # solved alone. With sweep.adaptive it matches any direction: the rounds' directions are not
 # known when the workflow is read, and each is solved as a chain of the sweep's C1 values.
@@ -100,8 +110,9 @@ ChainRule = namedtuple("ChainRule", "name c1s direction")
 def _chain_rules():
     c1s = sorted({f"{case.C1:.2f}" for case in CONFIG.cases}, key=float)
     if ADAPTIVE is not None:
-        return [ChainRule("solve_chain", c1s, f"phi={ANGLE_PATTERN}_theta={ANGLE_PATTERN}")]
-    directions = sorted({f"phi={case.phi:.1f}_theta={case.theta:.1f}" for case in CONFIG.cases})
+        any_direction = DIRECTION_WILDCARDS.format(phi=ANGLE_PATTERN, theta=ANGLE_PATTERN)
+        return [ChainRule("solve_chain", c1s, any_direction)]
+    directions = sorted({case.direction_id for case in CONFIG.cases})
     return [ChainRule("solve_chain", c1s, "|".join(map(re.escape, directions)))]
 
 
@@ -110,7 +121,7 @@ CHAIN_RULES = _chain_rules()
 
 def chain_files(name, c1s):
     """File ``name`` of every case of one direction's chain ({direction} left open)."""
-    return [f"results/cases/c1={c1}_{{direction}}/{name}" for c1 in c1s]
+    return [f"{CASES_ROOT}/{case_id(c1, '{direction}')}/{name}" for c1 in c1s]
 
 
 def all_cores():
@@ -240,12 +251,12 @@ def posture_files(name):
 
 def extrapolation_files(name):
     """File ``name`` of every extrapolation case outside the sweep."""
-    return [f"results/outside/{case.id}/{name}" for case in CONFIG.surrogate_study.extrapolation]
+    return [case_file(case, name, OUTSIDE_ROOT) for case in CONFIG.surrogate_study.extrapolation]
 
 
 def off_grid_files(name):
     """File ``name`` of every random test case off the sweep's grid (solved outside it)."""
-    return [f"results/outside/{case.id}/{name}" for case in CONFIG.surrogate_study.off_grid]
+    return [case_file(case, name, OUTSIDE_ROOT) for case in CONFIG.surrogate_study.off_grid]
 
 
 def held_out_models(name="model.json"):

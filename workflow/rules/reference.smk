@@ -12,9 +12,7 @@ rule reference_roundtrip:
     output:
         REFERENCE_ROUNDTRIP_JSON,
     params:
-        fe=CONFIG.solve_fe,
-        material=CONFIG.section("material"),
-        fixed=CONFIG.section("mesh", "fixed"),
+        **CONFIG.solver_params,
         # the round trip's own keys: the imaged chain's do not rerun it
         reference_state={
             key: CONFIG.section("reference_state", key)
@@ -43,9 +41,7 @@ if IMAGED is not None:
             h5=MESH.replace(".xdmf", ".h5"),
             record=REFERENCE_RECORD,
         params:
-            fe=CONFIG.solve_fe,
-            material=CONFIG.section("material"),
-            fixed=CONFIG.section("mesh", "fixed"),
+            **CONFIG.solver_params,
             imaged=CONFIG.section("reference_state", "imaged"),
             tolerance_mm=CONFIG.section("reference_state", "tolerance_mm"),
         log:
@@ -73,9 +69,7 @@ if IMAGED is not None:
             csv="results/tracking/{name}.csv",
             json="results/tracking/{name}.json",
         params:
-            fe=CONFIG.solve_fe,
-            material=CONFIG.section("material"),
-            fixed=CONFIG.section("mesh", "fixed"),
+            **CONFIG.solver_params,
             mesh=CONFIG.section("mesh"),
             target=lambda w: {"C1": IMAGED.points[w.name].C1, "phi": IMAGED.points[w.name].phi,
                               "theta": IMAGED.points[w.name].theta},
@@ -99,9 +93,7 @@ if IMAGED is not None:
             json=STIFFNESS_JSON,
             png="results/stiffness/misfit.png",
         params:
-            fe=CONFIG.solve_fe,
-            material=CONFIG.section("material"),
-            fixed=CONFIG.section("mesh", "fixed"),
+            **CONFIG.solver_params,
             mesh=CONFIG.section("mesh"),
             # the observation's posture (Phi, theta), degrees
             posture=[IMAGED.observed_in.phi, IMAGED.observed_in.theta]

@@ -22,14 +22,13 @@ rule solve:
         fields=update(f"{CASE_DIR}/fields.xdmf"),
         fields_h5=update(f"{CASE_DIR}/fields.h5"),
     params:
-        # `fe` with a `chest` contact obstacle written out: the job needs no mesh section
-        fe=CONFIG.solve_fe,
-        material=CONFIG.section("material"),
-        fixed=CONFIG.section("mesh", "fixed"),
+        # the solver's settings (run.config.solver_settings builds them): `fe` with a `chest`
+        # contact obstacle written out (the job needs no mesh section), `material`, `mesh.fixed`
+        **CONFIG.solver_params,
     log:
-        "results/logs/solve/c1={c1}_phi={phi}_theta={theta}.log",
+        f"results/logs/solve/{CASE_WILDCARDS}.log",
     benchmark:
-        "results/benchmarks/solve/c1={c1}_phi={phi}_theta={theta}.tsv"
+        f"results/benchmarks/solve/{CASE_WILDCARDS}.tsv"
     threads: 1
     resources:
         mem_mb=3000,
@@ -55,9 +54,7 @@ for chain_rule in CHAIN_RULES if CONFIG.chains else ():
             fields=update(chain_files("fields.xdmf", chain_rule.c1s)),
             fields_h5=update(chain_files("fields.h5", chain_rule.c1s)),
         params:
-            fe=CONFIG.solve_fe,
-            material=CONFIG.section("material"),
-            fixed=CONFIG.section("mesh", "fixed"),
+            **CONFIG.solver_params,
         wildcard_constraints:
             direction=chain_rule.direction,
         log:
@@ -86,6 +83,6 @@ use rule solve as solve_outside with:
         fields=update(f"{OUTSIDE_DIR}/fields.xdmf"),
         fields_h5=update(f"{OUTSIDE_DIR}/fields.h5"),
     log:
-        "results/logs/solve_outside/c1={c1}_phi={phi}_theta={theta}.log",
+        f"results/logs/solve_outside/{CASE_WILDCARDS}.log",
     benchmark:
-        "results/benchmarks/solve_outside/c1={c1}_phi={phi}_theta={theta}.tsv"
+        f"results/benchmarks/solve_outside/{CASE_WILDCARDS}.tsv"

@@ -12,9 +12,9 @@ if ADAPTIVE is not None:
 
     checkpoint sweep_round:
         input:
-            summaries=lambda wildcards: [f"results/cases/{c.id}/summary.json"
+            summaries=lambda wildcards: [case_file(c, "summary.json")
                                          for c in sweep_cases_through(int(wildcards.round) - 1)[0]],
-            points=lambda wildcards: [f"results/cases/{c.id}/points.h5"
+            points=lambda wildcards: [case_file(c, "points.h5")
                                       for c in sweep_cases_through(int(wildcards.round) - 1)[0]],
         output:
             SWEEP_ROUND,

@@ -3,15 +3,12 @@
 from pathlib import Path
 
 from fem.chain import solve_chain
-from fem.parameters import SolverSettings
 from fem.sweep import Case
+from run.config import solver_settings
 from run.joblog import job_log
 
 job_log(snakemake.log[0])
 
-settings = SolverSettings.from_config(
-    {"fe": snakemake.params.fe, "material": snakemake.params.material,
-     "mesh": {"fixed": snakemake.params.fixed}}
-)
+# the cases asked for are their folders' (the chain rule's outputs, Case.id's pattern)
 folders = {Case.from_id(Path(s).parent.name): Path(s).parent for s in snakemake.output.summaries}
-solve_chain(snakemake.input.mesh, folders, folders.__getitem__, settings)
+solve_chain(snakemake.input.mesh, folders, folders.__getitem__, solver_settings(snakemake.params))
