@@ -465,7 +465,7 @@ def read_cases(summary_paths: Sequence[str | Path], point_paths: Sequence[str | 
         if fields and points["u"].shape != fields[0].shape:
             raise DatasetError(f"{points_path}: {len(points['u'])} material points, expected "
                                f"{len(fields[0])} (another mesh?)")
-        cases.append(Case.from_id(Path(summary_path).parent.name))
+        cases.append(Case.from_summary(summary))  # its numbers (read_case: its folder's)
         converged.append(ok and bool(np.all(np.isfinite(points["u"]))))
         fields.append(1e3 * np.asarray(points["u"], dtype=float))
     return cases, np.array(converged, dtype=bool), np.array(fields)

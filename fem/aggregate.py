@@ -25,6 +25,7 @@ from fem.directions import direction_keys
 from fem.exceptions import DatasetError
 from fem.provenance import provenance
 from fem.splits import GROUP_SPLITS, SplitFractions, group_partition, softest_held_out_c1
+from fem.sweep import Case
 
 log = logging.getLogger(__name__)
 
@@ -56,7 +57,7 @@ def build_dataset(
     split: SplitFractions = SplitFractions(),
     seed: int = 0,
     config: dict[str, Any] | None = None,
-    test_cases: Sequence[tuple[float, float, float]] = (),
+    test_cases: Sequence[Case] = (),
     mesh: str | Path | None = None,
     fields_paths: Sequence[str | Path] | None = None,
 ) -> dict[str, Any]:
@@ -69,7 +70,7 @@ def build_dataset(
         split: fractions of the train, validation and test parts.
         seed: seed of the random split.
         config: the config sections to record as provenance.
-        test_cases: (C1, Φ, θ) of setups the by-case split always holds out as test
+        test_cases: setups the by-case split always holds out as test
             (the clinical cases: a by-case model is then judged on setups it never saw);
             the other converged cases are partitioned by ``split``. A converged case that
             passes through itself (``self_overlap``) is in no split: no surrogate learns it.
@@ -130,14 +131,15 @@ def build_dataset(
     good_cases = np.flatnonzero(converged & ~through)
     samples = (good_cases[:, None] * n_points + np.arange(n_points)[None, :]).ravel()
     by_sample = {k: samples[v] for k, v in split.partition(len(samples), rng).items()}
-    keys = [(float(s["C1"]), float(s["phi"]), float(s.get("theta", 0.0))) for s in summaries]
-    wanted = {tuple(float(v) for v in c) for c in test_cases}
+    # each case as its summary describes it (read_case checked it is its folder's case)
+    keys = [Case.from_summary(s) for s in summaries]
+    wanted = set(test_cases)
     forced = np.array([keys[i] in wanted for i in good_cases], dtype=bool)
     free = good_cases[~forced]
     by_case = {k: free[v] for k, v in split.partition(len(free), rng).items()}
     by_case["test"] = np.sort(np.concatenate([by_case["test"], good_cases[forced]]))
-    c1_all = np.array([k[0] for k in keys])
-    phi_all, theta_all = np.array([k[1] for k in keys]), np.array([k[2] for k in keys])
+    c1_all = np.array([k.C1 for k in keys])
+    phi_all, theta_all = np.array([k.phi for k in keys]), np.array([k.theta for k in keys])
     c1_good = np.round(c1_all[good_cases], 9)
     c1_values = np.unique(c1_good)
     c1_ends = (c1_values[0], c1_values[-1]) if c1_values.size else ()

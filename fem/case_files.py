@@ -222,7 +222,7 @@ def read_case(summary_path: str | Path, points_path: str | Path) -> tuple[dict, 
     except InvalidParameterError as err:
         raise DatasetError(f"{folder}: not a case folder ({err})") from None
     summary = read_summary(summary_path)
-    described = Case(summary["C1"], summary["phi"], summary["theta"])
+    described = Case.from_summary(summary)
     if described != expected or summary["case"] != expected.id:
         raise DatasetError(
             f"{summary_path}: the summary is of case {summary['case']!r} (C1 = {summary['C1']} "

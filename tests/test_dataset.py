@@ -455,3 +455,22 @@ def test_the_dataset_records_the_tissue_map_and_refuses_two(tmp_path: Path) -> N
     with pytest.raises(DatasetError, match=r"solved with 2 different tissue maps"):
         build_dataset(summaries, points, tmp_path / "mixed.h5")
     assert not (tmp_path / "mixed.h5").exists()
+
+
+def test_the_clinical_cases_are_held_out_as_test_by_their_case(tmp_path: Path) -> None:
+    """The by-case split tests the clinical cases, cases the random split alone would not.
+
+    They are matched as cases: each summary's numbers against the config's cases.
+    """
+    summaries, points = _cases(tmp_path)
+
+    def tested(name: str, clinical: list[Case]) -> set[str]:
+        build_dataset(summaries, points, tmp_path / name, test_cases=clinical)
+        ds = read_dataset(tmp_path / name)
+        return {str(ds.ids[i]) for i in ds.splits["by_case"]["test"]}
+
+    alone = tested("none.h5", [])
+    untested = [Case.from_id(c) for c in (Case(1.0 + i, 30.0 * i).id for i in range(5))
+                if c not in alone]
+    assert len(untested) >= 2
+    assert {c.id for c in untested[:2]} <= tested("two.h5", untested[:2])

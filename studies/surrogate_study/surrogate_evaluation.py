@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from fem.dataset import Dataset
+from fem.sweep import ClinicalCase
 from studies import paper
 from studies.results import Record, Result
 from surrogate.exceptions import ExtrapolationWarning
@@ -175,7 +176,7 @@ def time_prediction(
 def clinical_table(
     model: Surrogate,
     ds: Dataset,
-    clinical: Sequence[dict[str, Any]],
+    clinical: Sequence[ClinicalCase],
     fe_wall_s: dict[str, float] | None = None,
 ) -> list[dict[str, Any]]:
     """The paper's Table 3 for the configured clinical cases, ours beside the paper's.
@@ -183,7 +184,7 @@ def clinical_table(
     Args:
         model: the surrogate.
         ds: the dataset holding the clinical cases' FE solutions.
-        clinical: entries ``{C1, phi, theta?, label?}`` (the config's ``clinical`` list).
+        clinical: the config's clinical cases (:func:`fem.sweep.clinical_list`).
         fe_wall_s: optional FE solve time per case id (Table 4).
 
     Raises:
@@ -191,11 +192,11 @@ def clinical_table(
     """
     rows = []
     for item in clinical:
-        case = ds.case_index(item["C1"], item["phi"], item.get("theta", 0.0))
+        case = ds.case_index(item.case.C1, item.case.phi, item.case.theta)
         if not ds.converged[case]:
             raise KeyError(f"clinical case {ds.ids[case]} did not converge in the FE sweep")
-        row = {"label": item.get("label", str(ds.ids[case])), **compare_case(model, ds, case)}
-        row["paper"] = paper.table3_row(item["C1"], item["phi"])
+        row = {"label": item.label, **compare_case(model, ds, case)}
+        row["paper"] = paper.table3_row(item.case.C1, item.case.phi)
         if fe_wall_s is not None:
             row["fe_wall_s"] = fe_wall_s.get(str(ds.ids[case]))
         rows.append(row)
@@ -281,7 +282,7 @@ def compare_extra_case(
 def evaluate_clinical(
     models: dict[str, Surrogate],
     ds: Dataset,
-    clinical: Sequence[dict[str, Any]],
+    clinical: Sequence[ClinicalCase],
     fe_wall_s: dict[str, float] | None = None,
     mesh_xdmf: str | Path | None = None,
     field_paths: dict[tuple[str, str], str | Path] | None = None,
@@ -291,7 +292,7 @@ def evaluate_clinical(
     Args:
         models: e.g. ``{"by_sample": model, "by_case": model}``.
         ds: the dataset.
-        clinical: the config's ``clinical`` entries.
+        clinical: the config's clinical cases (:func:`fem.sweep.clinical_list`).
         fe_wall_s: FE solve time per case id.
         mesh_xdmf: the mesh, for the error fields.
         field_paths: ``{(model name, case id): path.xdmf}`` of the error fields to write.

@@ -2,22 +2,23 @@
 
 from fem.aggregate import build_dataset
 from fem.exceptions import DatasetError
-from fem.splits import SplitFractions
+from fem.splits import DatasetSplit
+from fem.sweep import clinical_cases
 from run.joblog import job_log
 from run.workdir import mark_refused
 
 job_log(snakemake.log[0])
 
-cfg = snakemake.params.dataset
+dataset = DatasetSplit.from_mapping(snakemake.params.dataset)
 try:
     build_dataset(
         snakemake.input.summaries,
         snakemake.input.points,
         snakemake.output[0],
-        split=SplitFractions(**cfg.get("split", {})),
-        seed=int(cfg.get("seed", 0)),
+        split=dataset.fractions,
+        seed=dataset.seed,
         config=snakemake.params.provenance,
-        test_cases=[(c["C1"], c["phi"], c.get("theta", 0.0)) for c in snakemake.params.clinical],
+        test_cases=clinical_cases(snakemake.params.clinical),
         mesh=snakemake.input.mesh,
         fields_paths=snakemake.input.fields,
     )

@@ -8,6 +8,7 @@ from surrogate.runtime import configure_cpu
 configure_cpu()
 
 from fem.dataset import read_dataset  # noqa: E402
+from fem.sweep import clinical_list  # noqa: E402
 from run.joblog import job_log  # noqa: E402
 from studies.surrogate_study.surrogate_evaluation import ClinicalEvaluation, evaluate_clinical  # noqa: E402
 from surrogate.predict import Surrogate  # noqa: E402
@@ -27,6 +28,7 @@ fields = {
     (Path(p).parent.name, Path(p).stem): p for p in snakemake.output.fields if p.endswith(".xdmf")
 }
 result = evaluate_clinical(
-    models, dataset, snakemake.params.clinical, fe_wall, snakemake.input.mesh, fields
+    models, dataset, clinical_list(snakemake.params.clinical), fe_wall, snakemake.input.mesh,
+    fields,
 )
 ClinicalEvaluation.from_json(result).write(snakemake.output.table)
