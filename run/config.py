@@ -7,8 +7,9 @@ every mapping's keys and builds the objects of every layer from it: the mesh
 (:class:`fem.parameters.SolverSettings`), the sweep and the clinical cases
 (:mod:`fem.sweep`), the FE study (:mod:`studies.fe_study.config`) and the surrogate with its
 study (:class:`surrogate.config.SurrogateConfig`, :mod:`studies.surrogate_study.config`). It
-lives in ``studies/`` because it spans them all; the schema and its check are
-:mod:`meshes.schema`, the error that names a key :mod:`studies.config_errors`.
+lives in ``run/`` because it spans every layer below; the schema and its check are
+:mod:`meshes.schema`, the error that names a key :mod:`studies.config_errors`. A job rebuilds
+what it needs from its rule's params with one call (:func:`solver_settings` for the solver).
 
 The schema states every bound and default; the dataclasses check what they need to stay
 valid on their own, and ``tests/test_config.py`` keeps the bounds they repeat in step with it.
