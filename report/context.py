@@ -17,7 +17,7 @@ from report.html import figure
 from run.run_log import run_time
 from studies.fe_study.convergence_map import ConvergenceMap
 from studies.fe_study.corpus import CorpusTable
-from studies.fe_study.fe_benchmark import ClinicalBenchmark
+from studies.fe_study.fe_clinical import FEClinical
 from studies.fe_study.fe_speed_accuracy import SpeedAccuracy
 from studies.fe_study.fold_section import FoldSections
 from studies.fe_study.mesh_quality import MeshQuality
@@ -44,7 +44,7 @@ log = logging.getLogger(__name__)
 #: Input names :func:`build_report` reads (the report rule's named inputs).
 INPUT_NAMES = (
     "dataset", "quality", "rest_pairs", "mesh_png", "model", "history", "table2", "ablations",
-    "clinical", "extrapolation", "benchmark", "clinical_fields", "fe_clinical",
+    "clinical", "extrapolation", "surrogate_benchmark", "clinical_fields", "fe_clinical",
     "fe_speed_accuracy", "fe_convergence_map", "corpus", "reference_roundtrip", "reference_record",
     "tracking", "stiffness", "viewer", "held_out", "postures", "off_grid", "fe_failure_edges",
     "fe_stability_audit", "fe_fold_section", "fe_skin", "warning_coverage", "run_log",
@@ -63,8 +63,8 @@ RESULT_TYPES: dict[str, Callable[[Path], Any]] = {
     "ablations": AblationComparison.read,
     "clinical": ClinicalEvaluation.read,
     "extrapolation": Extrapolation.read,
-    "benchmark": SurrogateBenchmark.read,
-    "fe_clinical": ClinicalBenchmark.read,
+    "surrogate_benchmark": SurrogateBenchmark.read,
+    "fe_clinical": FEClinical.read,
     "fe_speed_accuracy": SpeedAccuracy.read,
     "fe_convergence_map": ConvergenceMap.read,
     "fe_failure_edges": SweepEdges.read,

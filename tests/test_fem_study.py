@@ -260,7 +260,7 @@ def test_error_falls_with_mesh_size_against_a_finer_reference(
     from fem.parameters import Discretisation, SolverSettings
     from fem.sweep import Case
     from studies.fe_study.accuracy import observed_rates
-    from studies.fe_study.fe_benchmark import accuracy_at_vertices
+    from studies.fe_study.fe_clinical import accuracy_at_vertices
 
     case = Case(5.0, 180.0)
     fine = CaseRunner(mesh_ladder[0.02], SolverSettings(discretisation=Discretisation(degree=3)))

@@ -14,7 +14,7 @@ from typing import Any
 
 import pytest
 
-from studies.fe_study.fe_benchmark import ClinicalBenchmark
+from studies.fe_study.fe_clinical import FEClinical
 from studies.fe_study.fe_speed_accuracy import SpeedAccuracy
 from studies.machine import MachineState, machine_state
 from studies.results import Record, Result, ResultFormatError
@@ -127,14 +127,14 @@ def _clinical_benchmark() -> dict[str, Any]:
 
 def test_the_fe_clinical_benchmark_names_a_renamed_accuracy_key(tmp_path: Path) -> None:
     data = _clinical_benchmark()
-    bench = ClinicalBenchmark.from_json(data)
+    bench = FEClinical.from_json(data)
     assert bench.cases[0].accuracy.relative_max_error == 0.017
-    assert ClinicalBenchmark.from_json(bench.to_json()) == bench
+    assert FEClinical.from_json(bench.to_json()) == bench
     accuracy = data["cases"][0]["accuracy"]
     accuracy["relative_error"] = accuracy.pop("relative_max_error")
     (tmp_path / "clinical.json").write_text(json.dumps(data))
     with pytest.raises(ResultFormatError, match=r"clinical.json.cases\[0\].accuracy"):
-        ClinicalBenchmark.read(tmp_path / "clinical.json")
+        FEClinical.read(tmp_path / "clinical.json")
 
 
 def test_the_report_refuses_a_result_whose_key_was_renamed(tmp_path: Path) -> None:

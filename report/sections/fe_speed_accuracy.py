@@ -106,7 +106,7 @@ def _fe_clinical_tables(ctx: Context) -> str:
     """The default configuration on the clinical cases: targets, then one row per case."""
     fe = ctx.results.get("fe_clinical")
     if fe is None:
-        return missing("results/fe_study/clinical.json")
+        return missing("results/fe_study/fe_clinical.json")
     out = [para(
         "The clinical cases solved with the sweep's own settings, timed on one core; each is "
         f"solved again with a fixed {fe.baseline_steps}-step Newton baseline in "

@@ -130,10 +130,10 @@ def _table3(ctx: Context) -> str:
 
 
 def _table4(ctx: Context) -> str:
-    bench = ctx.results.get("benchmark")
+    bench = ctx.results.get("surrogate_benchmark")
     out = [h3("Table 4: wall time per case")]
     if bench is None:
-        return "".join(out) + missing("results/surrogate/benchmark.json")
+        return "".join(out) + missing("results/surrogate/surrogate_benchmark.json")
     speed = bench.speed
     if not speed:
         return "".join(out) + para("The benchmark holds no timed case.", "note")

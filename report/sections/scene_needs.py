@@ -39,7 +39,7 @@ def candidates(ctx: Context) -> list[Candidate]:
     """Every model with clinical-case errors and a cost on record."""
     out = []
     clinical = ctx.results.get("clinical")
-    bench = ctx.results.get("benchmark")
+    bench = ctx.results.get("surrogate_benchmark")
     study = ctx.results.get("table2")
     for split, name in (("by_sample", "surrogate, by-sample split"),
                         ("by_case", "surrogate, by-case split (clinical cases unseen)")):

@@ -17,7 +17,7 @@ from typing import Any
 from fem.overlap import self_overlap
 from fem.parameters import SolverSettings
 from fem.sweep import Case
-from studies.fe_study.fe_benchmark import TARGETS, accuracy_at_vertices
+from studies.fe_study.fe_clinical import TARGETS, accuracy_at_vertices
 from studies.fe_study.fe_timing import TimedSolve, timed_solve
 from studies.fe_study.fe_variants import FEVariant
 from studies.machine import machine_state, timed_on_one_core

@@ -60,7 +60,7 @@ class SpeedRow(Record):
 
 @dataclass(frozen=True, slots=True)
 class SurrogateBenchmark(Result):
-    """``results/surrogate/benchmark.json``: the surrogate's goals measured in one job."""
+    """``results/surrogate/surrogate_benchmark.json``: the surrogate's goals measured in one job."""
 
     machine: MachineState
     selected_architecture: str

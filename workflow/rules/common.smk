@@ -137,7 +137,7 @@ def all_cores():
 
 # -- FE study (fe_study.smk) ---------------------------------------------------------------
 FE_STUDY_DIR = "results/fe_study"
-FE_CLINICAL_JSON = f"{FE_STUDY_DIR}/clinical.json"
+FE_CLINICAL_JSON = f"{FE_STUDY_DIR}/fe_clinical.json"
 FE_SPEED_ACCURACY_JSON = f"{FE_STUDY_DIR}/speed_accuracy.json"
 FE_CONVERGENCE_MAP_JSON = f"{FE_STUDY_DIR}/convergence_map.json"
 FE_FAILURE_EDGES_JSON = f"{FE_STUDY_DIR}/failure_edges.json"
@@ -197,7 +197,7 @@ MODEL_BY_CASE_ARRAYS = f"{SURROGATE_DIR}/model_by_case/params.npz"
 CLINICAL_JSON = f"{SURROGATE_DIR}/clinical.json"
 EXTRAPOLATION_JSON = f"{SURROGATE_DIR}/extrapolation.json"
 ABLATIONS_JSON = f"{SURROGATE_DIR}/ablations.json"
-BENCHMARK_JSON = f"{SURROGATE_DIR}/benchmark.json"
+SURROGATE_BENCHMARK_JSON = f"{SURROGATE_DIR}/surrogate_benchmark.json"
 HELD_OUT_JSON = f"{SURROGATE_DIR}/held_out.json"
 POSTURES_JSON = f"{SURROGATE_DIR}/postures.json"
 OFF_GRID_JSON = f"{SURROGATE_DIR}/off_grid.json"
@@ -270,5 +270,5 @@ def clinical_fields():
                   split=["by_sample", "by_case"], case=clinical_ids(), ext=["xdmf", "h5"])
 
 
-SURROGATE_RESULTS = [STUDY_TABLE, ABLATIONS_JSON, CLINICAL_JSON, EXTRAPOLATION_JSON, BENCHMARK_JSON,
+SURROGATE_RESULTS = [STUDY_TABLE, ABLATIONS_JSON, CLINICAL_JSON, EXTRAPOLATION_JSON, SURROGATE_BENCHMARK_JSON,
                      HELD_OUT_JSON, POSTURES_JSON, OFF_GRID_JSON, WARNING_COVERAGE_JSON]

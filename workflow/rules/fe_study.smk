@@ -2,8 +2,8 @@
 # accuracy against a refined reference), speed against accuracy over mesh sizes x elements x
 # solver presets, and convergence maps over (C1, Phi) for adaptive and fixed-step loading.
 # Benchmarks, not tests: `snakemake -j2 fe_study` runs them alone; the report needs them. The
-# library code is in studies/ (fe_benchmark, fe_speed_accuracy, convergence_map); JSON results land
-# in results/fe_study/.
+# library code is in studies/ (fe_clinical, fe_speed_accuracy,
+# convergence_map); JSON results land in results/fe_study/.
 wildcard_constraints:
     fe_mesh=MESH_ID_PATTERN,
     fe_variant=FE_VARIANT_ID_PATTERN,

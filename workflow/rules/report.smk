@@ -29,7 +29,7 @@ rule report:
         postures=POSTURES_JSON,
         off_grid=OFF_GRID_JSON,
         warning_coverage=WARNING_COVERAGE_JSON,
-        benchmark=BENCHMARK_JSON,
+        surrogate_benchmark=SURROGATE_BENCHMARK_JSON,
         clinical_fields=clinical_fields(),
         fe_clinical=FE_CLINICAL_JSON,
         fe_speed_accuracy=FE_SPEED_ACCURACY_JSON,

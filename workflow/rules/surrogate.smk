@@ -80,7 +80,7 @@ rule architecture_study:
     conda:
         ENV
     script:
-        "../scripts/study_table.py"
+        "../scripts/architecture_study.py"
 
 
 # The model used downstream: the selected architecture's best run, trained again on its
@@ -336,7 +336,7 @@ rule surrogate_benchmark:
         clinical=CLINICAL_JSON,
         ablations=ABLATIONS_JSON,
     output:
-        BENCHMARK_JSON,
+        SURROGATE_BENCHMARK_JSON,
     params:
         clinical=CONFIG.section("clinical"),
         repeats=CONFIG.surrogate_study.timing_repeats,
@@ -344,11 +344,11 @@ rule surrogate_benchmark:
         material=CONFIG.section("material"),
         fixed=CONFIG.section("mesh", "fixed"),
     log:
-        "results/logs/surrogate/benchmark.log",
+        "results/logs/surrogate/surrogate_benchmark.log",
     threads: 2
     resources:
         mem_mb=4000,
     conda:
         ENV
     script:
-        "../scripts/benchmark.py"
+        "../scripts/surrogate_benchmark.py"

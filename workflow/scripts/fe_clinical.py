@@ -7,7 +7,7 @@ import logging
 
 from fem.parameters import SolverSettings
 from run.joblog import job_log
-from studies.fe_study.fe_benchmark import clinical_benchmark
+from studies.fe_study.fe_clinical import fe_clinical
 from studies.fe_study.fe_reference import load_references
 from studies.machine import limit_blas_threads
 
@@ -17,7 +17,7 @@ logging.info("single-threaded BLAS: %s", limit_blas_threads(1))
 cases, references = load_references(
     snakemake.params.clinical, snakemake.input.references, snakemake.input.reference_mesh
 )
-result = clinical_benchmark(
+result = fe_clinical(
     snakemake.input.mesh,
     SolverSettings.from_config(snakemake.params.config),
     cases,

@@ -4,7 +4,7 @@ Everything here is measured, nothing is assumed:
 
 * :func:`solve_reference` solves the clinical cases on a refined discretisation and
   evaluates its displacement at the material points (the default mesh's vertices);
-* :func:`clinical_benchmark` times the clinical cases at the default settings on one
+* :func:`fe_clinical` times the clinical cases at the default settings on one
   core, each followed by the same case with a fixed 10-step Newton baseline in the same
   process (so their ratio is free of machine speed), and compares the displacement
   with the reference;
@@ -67,8 +67,8 @@ class ClinicalSummary(Record):
 
 
 @dataclass(frozen=True, slots=True)
-class ClinicalBenchmark(Result):
-    """``results/fe_study/clinical.json``: the default discretisation on the clinical cases."""
+class FEClinical(Result):
+    """``results/fe_study/fe_clinical.json``: the default discretisation on the clinical cases."""
 
     mesh: str
     dofs: int
@@ -107,7 +107,7 @@ def accuracy_at_vertices(runner: Any, reference: Any | None) -> dict[str, Any] |
 
 
 @timed_on_one_core
-def clinical_benchmark(
+def fe_clinical(
     mesh_path: str | Path,
     settings: SolverSettings,
     cases: list[Case],
@@ -115,7 +115,7 @@ def clinical_benchmark(
     baseline_steps: int = 10,
     repeats: int = 1,
     labels: dict[str, str] | None = None,
-) -> ClinicalBenchmark:
+) -> FEClinical:
     """Time and check the clinical cases at the default discretisation.
 
     Args:
@@ -212,4 +212,4 @@ def clinical_benchmark(
         "labels": dict(labels or {}),
     }
     runner.solver.destroy()
-    return ClinicalBenchmark.from_json(out)
+    return FEClinical.from_json(out)

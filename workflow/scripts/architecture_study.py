@@ -12,7 +12,7 @@ from studies.surrogate_study.architecture import (
 from studies.surrogate_study.timing import time_on_one_core
 
 job_log(snakemake.log[0])
-log = logging.getLogger("study_table")
+log = logging.getLogger("architecture_study")
 
 table = architecture_table(read_run(path) for path in snakemake.input.runs)
 queries = [(c["C1"], c["phi"], c.get("theta", 0.0)) for c in snakemake.params.clinical] or [

@@ -36,5 +36,5 @@ bench = run_benchmark(
 bench["ablations"] = AblationComparison.read(snakemake.input.ablations).to_json()
 SurrogateBenchmark.from_json(bench).write(snakemake.output[0])
 text = format_benchmark(bench)
-logging.getLogger("benchmark").info("\n%s", text)
+logging.getLogger("surrogate_benchmark").info("\n%s", text)
 print(text, flush=True)
