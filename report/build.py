@@ -25,6 +25,7 @@ import jinja2
 from report.context import INPUT_NAMES, Context
 from report.html import para
 from report.sections.corpus import corpus_section
+from report.sections.extrapolation import extrapolation_section
 from report.sections.fe_speed_accuracy import fe_speed_accuracy_section
 from report.sections.generalisation import generalisation_section
 from report.sections.mesh import mesh_section
@@ -68,6 +69,7 @@ SECTIONS: tuple[tuple[str, str, Callable[[Context], str]], ...] = (
      surrogate_speed_accuracy_section),
     ("generalisation", "The surrogate between its cases and in every posture",
      generalisation_section),
+    ("extrapolation", "The surrogate outside its training data", extrapolation_section),
     ("scene-needs", "Model no more than a scene needs", scene_needs_section),
     ("stability", "Stability", stability_section),
     ("corpus", "A corpus of anatomies", corpus_section),

@@ -358,6 +358,7 @@ REPORT_SECTIONS = (
     "Surrogate training",
     "From the imaged shape to the reference state",
     "The surrogate between its cases and in every posture",
+    "The surrogate outside its training data",
     "What the skin changes",
 )
 

@@ -12,7 +12,6 @@ import numpy as np
 from report.common import PAPER_C1_RANGE
 from report.context import Context
 from report.html import fmt, h3, missing, para, pct, table
-from report.sections.extrapolation import extrapolation_section
 from report.sections.fold import fold_section_section
 from studies.figures import fe as fem_plots
 
@@ -84,8 +83,6 @@ def stability_section(ctx: Context) -> str:
     out.append(fold_section_section(ctx))
     out.append(h3("Are the sweep's converged states stable?"))
     out.append(stability_audit_section(ctx.results.get("fe_stability_audit")))
-    out.append(h3("Surrogate outside its training data"))
-    out.append(extrapolation_section(ctx))
     return "".join(out)
 
 
