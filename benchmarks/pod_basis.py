@@ -4,10 +4,11 @@
         [--by-c1 MODEL] [--outside DIR] [--centroids] [--config config.yaml]
         [--set KEY=VALUE ...] [--json OUT]
 
-A ``pod`` surrogate (:mod:`surrogate.pod`) takes the leading POD modes of the training cases'
-fields as its basis and trains a branch network of (C1, ĝ) for their weights. This benchmark
-fits such models with the ``surrogate`` settings of ``--config`` (structure forced to ``pod``,
-``--set`` overriding any) and measures them beside trained models of any structure:
+A ``pod`` surrogate (:mod:`surrogate.structures.pod`) takes the leading POD modes of the
+training cases' fields as its basis and trains a branch network of (C1, ĝ) for their weights.
+This benchmark fits such models with the ``surrogate`` settings of ``--config`` (structure
+forced to ``pod``, ``--set`` overriding any) and measures them beside trained models of any
+structure:
 
 * per the dataset's ``by_direction`` and ``by_c1`` splits, one fitted on the split's training
   cases (stopping early on its validation cases) and measured on its test cases, with the model
@@ -60,7 +61,7 @@ def fit(ds: Dataset, train: Sequence[int], validation: Sequence[int],
         ValueError: if a case did not converge, or there are fewer training cases than modes.
     """
     from surrogate.checkpoint import in_memory
-    from surrogate.pod import fit as fit_pod
+    from surrogate.structures.pod import fit as fit_pod
 
     result = fit_pod(ds, config.replace(structure="pod"), np.asarray(train),
                      np.asarray(validation))

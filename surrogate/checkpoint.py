@@ -26,7 +26,8 @@ from fem.dataset import Dataset
 from surrogate.config import SurrogateConfig
 from surrogate.data import Normalisation
 from surrogate.exceptions import ModelFileError, SurrogateConfigError
-from surrogate.model import Params, from_arrays, to_arrays
+from surrogate.model import Params
+from surrogate.structures import structure_for
 from surrogate.training_range import check_record
 
 if TYPE_CHECKING:  # training code is not needed to save or load a model
@@ -105,7 +106,7 @@ def save_model(folder: str | Path, result: TrainResult, ds: Dataset) -> Path:
         points_boundary=ds.boundary,
         points_node_index=node_index,
         **extra,
-        **to_arrays(result.params),
+        **structure_for(result.config).to_arrays(result.params),
     )
     meta = {
         "format_version": FORMAT_VERSION,
@@ -240,7 +241,8 @@ def load_checkpoint(folder: str | Path) -> Checkpoint:
     try:
         config = SurrogateConfig.from_mapping(meta["config"])
         points = {k: arrays.pop(k) for k in list(arrays) if k.startswith(("points_", "mesh_"))}
-        params = from_arrays(arrays, config)
+        structure = structure_for(config)
+        params = structure.from_arrays(arrays)
         norm = Normalisation.from_dict(meta["normalisation"])
         trained = check_record(meta.get("training_range", {}))
         X, boundary = points["points_X"], points["points_boundary"]
@@ -249,10 +251,9 @@ def load_checkpoint(folder: str | Path) -> Checkpoint:
     if X.shape != (meta.get("n_points", X.shape[0]), 3) or boundary.shape != (X.shape[0],):
         raise ModelFileError(f"{folder}: material points do not match n_points")
     basis, cells = points.get("points_basis"), points.get("mesh_cells")
-    if config.structure == "pod" and (basis is None or basis.shape != (len(X), 3, config.modes)
-                                      or not np.all(np.isfinite(basis))):
-        raise ModelFileError(f"{folder}: a pod model needs its modes as points_basis, finite, "
-                             f"of shape {(len(X), 3, config.modes)}")
+    wrong = structure.check_saved(basis, len(X))
+    if wrong:
+        raise ModelFileError(f"{folder}: {wrong}")
     if cells is not None and (cells.ndim != 2 or cells.shape[1] != 4 or cells.min() < 0
                               or cells.max() >= len(X)):
         raise ModelFileError(f"{folder}: mesh_cells are not tetrahedra of its points")

@@ -172,11 +172,12 @@ def train(args: argparse.Namespace) -> int:
     configure_cpu(single_thread=True)  # before JAX's first computation: one core
     from fem.dataset import read_dataset
     from surrogate.checkpoint import save_model
+    from surrogate.structures import structure_for
     from surrogate.train import train_and_evaluate
 
     try:
         config, overrides = settings(args.config, args.set)
-        dataset = read_dataset(args.dataset, nodes=config.structure == "pod")
+        dataset = read_dataset(args.dataset, nodes=structure_for(config).reads_nodes)
         result = train_and_evaluate(dataset, config, progress=args.progress)
     except (OSError, SurrogateError, DatasetError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)

@@ -8,6 +8,7 @@ from typing import Any
 
 from fem.splits import SPLIT_KINDS
 from surrogate.exceptions import SurrogateConfigError
+from surrogate.structures import STRUCTURES as STRUCTURE_ENTRIES
 
 ACTIVATIONS = ("tanh", "relu", "gelu", "silu")
 BOUNDARY_MODES = ("network", "shared", "exact")
@@ -15,7 +16,8 @@ LR_SCHEDULES = ("constant", "cosine", "exponential")
 C1_ENCODINGS = ("linear", "log", "inverse")
 OUTPUT_SCALINGS = ("none", "compliance")
 OUTPUT_FORMS = ("vector", "gravity_linear")
-STRUCTURES = ("pointwise", "separable", "pod")
+STRUCTURES = tuple(STRUCTURE_ENTRIES)
+"""The structures' names, from their registry (:mod:`surrogate.structures`)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -55,7 +57,8 @@ class SurrogateConfig:
             rib as every FE field does, so ``boundary`` and ``alpha`` do not apply. Its unit of
             data is a whole case: with ``split: by_sample`` the ``by_case`` split's validation
             cases validate and every other case trains. It is trained by full-batch Adam on the
-            weights' squared error, an epoch being :data:`surrogate.pod.STEPS_PER_EPOCH` steps).
+            weights' squared error, an epoch being
+            :data:`surrogate.structures.pod.STEPS_PER_EPOCH` steps).
         modes: number of fields T_k of a ``separable`` or ``pod`` model.
         point_features: a ``separable`` model's point networks see, besides the point's
             standardised coordinates X, ``sin`` and ``cos`` of 2π X·b for this many random
@@ -151,14 +154,16 @@ class SurrogateConfig:
             raise SurrogateConfigError(
                 f"surrogate.point_features must be a non-negative integer, got "
                 f"{self.point_features!r}")
-        if self.structure == "pod" and self.boundary == "exact":
+        entry = STRUCTURE_ENTRIES[self.structure]
+        if self.boundary in entry.refused_boundaries:
             raise SurrogateConfigError(
-                "surrogate.boundary: exact does not apply to structure: pod (its modes vanish on "
-                "the rib as the FE fields do); leave boundary at network")
-        if self.point_features and self.structure != "separable":
+                f"surrogate.boundary: {self.boundary} does not apply to structure: "
+                f"{self.structure} {entry.refusal}")
+        if self.point_features and not entry.point_features:
+            takes = " or ".join(name for name, e in STRUCTURE_ENTRIES.items() if e.point_features)
             raise SurrogateConfigError(
-                "surrogate.point_features needs structure: separable (a pointwise network sees "
-                "the case beside the point)")
+                f"surrogate.point_features needs structure: {takes} (a {self.structure} model's "
+                "networks do not see the point alone)")
         frequency = self.point_frequency
         if isinstance(frequency, bool) or not isinstance(frequency, (int, float)) \
                 or not (math.isfinite(frequency) and frequency > 0):

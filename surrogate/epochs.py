@@ -1,8 +1,8 @@
 """What every structure's training shares: its result, its optimiser and its epoch loop.
 
-:func:`surrogate.train.train_and_evaluate` trains the networks with it, and
-:func:`surrogate.pod.train_pod` the ``pod`` model's weights: both build on this module, which
-neither of them is, so that neither imports the other's internals.
+:func:`surrogate.train.train_networks` trains the point networks with it, and
+:func:`surrogate.structures.pod.train_pod` the ``pod`` model's weights: both build on this module,
+which neither of them is, so that neither imports the other's internals.
 """
 
 from __future__ import annotations

@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from surrogate.model import boundary_network, point_frequencies, weighs_fields
 from surrogate.predict import Surrogate
+from surrogate.structures import structure_for
 
 FORMAT = "breast-surrogate-web"
 VERSION = 1
@@ -64,26 +64,19 @@ def export_web(model: Surrogate) -> dict[str, Any]:
             (:meth:`Surrogate.at`), which holds no modes at them.
     """
     config, norm = model.config, model.normalisation
-    if config.structure == "pod" and model.basis is None:
-        raise ValueError(f"a pod model asked at {len(model.X)} points, more than its mesh has "
-                         "nodes, holds no modes there to export: ask it at fewer points")
+    structure = structure_for(config)
     factor = np.ones(len(model.X)) if model.point_factor is None else model.point_factor
     parts: dict[str, dict[str, Any]] = {}
     members = {"domain": np.flatnonzero(~model.boundary)}
-    net = boundary_network(config)
+    net = structure.boundary_network()
     if net is not None and model.boundary.any():
         members["boundary"] = np.flatnonzero(model.boundary)
-    separable = weighs_fields(config)
-    frequencies = point_frequencies(config)
     for part, index in members.items():
         parts[part] = {
             "points": encode_array(index, "int32"),
             "gain": encode_array(factor[index] * norm.u_scale, "float32"),
+            **structure.web_part(model, index, "domain" if part == "domain" else net),
         }
-        if config.structure == "pod":
-            parts[part]["modes"] = encode_array(model.basis[index], "float32")
-        else:
-            parts[part]["layers"] = _layers(model.params["domain" if part == "domain" else net])
     checks = model.trained.range_checks()
     return {
         "format": FORMAT,
@@ -92,12 +85,8 @@ def export_web(model: Surrogate) -> dict[str, Any]:
         "activation": config.activation,
         "boundary": config.boundary,
         "output_form": config.output_form,
-        "structure": config.structure,
-        "modes": config.modes if separable else None,
-        "branch": _layers(model.params["branch"]) if separable else None,
-        # (3, F) frequencies of the point networks' Fourier features, or null
-        "point_frequencies": None if frequencies is None else encode_array(frequencies,
-                                                                            "float32"),
+        "structure": structure.name,
+        **structure.web_fields(model),
         "n_points": int(len(model.X)),
         "X_m": encode_array(model.X, "float32"),
         "points_standardised": encode_array(norm.points(model.X), "float32"),
@@ -114,7 +103,8 @@ def export_web(model: Surrogate) -> dict[str, Any]:
     }
 
 
-def _layers(layers: Any) -> list[dict[str, Any]]:
+def encode_layers(layers: Any) -> list[dict[str, Any]]:
+    """A network's layers as the page reads them: ``[{W, b}, ...]``, each encoded."""
     return [
         {"W": encode_array(np.asarray(W), "float32"), "b": encode_array(np.asarray(b), "float32")}
         for W, b in layers

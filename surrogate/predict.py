@@ -32,14 +32,7 @@ import numpy as np
 
 from surrogate.checkpoint import Checkpoint, load_checkpoint
 from surrogate.exceptions import ExtrapolationWarning, ModelFileError
-from surrogate.model import (
-    ACTIVATIONS,
-    boundary_network,
-    branch_weights,
-    mlp,
-    point_inputs,
-    weighs_fields,
-)
+from surrogate.structures import structure_for
 from surrogate.training_range import TrainingRange
 
 
@@ -99,68 +92,24 @@ class Surrogate:
         factor = (
             np.ones(len(self.X), np.float32) if self.point_factor is None else self.point_factor
         )
-        act = ACTIVATIONS[config.activation]
         u_scale = np.float32(norm.u_scale)
+        structure = structure_for(config)
 
-        def split_first(layers, idx, gain):
-            W0, b0 = (np.asarray(a, np.float32) for a in layers[0])
-            pre = pts[idx] @ W0[:3] + b0  # point part of the first layer, once per mesh
-            return {
-                "pre": jnp.asarray(pre),
-                "Wc": jnp.asarray(W0[3:]),
-                "rest": [(jnp.asarray(W), jnp.asarray(b)) for W, b in layers[1:]],
-                "gain": jnp.asarray((gain * u_scale).astype(np.float32)[:, None]),
-            }
+        def prepare(layers, idx):
+            basis = None if self.basis is None else self.basis[idx]
+            return structure.query_part(layers, pts[idx], factor[idx], u_scale, basis)
 
-        def fields_of(layers, idx, gain):
-            # a separable model's fields at the points, once per mesh, gain and 1/√modes
-            # included, as one (n · 3, modes) matrix: a query is then one matrix-vector product
-            # (XLA's CPU backend runs a rank-3 contraction several times slower)
-            fields = np.asarray(mlp(layers, point_inputs(jnp.asarray(pts[idx]), config),
-                                    config.activation))
-            fields = fields.reshape(len(idx), 3, config.modes) / math.sqrt(config.modes)
-            fields = fields * (gain * u_scale)[:, None, None]
-            return {"fields": jnp.asarray(fields.reshape(-1, config.modes).astype(np.float32))}
-
-        def modes_of(_, idx, gain):
-            # a pod model's modes at the points, gain included, as fields_of lays them out
-            modes = self.basis[idx] * (gain * u_scale)[:, None, None]
-            return {"fields": jnp.asarray(modes.reshape(-1, config.modes).astype(np.float32,
-                                                                                copy=False))}
-
-        separable = weighs_fields(config)
-        prepare = {"separable": fields_of, "pod": modes_of}.get(config.structure, split_first)
-        parts = {"domain": prepare(self.params.get("domain"), domain, factor[domain])}
-        net = None if self._clamped_zero else boundary_network(config)
+        parts = {"domain": prepare(self.params.get("domain"), domain)}
+        net = None if self._clamped_zero else structure.boundary_network()
         if net is not None and bound.size:
-            parts["boundary"] = prepare(self.params[net], bound, factor[bound])
-        if separable:
+            parts["boundary"] = prepare(self.params[net], bound)
+        if structure.weighs_fields:
             parts["branch"] = self.params["branch"]
         n_bound = int(bound.size)
         inverse_j = jnp.asarray(inverse.astype(np.int32))
 
-        linear_in_gravity = config.output_form == "gravity_linear"
-
-        def forward(part, c):
-            h = act(part["pre"] + c[:4] @ part["Wc"])
-            for W, b in part["rest"][:-1]:
-                h = act(h @ W + b)
-            W, b = part["rest"][-1]
-            if linear_in_gravity:  # M ĝ: the last layer contracted with ĝ, once per query
-                W = W.reshape(W.shape[0], 3, 3) @ c[1:4]
-                b = b.reshape(3, 3) @ c[1:4]
-            return (h @ W + b) * (part["gain"] * c[4])
-
         def run(parts, c):
-            if separable:  # the branch once, then one weighted sum of the fields per part
-                weights = branch_weights(parts["branch"], c[None, :4], config)[0] * c[4]
-                out = [(parts["domain"]["fields"] @ weights).reshape(-1, 3)]
-                if "boundary" in parts:
-                    out.append((parts["boundary"]["fields"] @ weights).reshape(-1, 3))
-            else:
-                out = [forward(parts["domain"], c)]
-                if "boundary" in parts:
-                    out.append(forward(parts["boundary"], c))
+            out = structure.answer(parts, c)
             if "boundary" not in parts and n_bound:
                 out.append(jnp.zeros((n_bound, 3), jnp.float32))
             return jnp.take(jnp.concatenate(out), inverse_j, axis=0)
@@ -212,45 +161,14 @@ class Surrogate:
             from surrogate.data import dirichlet_factor
 
             factor = dirichlet_factor(self.X, self.boundary, c.config.bc_length, at=points)
-        basis = None
-        if c.config.structure == "pod":
-            from surrogate.interpolation import (
-                interpolate,
-                interpolation_matrix,
-                locate,
-                locate_quadratic,
-            )
-
-            if c.nodes is not None:
-                nodes = c.nodes.X, c.nodes.basis
-                where = locate_quadratic(c.nodes.X, c.nodes.cells, points)
-            elif c.cells is not None:
-                nodes = self.X, c.basis
-                where = locate(self.X, c.cells, points)
-            else:
-                raise ValueError(
-                    "this pod model answers at its material points only: its dataset has no "
-                    "mesh cells to interpolate its modes in (rebuild the dataset with its mesh, "
-                    "snakemake --forcerun aggregate, and train again)")
-            if len(points) > len(nodes[0]):
-                # more points than nodes: the field at the nodes, then at the points (the same
-                # sum by linearity), in memory and time that grow with the points as 3 values
-                # each, not as 3 × modes
-                return Surrogate(replace(
-                    c, X=nodes[0], boundary=np.zeros(len(nodes[0]), dtype=bool),
-                    point_factor=None, node_index=None, basis=nodes[1], cells=None, nodes=None,
-                ), clamped_zero=True,
-                    between=(points, interpolation_matrix(*where, len(nodes[0]))))
-            basis = interpolate(nodes[1], *where).astype(np.float32, copy=False)
-        boundary = np.zeros(len(points), dtype=bool)
-        if c.config.structure != "pod" and c.cells is not None:
-            # the networks answer anywhere, but only the body is trained: a point outside is
-            # refused, and one on the chest wall's clamped face (a combination of boundary
-            # corners alone) answers zero, as FE has it
-            from surrogate.interpolation import locate
-
-            rows, weights = locate(self.X, c.cells, points)
-            boundary = np.where(self.boundary[rows], 0.0, weights).sum(axis=1) <= 1e-9
+        where = structure_for(c.config).placed(c, self.X, self.boundary, points)
+        if where.nodes is not None:
+            nodes, basis, matrix = where.nodes
+            return Surrogate(replace(
+                c, X=nodes, boundary=np.zeros(len(nodes), dtype=bool), point_factor=None,
+                node_index=None, basis=basis, cells=None, nodes=None,
+            ), clamped_zero=True, between=(points, matrix))
+        boundary, basis = where.boundary, where.basis
         return Surrogate(replace(
             c, X=points, boundary=boundary,
             point_factor=None if factor is None else factor.astype(np.float32),

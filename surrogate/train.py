@@ -6,8 +6,10 @@ validation loss (Eq. 2), best weights kept. A learning-rate schedule is an optio
 
 Each batch holds domain and boundary samples in their training proportions, as the
 authors' code draws one batch from each set per step; every network is then
-evaluated only on its own samples (:func:`surrogate.model.split_loss`). One epoch is
-a single jitted ``lax.scan`` over :func:`train_step`, so Python runs once per epoch.
+evaluated only on its own samples (:meth:`surrogate.structures.base.Structure.split_loss`). One
+epoch is a single jitted ``lax.scan``, the structure's (its ``epoch_plan``), so Python runs once
+per epoch. A ``pod`` model trains its own way
+(:mod:`surrogate.structures.pod`).
 All randomness (initial weights, shuffling) is split from ``config.seed``.
 """
 
@@ -16,7 +18,7 @@ from __future__ import annotations
 import logging
 import time
 from functools import partial
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import jax
 import jax.numpy as jnp
@@ -33,17 +35,11 @@ from surrogate.epochs import (
     make_optimizer,
     run_epochs,
 )
-from surrogate.model import (
-    Params,
-    Part,
-    PointOrder,
-    boundary_network,
-    grid_loss,
-    init_params,
-    pointwise_error,
-    samples_network,
-    split_loss,
-)
+from surrogate.model import Params, pointwise_error
+from surrogate.structures import structure_for
+
+if TYPE_CHECKING:
+    from surrogate.structures.base import Structure
 
 log = logging.getLogger(__name__)
 
@@ -59,132 +55,16 @@ def init(
     """
     key = jax.random.PRNGKey(config.seed)
     key, init_key = jax.random.split(key)
-    params = init_params(init_key, config)
+    params = structure_for(config).init_params(init_key)
     optimizer = make_optimizer(config, steps_per_epoch)
     return params, optimizer, optimizer.init(params), key
 
 
-def train_step(
-    params: Params,
-    opt_state: Any,
-    domain: Part,
-    boundary: Part | None,
-    tables: Tables,
-    *,
-    config: SurrogateConfig,
-    optimizer: optax.GradientTransformation,
-) -> tuple[Params, Any, jax.Array]:
-    """One Adam step on one batch (domain part and boundary part); returns the loss."""
-    value, grads = jax.value_and_grad(split_loss)(params, domain, boundary, config, tables)
-    updates, opt_state = optimizer.update(grads, opt_state, params)
-    return optax.apply_updates(params, updates), opt_state, value
-
-
-def _batches(key: jax.Array, n: int, per_step: int, steps: int) -> jax.Array:
+def batches(key: jax.Array, n: int, per_step: int, steps: int) -> jax.Array:
     """Shuffled indices (steps, per_step), wrapping around so that every step has one shape."""
     perm = jax.random.permutation(key, n)
     reps = -(-steps * per_step // n)
     return jnp.tile(perm, reps)[: steps * per_step].reshape(steps, per_step)
-
-
-@partial(jax.jit, static_argnames=("config", "optimizer", "per_step", "steps"))
-def train_epoch(
-    params: Params,
-    opt_state: Any,
-    key: jax.Array,
-    domain: Part,
-    boundary: Part | None,
-    tables: Tables,
-    *,
-    config: SurrogateConfig,
-    optimizer: optax.GradientTransformation,
-    per_step: tuple[int, int],
-    steps: int,
-) -> tuple[Params, Any, jax.Array]:
-    """One pass over the training samples: a ``lax.scan`` of :func:`train_step`."""
-    k_domain, k_boundary = jax.random.split(key)
-    order_d = _batches(k_domain, domain[0].shape[0], per_step[0], steps)
-    if boundary is None:
-        order_b = jnp.zeros((steps, 0), jnp.int32)
-    else:
-        order_b = _batches(k_boundary, boundary[0].shape[0], per_step[1], steps)
-
-    def step(carry, idx):
-        params, opt_state = carry
-        i_d, i_b = idx
-        part_b = None if boundary is None else tuple(a[i_b] for a in boundary)
-        params, opt_state, value = train_step(
-            params,
-            opt_state,
-            tuple(a[i_d] for a in domain),
-            part_b,
-            tables,
-            config=config,
-            optimizer=optimizer,
-        )
-        return (params, opt_state), value
-
-    (params, opt_state), losses = jax.lax.scan(step, (params, opt_state), (order_d, order_b))
-    return params, opt_state, jnp.mean(losses)
-
-
-PART_FIELDS = ("x", "y", "gain", "point", "case")
-"""The :class:`Samples` fields of a batch part, in :data:`surrogate.model.Part` order."""
-
-
-def case_grid(
-    samples: Samples, n_points: int, use_rib: bool
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Training samples laid out as whole cases for a separable model's :func:`grid_loss`.
-
-    Returns ``(case rows (C,), targets (C, N, 3), gains (C, N), member (C, N))``: ``member``
-    marks the (case, point) pairs that are training samples; rib samples are left out where
-    no network predicts them (``use_rib`` False), as the pointwise path leaves them out.
-    """
-    cases, row = np.unique(samples.case, return_inverse=True)
-    y = np.zeros((len(cases), n_points, 3), np.float32)
-    gain = np.zeros((len(cases), n_points), np.float32)
-    member = np.zeros((len(cases), n_points), np.float32)
-    y[row, samples.point] = samples.y
-    gain[row, samples.point] = samples.gain
-    member[row, samples.point] = 1.0 if use_rib else (~samples.boundary).astype(np.float32)
-    return cases.astype(np.int32), y, gain, member
-
-
-def point_order(boundary: np.ndarray) -> PointOrder:
-    """The rows each point network of a separable model takes (:class:`PointOrder`)."""
-    domain, rib = np.flatnonzero(~boundary), np.flatnonzero(boundary)
-    inverse = np.argsort(np.concatenate([domain, rib]))
-    return PointOrder(*(jnp.asarray(a.astype(np.int32)) for a in (domain, rib, inverse)),
-                      jnp.asarray(boundary, bool))
-
-
-@partial(jax.jit, static_argnames=("config", "optimizer", "per_step", "steps"))
-def train_epoch_grid(
-    params: Params,
-    opt_state: Any,
-    key: jax.Array,
-    grid: tuple[jax.Array, jax.Array, jax.Array, jax.Array],
-    order: PointOrder,
-    tables: Tables,
-    *,
-    config: SurrogateConfig,
-    optimizer: optax.GradientTransformation,
-    per_step: int,
-    steps: int,
-) -> tuple[Params, Any, jax.Array]:
-    """One pass over a separable model's training cases, ``per_step`` whole cases a step."""
-
-    def step(carry, idx):
-        params, opt_state = carry
-        batch = tuple(a[idx] for a in grid)
-        value, grads = jax.value_and_grad(grid_loss)(params, batch, tables, order, config)
-        updates, opt_state = optimizer.update(grads, opt_state, params)
-        return (optax.apply_updates(params, updates), opt_state), value
-
-    order_c = _batches(key, grid[0].shape[0], per_step, steps)
-    (params, opt_state), losses = jax.lax.scan(step, (params, opt_state), order_c)
-    return params, opt_state, jnp.mean(losses)
 
 
 @partial(jax.jit, static_argnames=("net", "config"))
@@ -193,7 +73,7 @@ def _error_sum(params, part, w, tables, *, net, config):
     pred = (
         jnp.zeros_like(y)
         if net is None
-        else samples_network(params, net, part, tables, config) * g[:, None]
+        else structure_for(config).samples_network(params, net, part, tables) * g[:, None]
     )
     return jnp.sum(w * pointwise_error(pred, y))
 
@@ -207,7 +87,7 @@ def error_sums(
     every set.
     """
     sums = []
-    for on_boundary, net in ((False, "domain"), (True, boundary_network(config))):
+    for on_boundary, net in ((False, "domain"), (True, structure_for(config).boundary_network())):
         part = samples.subset(samples.boundary == on_boundary)
         total = 0.0
         for start in range(0, len(part), EVAL_CHUNK):
@@ -296,7 +176,9 @@ def train_and_evaluate(
             keep the weights of the lowest validation loss (a ``pod`` model: of the lowest
             validation error in mm).
 
-    A ``pod`` model is fitted by :func:`surrogate.pod.train_pod`.
+    The model's structure trains it (:meth:`surrogate.structures.base.Structure.train`): a
+    ``pod`` model by :func:`surrogate.structures.pod.train_pod`, the others by
+    :func:`train_networks`.
 
     Raises:
         ValueError: if the chosen split has no training or validation samples, or
@@ -305,39 +187,30 @@ def train_and_evaluate(
     if refit_epochs is not None and (isinstance(refit_epochs, bool)
                                      or not isinstance(refit_epochs, int) or refit_epochs < 1):
         raise ValueError(f"refit_epochs must be a positive integer, got {refit_epochs!r}")
-    if config.structure == "pod":
-        from surrogate.pod import train_pod  # it builds on this module
+    return structure_for(config).train(ds, progress, holdout, refit_epochs)
 
-        return train_pod(ds, config, progress, holdout, refit_epochs)
+
+def train_networks(
+    structure: Structure, ds: Dataset, progress: bool = True,
+    holdout: np.ndarray | None = None, refit_epochs: int | None = None,
+) -> TrainResult:
+    """Train a structure of point networks (:meth:`Structure.train`'s default).
+
+    Adam on its epochs (:meth:`Structure.epoch_plan`), early stopping on the validation loss,
+    best weights kept; with ``refit_epochs``, that many epochs on the training and validation
+    samples, the last weights kept (:func:`train_and_evaluate`).
+    """
+    config = structure.config
     start = time.perf_counter()
     norm, phi, train, val, train_cases = prepare(ds, config, holdout, refit_epochs is not None)
     inputs = Tables(*(jnp.asarray(a) for a in tables(ds, norm)))
-    use_boundary = boundary_network(config) is not None and bool(np.any(train.boundary))
-    if config.structure == "separable":
-        grid = case_grid(train, ds.n_points, use_boundary)
-        per_step = max(1, min(round(config.batch_size / ds.n_points), len(grid[0])))
-        steps = -(-len(grid[0]) // per_step)
-        data: tuple[Any, ...] = (tuple(jnp.asarray(a) for a in grid), point_order(ds.boundary))
-        epoch = train_epoch_grid
-        what = f"{len(grid[0])} cases on {ds.n_points} points, {steps} steps of {per_step} cases"
-    else:
-        domain = train.subset(~train.boundary)
-        bset = train.subset(train.boundary)
-        n_used = len(domain) + (len(bset) if use_boundary else 0)
-        batch = min(config.batch_size, n_used)
-        steps = -(-n_used // batch)
-        per_b = max(1, round(batch * len(bset) / n_used)) if use_boundary else 0
-        per_step = (batch - per_b, per_b)
-        data = (
-            tuple(jnp.asarray(getattr(domain, f)) for f in PART_FIELDS),
-            tuple(jnp.asarray(getattr(bset, f)) for f in PART_FIELDS) if use_boundary else None,
-        )
-        epoch = train_epoch
-        what = f"{steps} steps of {per_step} samples"
+    use_boundary = structure.boundary_network() is not None and bool(np.any(train.boundary))
+    epoch, data, per_step, steps, what = structure.epoch_plan(train, ds.n_points, ds.boundary,
+                                                              use_boundary)
 
     params, optimizer, opt_state, key = init(config, steps)
     schedule = learning_rate_schedule(config, steps)
-    kwargs = dict(config=config, optimizer=optimizer, per_step=per_step, steps=steps)
+    kwargs = dict(structure=structure, optimizer=optimizer, per_step=per_step, steps=steps)
 
     result = TrainResult(
         params=params,
@@ -354,7 +227,7 @@ def train_and_evaluate(
         "%s %s (%s boundary): %d training samples (%d on the rib), %s per epoch, "
         "compiled in %.1f s",
         config.architecture,
-        config.structure,
+        structure.name,
         config.boundary,
         len(train),
         int(np.sum(train.boundary)),

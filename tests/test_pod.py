@@ -93,7 +93,7 @@ def test_the_dataset_keeps_its_meshs_tetrahedra(cube: tuple[Path, Path]) -> None
 
 
 def test_the_basis_holds_fields_in_its_span_exactly() -> None:
-    from surrogate.pod import fit_basis
+    from surrogate.structures.pod import fit_basis
 
     rng = np.random.default_rng(0)
     span = rng.normal(size=(3, 30))
@@ -313,7 +313,7 @@ def _card(folder: Path, edit: Any) -> None:
 
 
 def test_pod_settings_that_do_not_apply_are_refused(cube: tuple[Path, Path]) -> None:
-    from surrogate.pod import case_split, train_pod
+    from surrogate.structures.pod import case_split, train_pod
 
     with pytest.raises(SurrogateConfigError, match="exact does not apply to structure: pod"):
         CONFIG.replace(boundary="exact")
@@ -411,8 +411,8 @@ def test_a_refit_trains_on_the_validation_cases_for_the_epochs_chosen(
 
     from studies.surrogate_study.architecture import refit_model
     from studies.surrogate_study.held_out import trained_cases
-    from surrogate.pod import case_split
     from surrogate.predict import Surrogate
+    from surrogate.structures.pod import case_split
 
     ds, result, folder = trained
     train, validation = case_split(ds, CONFIG)

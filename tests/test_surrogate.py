@@ -62,28 +62,30 @@ def test_config_validation_names_the_key() -> None:
 
 def test_fourier_features_are_the_points_sines_and_cosines() -> None:
     """``point_inputs``: X, then sin and cos of 2π X·b, with b drawn from the seed alone."""
-    from surrogate.model import layer_sizes, point_frequencies, point_inputs
+    from surrogate.structures import structure_for
 
     config = SurrogateConfig(structure="separable", point_features=5, point_frequency=3.0)
-    b = point_frequencies(config)
-    assert b.shape == (3, 5) and np.array_equal(b, point_frequencies(config))
-    assert not np.array_equal(b, point_frequencies(config.replace(seed=1)))
+    structure = structure_for(config)
+    b = structure.point_frequencies()
+    assert b.shape == (3, 5) and np.array_equal(b, structure.point_frequencies())
+    assert not np.array_equal(b, structure_for(config.replace(seed=1)).point_frequencies())
     x = np.array([[0.1, -0.2, 0.3], [1.0, 0.0, -1.0]], np.float32)
     z = 2 * np.pi * x @ b
     expected = np.concatenate([x, np.sin(z), np.cos(z)], axis=1)
-    assert np.allclose(np.asarray(point_inputs(x, config)), expected, atol=1e-5)
-    assert layer_sizes(config)[0] == 13 and layer_sizes(config, "branch")[0] == 4
-    plain = config.replace(point_features=0)
-    assert point_frequencies(plain) is None and point_inputs(x, plain) is x
+    assert np.allclose(np.asarray(structure.point_inputs(x)), expected, atol=1e-5)
+    assert structure.layer_sizes()[0] == 13 and structure.layer_sizes("branch")[0] == 4
+    plain = structure_for(config.replace(point_features=0))
+    assert plain.point_frequencies() is None and plain.point_inputs(x) is x
 
 
 def test_loss_is_eq2() -> None:
     import jax.numpy as jnp
 
-    from surrogate.model import init_params, loss
+    from surrogate.structures import structure_for
 
     config = SurrogateConfig(hidden_layers=1, width=4, alpha=10.0, activation="tanh")
-    params = init_params(__import__("jax").random.PRNGKey(0), config)
+    structure = structure_for(config)
+    params = structure.init_params(__import__("jax").random.PRNGKey(0))
     # zero the output layers: predictions are 0, so the loss is the weighted mean target norm
     for net in params:
         W, b = params[net][-1]
@@ -91,7 +93,7 @@ def test_loss_is_eq2() -> None:
     x = jnp.zeros((3, 7))
     y = jnp.array([[3.0, 4.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
     b = jnp.array([False, False, True])
-    value = loss(params, x, y, b, jnp.ones(3), config)
+    value = structure.loss(params, x, y, b, jnp.ones(3))
     assert float(value) == pytest.approx((5.0 + 1.0 + 10.0 * 1.0) / 3, rel=1e-5)
 
 
@@ -105,23 +107,24 @@ def test_a_gravity_linear_network_is_a_matrix_times_the_gravity_direction() -> N
     import jax.numpy as jnp
 
     from surrogate.data import DIRECTION
-    from surrogate.model import apply, init_params, layer_sizes
+    from surrogate.structures import structure_for
 
     rng = np.random.default_rng(3)
     points = rng.normal(size=(5, 3))
     g = np.array([0.48, -0.6, 0.64])  # a unit direction
     for form, superposes in (("gravity_linear", True), ("vector", False)):
         config = SurrogateConfig(hidden_layers=2, width=8, activation="silu", output_form=form)
-        assert layer_sizes(config)[-1] == (9 if form == "gravity_linear" else 3)
-        params = init_params(jax.random.PRNGKey(1), config)
+        structure = structure_for(config)
+        assert structure.layer_sizes()[-1] == (9 if form == "gravity_linear" else 3)
+        params = structure.init_params(jax.random.PRNGKey(1))
         W, b = params["domain"][0]
         params["domain"][0] = (W.at[DIRECTION].set(0.0), b + 0.1)
         params["domain"][-1] = tuple(a + 0.05 for a in params["domain"][-1])  # nonzero bias
 
-        def u(direction: np.ndarray, params=params, config=config) -> np.ndarray:
+        def u(direction: np.ndarray, params=params, structure=structure) -> np.ndarray:
             x = np.concatenate([points, np.full((5, 1), 0.3), np.tile(direction, (5, 1))], 1)
-            return np.asarray(apply(params, jnp.asarray(x, jnp.float32), jnp.zeros(5, bool),
-                                    jnp.ones(5), config))
+            return np.asarray(structure.apply(params, jnp.asarray(x, jnp.float32),
+                                              jnp.zeros(5, bool), jnp.ones(5)))
 
         superposed = sum(g[j] * u(np.eye(3)[j]) for j in range(3))
         assert np.allclose(u(g), superposed, atol=1e-6) == superposes, form
@@ -143,14 +146,17 @@ def test_a_separable_model_trains_on_whole_cases_with_the_loss_of_eq2(
     from fem.dataset import read_dataset
     from studies.surrogate_study.architecture import count_parameters
     from surrogate.data import tables
-    from surrogate.model import grid_loss, init_params, network, samples_network, split_loss
-    from surrogate.train import PART_FIELDS, case_grid, point_order, prepare
+    from surrogate.structures import structure_for
+    from surrogate.structures.pointwise import PART_FIELDS
+    from surrogate.structures.separable import case_grid, grid_loss, point_order
+    from surrogate.train import prepare
 
     ds = read_dataset(dataset_path)
     config = SurrogateConfig(hidden_layers=2, width=8, activation="silu", alpha=3.0, modes=4,
                              structure="separable", output_form="gravity_linear",
                              output_scaling="compliance", boundary=boundary)
-    params = init_params(jax.random.PRNGKey(2), config)
+    structure = structure_for(config)
+    params = structure.init_params(jax.random.PRNGKey(2))
     assert count_parameters(config.as_dict()) == sum(
         W.size + b.size for layers in params.values() for W, b in layers)
     norm, _, train, _, _ = prepare(ds, config)
@@ -161,17 +167,17 @@ def test_a_separable_model_trains_on_whole_cases_with_the_loss_of_eq2(
     assert len(grid[0]) == 3 and grid[3].sum() == (len(train) if use_rib else
                                                    np.sum(~train.boundary))
     whole = grid_loss(params, tuple(jnp.asarray(a) for a in grid), inputs,
-                      point_order(ds.boundary), config)
+                      point_order(ds.boundary), structure)
 
     def part(mask: np.ndarray) -> tuple:
         return tuple(jnp.asarray(getattr(train.subset(mask), f)) for f in PART_FIELDS)
 
-    one_by_one = split_loss(params, part(~train.boundary),
-                            part(train.boundary) if use_rib else None, config)
+    one_by_one = structure.split_loss(params, part(~train.boundary),
+                                      part(train.boundary) if use_rib else None)
     assert float(whole) == pytest.approx(float(one_by_one), rel=1e-5)
     domain = part(~train.boundary)
-    np.testing.assert_allclose(samples_network(params, "domain", domain, inputs, config),
-                               network(params, "domain", domain[0], config), atol=1e-5)
+    np.testing.assert_allclose(structure.samples_network(params, "domain", domain, inputs),
+                               structure.network(params, "domain", domain[0]), atol=1e-5)
 
 
 def test_training_reduces_the_loss_and_round_trips(dataset_path: Path, tmp_path: Path) -> None:
@@ -623,8 +629,8 @@ def test_fast_prediction_is_the_plain_network(
 
     The fast path precomputes the first layer's point part (a separable model's fields), runs
     in float32 and gathers the points per network (and contracts a ``gravity_linear`` model's
-    last layer with ĝ before the points pass it); ``model.apply`` is the plain forward pass,
-    every network evaluated at every sample.
+    last layer with ĝ before the points pass it); the structure's ``apply`` is the plain
+    forward pass, every network evaluated at every sample.
     """
     import warnings
     from dataclasses import replace
@@ -636,8 +642,8 @@ def test_fast_prediction_is_the_plain_network(
     from fem.directions import gravity_direction
     from surrogate.checkpoint import save_model
     from surrogate.exceptions import ExtrapolationWarning
-    from surrogate.model import apply
     from surrogate.predict import Surrogate
+    from surrogate.structures import structure_for
     from surrogate.train import train_and_evaluate
 
     ds = read_dataset(dataset_path)
@@ -670,12 +676,11 @@ def test_fast_prediction_is_the_plain_network(
         x = np.concatenate([norm.points(model.X), norm.case(np.full(N, C1), direction)], axis=1)
         gain = norm.gain(np.full(N, C1)) * factor
         plain = norm.u_scale * np.asarray(
-            apply(
+            structure_for(model.config).apply(
                 model.params,
                 jnp.asarray(x, jnp.float32),
                 jnp.asarray(model.boundary),
                 jnp.asarray(gain, jnp.float32),
-                model.config,
             )
         )
         assert np.abs(plain).max() > 0

@@ -55,8 +55,8 @@ class WebSurrogate {
       });
       this.modes = model.modes;
       this.branch = plain(model.branch);
-      // the point networks' Fourier frequencies (3 x F, row-major), as surrogate.model's
-      // point_inputs: [X, sin 2πX·b, cos 2πX·b]
+      // the point networks' Fourier frequencies (3 x F, row-major), as
+      // surrogate.structures.separable's point_inputs: [X, sin 2πX·b, cos 2πX·b]
       this.frequencies = model.point_frequencies ? decode(model.point_frequencies) : null;
       this.parts = Object.values(model.parts).map((part) => ({
         points: decode(part.points),

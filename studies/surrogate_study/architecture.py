@@ -27,7 +27,7 @@ from studies import paper
 from studies.results import Record, Result
 from surrogate.checkpoint import HISTORY_JSON, MODEL_JSON, PARAMS_NPZ, unconverged_cases, write_json
 from surrogate.config import SurrogateConfig, parse_architecture
-from surrogate.model import layer_sizes, network_names
+from surrogate.structures import structure_for
 
 if TYPE_CHECKING:
     from surrogate.epochs import TrainResult
@@ -183,11 +183,11 @@ def read_run(folder: str | Path) -> dict[str, Any]:
 
 def count_parameters(cfg: dict[str, Any]) -> int:
     """Weights and biases of every network of a run's config (``model.json``'s ``config``)."""
-    config = SurrogateConfig.from_mapping(cfg)
+    structure = structure_for(SurrogateConfig.from_mapping(cfg))
     return sum(
         a * b + b
-        for net in network_names(config)
-        for a, b in itertools.pairwise(layer_sizes(config, net))
+        for net in structure.network_names()
+        for a, b in itertools.pairwise(structure.layer_sizes(net))
     )
 
 

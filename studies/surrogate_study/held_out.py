@@ -35,6 +35,7 @@ from fem.directions import direction_keys, gravity_direction
 from studies.results import Record, Result
 from studies.surrogate_study.case_errors import CaseErrors, Centroids, ErrorSpread
 from surrogate.exceptions import ExtrapolationWarning
+from surrogate.structures import structure_for
 
 if TYPE_CHECKING:  # JAX is imported by whoever has a model, not by this module's records
     from surrogate.predict import Surrogate
@@ -224,7 +225,8 @@ def trained_cases(model: Surrogate, ds: Dataset) -> np.ndarray:
     """The converged cases of ``ds`` whose fields ``model`` trained on (indices, ascending).
 
     A ``pod`` model trains on whole cases and leaves its validation cases out (with ``split:
-    by_sample``, the ``by_case`` split's validation cases: :func:`surrogate.pod.case_split`); a
+    by_sample``, the ``by_case`` split's validation cases:
+    :func:`surrogate.structures.pod.case_split`); a
     pointwise or separable model's by-sample split draws points, so that it trains on part of
     every case. A model refitted on its validation data too (``metrics.refit``,
     :func:`surrogate.train.train_and_evaluate`'s ``refit_epochs``) trained on those as well.
@@ -232,17 +234,7 @@ def trained_cases(model: Surrogate, ds: Dataset) -> np.ndarray:
     """
     held = np.flatnonzero(np.isin(ds.ids, list(model.held_out)))
     refit = bool(model.metrics.get("refit"))
-    if model.config.structure == "pod":
-        from surrogate.pod import case_split
-
-        train, validation = case_split(ds, model.config, held)
-        cases = np.union1d(train, validation) if refit else train
-    elif model.config.split == "by_sample":
-        cases = np.setdiff1d(np.arange(len(ds.ids)), held)
-    else:
-        parts = ds.splits[model.config.split]
-        cases = np.setdiff1d(np.union1d(parts["train"], parts["validation"]) if refit
-                             else parts["train"], held)
+    cases = structure_for(model.config).trained_cases(ds, held, refit)
     return np.intersect1d(cases, np.flatnonzero(ds.converged))
 
 

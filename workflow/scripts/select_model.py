@@ -19,6 +19,8 @@ from fem.dataset import read_dataset  # noqa: E402
 from run.joblog import job_log  # noqa: E402
 from studies.fe_study.stability_audit import without_unstable  # noqa: E402
 from studies.surrogate_study.architecture import copy_model, refit_model  # noqa: E402
+from surrogate.config import SurrogateConfig  # noqa: E402
+from surrogate.structures import structure_for  # noqa: E402
 
 job_log(snakemake.log[0])
 log = logging.getLogger("select_model")
@@ -27,7 +29,8 @@ table = json.loads(Path(snakemake.input.table).read_text())
 run, folder = table["selected_run"], Path(snakemake.output.model).parent
 if snakemake.params.refit:
     card = json.loads((Path(run) / "model.json").read_text())
-    dataset = read_dataset(snakemake.input.dataset, nodes=card["config"]["structure"] == "pod")
+    config = SurrogateConfig.from_mapping(card["config"])
+    dataset = read_dataset(snakemake.input.dataset, nodes=structure_for(config).reads_nodes)
     result = refit_model(run, without_unstable(dataset, snakemake.input.audit), folder)
     log.info("selected %s: %s, trained again on %d cases for %d epochs in %.0f s",
              table["selected_architecture"], run, result.train_cases.size, result.best_epoch,

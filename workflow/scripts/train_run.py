@@ -12,6 +12,7 @@ from run.joblog import job_log  # noqa: E402
 from studies.fe_study.stability_audit import without_unstable  # noqa: E402
 from surrogate.checkpoint import save_model  # noqa: E402
 from surrogate.config import SurrogateConfig  # noqa: E402
+from surrogate.structures import structure_for  # noqa: E402
 from surrogate.train import train_and_evaluate  # noqa: E402
 
 job_log(snakemake.log[0])
@@ -28,7 +29,7 @@ config = SurrogateConfig.from_mapping(dict(snakemake.params.surrogate)).with_arc
 config = config.replace(seed=config.seed + int(getattr(wildcards, "repeat", 0)))
 
 # a pod model takes its modes at every node of a quadratic mesh, where the dataset has them
-dataset = read_dataset(snakemake.input.dataset, nodes=config.structure == "pod")
+dataset = read_dataset(snakemake.input.dataset, nodes=structure_for(config).reads_nodes)
 dataset = without_unstable(dataset, snakemake.input.audit)  # no sample of an unstable state
 holdout = [
     dataset.case_index(c["C1"], c["phi"], c.get("theta", 0.0)) for c in snakemake.params.holdout

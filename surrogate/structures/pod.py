@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import logging
 import time
+from typing import TYPE_CHECKING, Any
 
 import jax
 import jax.numpy as jnp
@@ -51,7 +52,12 @@ from surrogate.epochs import (
     make_optimizer,
     run_epochs,
 )
-from surrogate.model import Layers, Params, branch_weights, init_params
+from surrogate.model import Layers, Params, branch_sizes, branch_weights, weigh_fields
+from surrogate.structures.base import Placement, Structure
+
+if TYPE_CHECKING:
+    from surrogate.checkpoint import Checkpoint
+    from surrogate.predict import Surrogate
 
 log = logging.getLogger(__name__)
 
@@ -117,7 +123,7 @@ def _clamped(modes: np.ndarray, rib: np.ndarray) -> np.ndarray:
 
     The training fields vanish there, so the modes that hold them do; modes beyond the fields'
     rank (singular values at round-off) need not, and the model answers between the points
-    (:meth:`surrogate.predict.Surrogate.at`) by its modes, not by its rib flags.
+    (:meth:`Pod.placed`) by its modes, not by its rib flags.
     """
     modes = modes.astype(np.float32)
     modes[rib] = 0.0
@@ -228,7 +234,7 @@ def fit(
 
     key = jax.random.PRNGKey(config.seed)
     _, init_key = jax.random.split(key)
-    layers = init_params(init_key, config)["branch"]
+    layers = Pod(config).init_params(init_key)["branch"]
     optimizer = make_optimizer(config, STEPS_PER_EPOCH)
     schedule = learning_rate_schedule(config, STEPS_PER_EPOCH)
     state = optimizer.init(layers)
@@ -265,3 +271,117 @@ def fit(
              "%.1f s", config.architecture, result.best_epoch, len(result.history),
              result.validation_error_mm, result.validation_error_domain_mm, result.train_s)
     return result
+
+
+class Pod(Structure):
+    """The training data's POD modes as the fields, a branch for their weights.
+
+    See the module docstring.
+    """
+
+    name = "pod"
+    weighs_fields = True
+    reads_nodes = True
+
+    def network_names(self) -> tuple[str, ...]:
+        """The branch alone."""
+        return ("branch",)
+
+    def boundary_network(self) -> str | None:
+        """None: the rib points are exactly zero, as its modes (the FE fields') are there."""
+        return None
+
+    def layer_sizes(self, net: str = "branch") -> list[int]:
+        """The branch's: the case (4) in, the modes' weights out."""
+        return branch_sizes(self.config)
+
+    def network(self, params: Params, net: str, x: jax.Array) -> jax.Array:
+        """None: a pod model has no point network; its fields are its modes."""
+        raise NotImplementedError("a pod model has no point network: its fields are its modes")
+
+    def train(self, ds: Dataset, progress: bool = True, holdout: np.ndarray | None = None,
+              refit_epochs: int | None = None) -> TrainResult:
+        """:func:`train_pod`."""
+        return train_pod(ds, self.config, progress, holdout, refit_epochs)
+
+    def trained_cases(self, ds: Dataset, held: np.ndarray, refit: bool) -> np.ndarray:
+        """Whole cases: :func:`case_split`'s training cases (and validation cases, ``refit``)."""
+        train, validation = case_split(ds, self.config, held)
+        return np.union1d(train, validation) if refit else train
+
+    def check_saved(self, basis: np.ndarray | None, n_points: int) -> str | None:
+        """Its modes at the points (``points_basis``) must be there, finite and of its shape."""
+        shape = (n_points, 3, self.config.modes)
+        if basis is None or basis.shape != shape or not np.all(np.isfinite(basis)):
+            return f"a pod model needs its modes as points_basis, finite, of shape {shape}"
+        return None
+
+    def query_part(self, layers: Any, points: np.ndarray, gain: np.ndarray,
+                   u_scale: np.float32, basis: np.ndarray | None) -> dict[str, Any]:
+        """Its modes at the points, gain included, laid out as a separable model's fields."""
+        modes = basis * (gain * u_scale)[:, None, None]
+        return {"fields": jnp.asarray(modes.reshape(-1, self.config.modes).astype(np.float32,
+                                                                                 copy=False))}
+
+    def answer(self, parts: dict[str, Any], c: jax.Array) -> list[jax.Array]:
+        """The branch once, then one weighted sum of the modes."""
+        return weigh_fields(parts, c, self.config)
+
+    def placed(self, checkpoint: Checkpoint, X: np.ndarray, boundary: np.ndarray,
+               points: np.ndarray) -> Placement:
+        """Its modes interpolated in the mesh's tetrahedra.
+
+        Quadratic where it has them at every node of a quadratic mesh, linear between the
+        vertices otherwise; at more points than
+        nodes, the field at the nodes, then at the points (the same sum by linearity), in
+        memory and time that grow with the points as 3 values each, not as 3 × modes.
+
+        Raises:
+            ValueError: if its dataset had no mesh cells.
+        """
+        from surrogate.interpolation import (
+            interpolate,
+            interpolation_matrix,
+            locate,
+            locate_quadratic,
+        )
+
+        c = checkpoint
+        if c.nodes is not None:
+            nodes = c.nodes.X, c.nodes.basis
+            where = locate_quadratic(c.nodes.X, c.nodes.cells, points)
+        elif c.cells is not None:
+            nodes = X, c.basis
+            where = locate(X, c.cells, points)
+        else:
+            raise ValueError(
+                "this pod model answers at its material points only: its dataset has no "
+                "mesh cells to interpolate its modes in (rebuild the dataset with its mesh, "
+                "snakemake --forcerun aggregate, and train again)")
+        on_face = np.zeros(len(points), dtype=bool)
+        if len(points) > len(nodes[0]):
+            return Placement(on_face, nodes=(*nodes, interpolation_matrix(*where,
+                                                                          len(nodes[0]))))
+        return Placement(on_face, basis=interpolate(nodes[1], *where).astype(np.float32,
+                                                                             copy=False))
+
+    def web_part(self, model: Surrogate, index: np.ndarray, net: str) -> dict[str, Any]:
+        """Its modes at the part's points (points, 3, ``modes``) instead of layers.
+
+        Raises:
+            ValueError: for a model asked at more points than its nodes
+                (:meth:`surrogate.predict.Surrogate.at`), which holds no modes at them.
+        """
+        from surrogate.export import encode_array
+
+        if model.basis is None:
+            raise ValueError(f"a pod model asked at {len(model.X)} points, more than its mesh "
+                             "has nodes, holds no modes there to export: ask it at fewer points")
+        return {"modes": encode_array(model.basis[index], "float32")}
+
+    def web_fields(self, model: Surrogate) -> dict[str, Any]:
+        """The modes and the branch's layers."""
+        from surrogate.export import encode_layers
+
+        return {"modes": self.config.modes, "branch": encode_layers(model.params["branch"]),
+                "point_frequencies": None}
