@@ -42,7 +42,7 @@ import numpy as np
 
 from fem.case_files import read_summary
 from fem.dataset import Dataset, read_dataset
-from studies.surrogate_study.case_errors import CaseErrors, Centroids, ErrorSpread
+from studies.surrogate_study.errors_against_fe import CaseErrors, Centroids, ErrorSpread
 from studies.surrogate_study.surrogate_evaluation import fe_in_model_order
 from surrogate.config import SurrogateConfig
 from surrogate.exceptions import ExtrapolationWarning

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from meshes.points import read_points, write_points
-from studies.machine import machine_state
+from studies.timing_hygiene import machine_state
 from surrogate.checkpoint import load_checkpoint
 
 

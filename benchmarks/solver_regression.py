@@ -24,7 +24,7 @@ from fem.configfile import read_config_file
 from fem.exceptions import InvalidParameterError
 from fem.parameters import SolverSettings
 from fem.sweep import clinical_cases
-from studies.machine import machine_state, one_core
+from studies.timing_hygiene import machine_state, one_core
 
 #: The ``direct`` preset's options before issue 21, as overrides of today's.
 BEFORE = {"ksp_pc_side": "left", "refactor_above_ratio": 1.0, "load_atol": 0.0,

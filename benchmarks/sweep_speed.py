@@ -35,8 +35,8 @@ import yaml
 
 from fem.case_files import read_points
 from fem.sweep import Case
-from studies.machine import MachineState, machine_state, run_pinned
 from studies.results import Record, Result
+from studies.timing_hygiene import MachineState, machine_state, run_pinned
 
 REPO = Path(__file__).resolve().parent.parent
 

@@ -31,8 +31,8 @@ def main(argv: list[str] | None = None) -> int:
     from fem.reference import write_reference_mesh
     from fem.sweep import Case
     from meshes.io import from_file_order, geometry_nodes, nodes_in_file_order
-    from studies.machine import machine_state
     from studies.reference_state.tracking import check_model_on, track_both
+    from studies.timing_hygiene import machine_state
     from surrogate.predict import Surrogate
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])

@@ -17,9 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-from studies.machine import MachineState, machine_state
 from studies.results import Result
 from studies.surrogate_study.browser import open_page
+from studies.timing_hygiene import MachineState, machine_state
 
 FRAME_BUDGET_MS = 33.0
 """One update within a frame at 30 frames a second."""

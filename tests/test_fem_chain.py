@@ -167,10 +167,10 @@ def test_a_chain_writes_every_case_as_run_case_does(coarse_mesh: Path, tmp_path:
 
 def test_the_rescue_benchmark_solves_the_chains_both_ways(coarse_mesh: Path,
                                                           tmp_path: Path) -> None:
-    """``benchmarks.rescue_cost``: each way's chains in fresh processes, compared case by case."""
+    """``benchmarks.rescue_settings``: each way's chains in fresh processes, compared by case."""
     import yaml
 
-    from benchmarks.rescue_cost import RescueCost, parse_against, run
+    from benchmarks.rescue_settings import RescueCost, parse_against, run
 
     config = {"fe": {"loading": {"stall_window": 6}}}
     result = run(coarse_mesh, config, [(-90.0, 0.0)], [1.5, 1.0], tmp_path)
@@ -186,8 +186,8 @@ def test_the_rescue_benchmark_solves_the_chains_both_ways(coarse_mesh: Path,
     summary = json.loads((tmp_path / "config" / "cases" / Case(1.0, -90.0).id / "summary.json")
                          .read_text())
     assert summary["settings"]["loading"]["stall_window"] == 6
-    result.write(tmp_path / "rescue_cost.json")
-    assert RescueCost.read(tmp_path / "rescue_cost.json") == result
+    result.write(tmp_path / "rescue_settings.json")
+    assert RescueCost.read(tmp_path / "rescue_settings.json") == result
     assert parse_against(["rescue_min_step=0.015625", "stall_window=0"]) == {
         "rescue_min_step": 0.015625, "stall_window": 0}
     for against, message in (({"stall_window": 6}, "is the config's own"),

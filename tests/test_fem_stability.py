@@ -219,7 +219,7 @@ def test_held_out_cases_are_banded_by_their_angle_to_the_nearest_failure() -> No
 
     from report.context import Context
     from report.sections.generalisation import held_out_part
-    from studies.surrogate_study.case_errors import CaseErrors, ErrorSpread
+    from studies.surrogate_study.errors_against_fe import CaseErrors, ErrorSpread
     from studies.surrogate_study.held_out import (
         HeldOutBlock,
         HeldOutEvaluation,

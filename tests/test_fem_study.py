@@ -200,7 +200,7 @@ def test_blas_and_openmp_threads_are_limited_in_the_loaded_libraries() -> None:
     import ctypes
     import os
 
-    from studies.machine import limit_blas_threads
+    from studies.timing_hygiene import limit_blas_threads
 
     done = limit_blas_threads(1)  # numpy has loaded OpenBLAS; dolfinx's import loads libgomp
     assert {"libblas.so.3", "libopenblas.so.0"} & set(done)
@@ -211,7 +211,7 @@ def test_blas_and_openmp_threads_are_limited_in_the_loaded_libraries() -> None:
 def test_one_core_pins_every_thread_and_restores_the_affinity() -> None:
     import os
 
-    from studies.machine import one_core
+    from studies.timing_hygiene import one_core
 
     allowed = os.sched_getaffinity(0)
     with one_core() as core:

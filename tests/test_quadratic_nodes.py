@@ -170,9 +170,9 @@ def test_the_dataset_holds_the_fields_at_every_node(sweep) -> None:
 def test_a_cases_field_at_named_points_is_the_quadratic_field_there(sweep) -> None:
     """A case's field between the nodes, exactly where it is quadratic.
 
-    The function is ``studies.reference_state.case_points``'s.
+    The function is ``studies.reference_state.fe_at_points``'s.
     """
-    from studies.reference_state.case_points import fe_at_points
+    from studies.reference_state.fe_at_points import fe_at_points
 
     folder, summaries, _, _ = sweep
     case = Path(summaries[7]).parent
@@ -260,7 +260,7 @@ def test_the_held_out_and_posture_errors_are_taken_between_the_points_too(
     the model fitted at every node answers them as well as its material points, the one fitted
     at the vertices misses the curvature, and the evaluations report both at the centroids.
     """
-    from studies.surrogate_study.case_errors import Centroids
+    from studies.surrogate_study.errors_against_fe import Centroids
     from studies.surrogate_study.held_out import evaluate_held_out, trained_cases
     from studies.surrogate_study.postures import evaluate_postures
 
@@ -403,7 +403,7 @@ def test_a_held_out_block_without_cases_the_by_sample_model_trained_on(
     """Where the by-sample model trained on none of a split's test cases, no row says it did."""
     from report.context import Context
     from report.sections.generalisation import held_out_part
-    from studies.surrogate_study.case_errors import CaseErrors, ErrorSpread
+    from studies.surrogate_study.errors_against_fe import CaseErrors, ErrorSpread
     from studies.surrogate_study.held_out import HeldOutBlock, HeldOutEvaluation
 
     folder = sweep[0]

@@ -16,9 +16,9 @@ import pytest
 
 from studies.fe_study.fe_clinical import FEClinical
 from studies.fe_study.fe_speed_accuracy import SpeedAccuracy
-from studies.machine import MachineState, machine_state
 from studies.results import Record, Result, ResultFormatError
 from studies.surrogate_study.surrogate_benchmark import Goal
+from studies.timing_hygiene import MachineState, machine_state
 
 pytestmark = pytest.mark.unit
 
@@ -202,7 +202,7 @@ def test_the_by_c1_cases_are_told_apart_by_whether_their_c1_is_interpolated() ->
 
     from report.context import Context
     from report.sections.generalisation import held_out_part
-    from studies.surrogate_study.case_errors import CaseErrors, ErrorSpread
+    from studies.surrogate_study.errors_against_fe import CaseErrors, ErrorSpread
     from studies.surrogate_study.held_out import (
         HeldOutBlock,
         HeldOutEvaluation,

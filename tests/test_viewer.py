@@ -260,7 +260,7 @@ def test_a_page_for_any_model_from_the_command_line(
     from fem.dataset import read_dataset
     from report.viewer import ViewerError, fe_cases
     from report.viewer.__main__ import main
-    from studies.reference_state.case_points import fe_at_points
+    from studies.reference_state.fe_at_points import fe_at_points
     from tests.conftest import REPO
 
     results = small_run / "results"
@@ -348,7 +348,7 @@ def test_movement_is_measured_from_a_posture_the_user_chooses(
     say which.
     """
     from report.viewer.__main__ import main
-    from studies.reference_state.case_points import fe_at_points
+    from studies.reference_state.fe_at_points import fe_at_points
     from tests.conftest import REPO
 
     results = small_run / "results"

@@ -293,7 +293,7 @@ def test_a_cases_fe_field_answers_at_named_points(
 ) -> None:
     """A case's FE displacement at material points, by its shape functions.
 
-    The command is ``studies.reference_state.case_points``.
+    The command is ``studies.reference_state.fe_at_points``.
 
     At the mesh's vertices it is the case's own ``points.h5``; between them, at a cell's
     centroid, the field's value there (the quadratic field's on a quadratic mesh, the corners'
@@ -305,7 +305,7 @@ def test_a_cases_fe_field_answers_at_named_points(
     from fem.case_files import read_node_displacement
     from fem.dataset import read_dataset
     from meshes.points import read_points
-    from studies.reference_state.case_points import CasePointsError, fe_at_points, main
+    from studies.reference_state.fe_at_points import CasePointsError, fe_at_points, main
     from surrogate.interpolation import at_centroids
 
     ds = read_dataset(small_run / "results/dataset/dataset.h5")

@@ -8,7 +8,7 @@ from typing import Any
 
 from report.context import Context
 from report.html import fmt, h3, missing, para, pct, table
-from studies.surrogate_study.case_errors import CaseErrors, ErrorSpread
+from studies.surrogate_study.errors_against_fe import CaseErrors, ErrorSpread
 from studies.surrogate_study.held_out import (
     BRACKET_LABELS,
     HeldOutBlock,

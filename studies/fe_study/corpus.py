@@ -28,8 +28,8 @@ import numpy as np
 from fem.parameters import SolverSettings, as_dict
 from fem.sweep import Case, clinical_cases
 from studies.fe_study.mesh_quality import MeshQuality
-from studies.machine import machine_state
 from studies.results import Record, Result
+from studies.timing_hygiene import machine_state
 
 log = logging.getLogger(__name__)
 

@@ -48,8 +48,8 @@ from fem.directions import gravity_angles, gravity_direction
 from fem.exceptions import InvalidParameterError
 from fem.parameters import Gravity, SolverSettings
 from fem.sweep import Case
-from studies.machine import machine_state
 from studies.results import Record, Result
+from studies.timing_hygiene import machine_state
 
 log = logging.getLogger(__name__)
 

@@ -31,8 +31,8 @@ from fem.overlap import self_overlap
 from fem.parameters import SolverSettings
 from fem.sweep import Case
 from studies.fe_study.fe_timing import TimedSolve, timed_solve, vertex_displacement
-from studies.machine import machine_state, timed_on_one_core
 from studies.results import Record, Result
+from studies.timing_hygiene import machine_state, timed_on_one_core
 
 log = logging.getLogger(__name__)
 
@@ -131,7 +131,7 @@ def fe_clinical(
     Returns:
         Per-case records (timings, baseline, accuracy, :func:`fem.overlap.self_overlap`) and
         a summary against :data:`TARGETS`, all measured on one pinned core
-        (:func:`studies.machine.one_core`).
+        (:func:`studies.timing_hygiene.one_core`).
     """
     from fem.case import CaseRunner
 

@@ -20,8 +20,8 @@ from fem.sweep import Case
 from studies.fe_study.fe_clinical import TARGETS, accuracy_at_vertices
 from studies.fe_study.fe_timing import TimedSolve, timed_solve
 from studies.fe_study.fe_variants import FEVariant
-from studies.machine import machine_state, timed_on_one_core
 from studies.results import Result
+from studies.timing_hygiene import machine_state, timed_on_one_core
 
 log = logging.getLogger(__name__)
 

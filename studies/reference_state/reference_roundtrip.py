@@ -29,8 +29,8 @@ from fem.configfile import read_config_file
 from fem.exceptions import FEError
 from fem.parameters import SolverSettings
 from fem.sweep import Case
-from studies.machine import machine_state
 from studies.results import Record, Result
+from studies.timing_hygiene import machine_state
 
 
 @dataclass(frozen=True)

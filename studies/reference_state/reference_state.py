@@ -14,8 +14,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from studies.machine import machine_state
 from studies.results import Result
+from studies.timing_hygiene import machine_state
 
 
 class NoReferenceError(RuntimeError):

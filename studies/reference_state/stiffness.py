@@ -154,7 +154,7 @@ def write_outputs(result: StiffnessResult, folder: Path) -> None:
 def benchmark(estimator: Estimator, c1s: list[float], noise_mm: float, phi: float, theta: float,
               seed: int, out: Path | None) -> list[StiffnessResult]:
     """Estimate C1 from noisy FE skins at each true C1; print one row each."""
-    from studies.machine import machine_state
+    from studies.timing_hygiene import machine_state
 
     rng = np.random.default_rng(seed)
     print(f"machine: {machine_state().to_json()}")

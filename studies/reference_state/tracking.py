@@ -37,9 +37,9 @@ from typing import Any
 import numpy as np
 
 from meshes.io import from_file_order, nodes_in_file_order, same_cells
-from studies.machine import machine_state, one_core
 from studies.results import Result
 from studies.surrogate_study.timing import time_model
+from studies.timing_hygiene import machine_state, one_core
 
 log = logging.getLogger(__name__)
 

@@ -33,7 +33,7 @@ import numpy as np
 from fem.dataset import Dataset
 from fem.directions import direction_keys, gravity_direction
 from studies.results import Record, Result
-from studies.surrogate_study.case_errors import CaseErrors, Centroids, ErrorSpread
+from studies.surrogate_study.errors_against_fe import CaseErrors, Centroids, ErrorSpread
 from surrogate.exceptions import ExtrapolationWarning
 from surrogate.structures import structure_for
 

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from studies.results import Result, write_json
-from studies.surrogate_study.case_errors import ErrorSpread
+from studies.surrogate_study.errors_against_fe import ErrorSpread
 from studies.surrogate_study.postures import PostureRow, evaluate_postures
 from surrogate.predict import Surrogate
 

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from studies.results import Record, Result
-from studies.surrogate_study.case_errors import CaseErrors, Centroids
+from studies.surrogate_study.errors_against_fe import CaseErrors, Centroids
 from studies.surrogate_study.surrogate_evaluation import extrapolation_kind, fe_in_model_order
 from surrogate.exceptions import ExtrapolationWarning
 from surrogate.predict import Surrogate

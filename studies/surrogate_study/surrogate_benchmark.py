@@ -23,9 +23,9 @@ from typing import Any
 import numpy as np
 
 from studies import paper
-from studies.machine import MachineState, machine_state
 from studies.results import Record, Result
 from studies.surrogate_study.timing import time_on_one_core
+from studies.timing_hygiene import MachineState, machine_state
 
 log = logging.getLogger(__name__)
 

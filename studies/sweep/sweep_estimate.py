@@ -37,7 +37,7 @@ from fem.adaptive import LoadSpaceInterpolant, committee, load_points
 from fem.case_files import read_case
 from fem.dataset import Dataset
 from studies.results import Record, Result
-from studies.surrogate_study.case_errors import CaseErrors
+from studies.surrogate_study.errors_against_fe import CaseErrors
 from studies.surrogate_study.off_grid import OffGridEvaluation
 from surrogate.predict import Surrogate
 

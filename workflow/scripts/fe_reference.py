@@ -7,7 +7,7 @@ from fem.sweep import Case
 from run.joblog import job_log
 from studies.fe_study.fe_reference import solve_reference
 from studies.fe_study.fe_variants import FEVariant, MeshSpec
-from studies.machine import limit_blas_threads
+from studies.timing_hygiene import limit_blas_threads
 
 job_log(snakemake.log[0])
 logging.info("BLAS on %d threads: %s", snakemake.threads, limit_blas_threads(snakemake.threads))

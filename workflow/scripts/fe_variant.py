@@ -7,7 +7,7 @@ from run.joblog import job_log
 from studies.fe_study.fe_reference import load_references
 from studies.fe_study.fe_speed_accuracy import run_variant
 from studies.fe_study.fe_variants import FEVariant
-from studies.machine import limit_blas_threads
+from studies.timing_hygiene import limit_blas_threads
 
 job_log(snakemake.log[0])
 logging.info("single-threaded BLAS: %s", limit_blas_threads(1))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from benchmarks.direction_gaps import direction_gaps, leave_one_out, main
+from benchmarks.direction_spacing_error import direction_spacing_error, leave_one_out, main
 from fem.adaptive import direction_angles
 from fem.dataset import Dataset
 from fem.directions import gravity_direction
@@ -37,7 +37,7 @@ def _dataset(bump: float) -> Dataset:
 
 
 def test_a_field_linear_in_the_direction_has_no_gap() -> None:
-    gaps = direction_gaps(_dataset(bump=0.0))
+    gaps = direction_spacing_error(_dataset(bump=0.0))
     assert [s.C1 for s in gaps.stiffness] == [1.0, 3.0]
     for s in gaps.stiffness:
         assert s.directions == 24 and s.over_limit == 0

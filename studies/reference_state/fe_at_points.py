@@ -1,6 +1,6 @@
 """The FE displacement of a solved case at named points inside the body.
 
-    .venv/bin/python -m studies.reference_state.case_points results/cases/c1=1.00_phi=0.0_theta=0.0
+    .venv/bin/python -m studies.reference_state.fe_at_points results/cases/c1=1.00_phi=0.0_theta=0.0
     tumour.csv \
         [-o tumour_supine_fe.csv] [--from results/cases/c1=1.00_phi=180.0_theta=0.0]
 
@@ -61,7 +61,7 @@ def fe_at_points(case: str | Path, points: np.ndarray) -> np.ndarray:
 
 def main(argv: list[str] | None = None) -> int:
     """Print (and write) the points' FE displacement; returns the exit status."""
-    parser = argparse.ArgumentParser(prog="python -m studies.reference_state.case_points",
+    parser = argparse.ArgumentParser(prog="python -m studies.reference_state.fe_at_points",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("case", type=Path, help="a solved case's folder")
     parser.add_argument("points", type=Path, help="CSV name,x,y,z of material points, m")

@@ -20,8 +20,8 @@ Every case is solved by :func:`fem.chain.solve_chain` (a direction's C1 values i
 is already there is not solved again, so an interrupted run resumes. Trainings run in the same
 number of processes, one JAX thread each.
 
-``python -m benchmarks.direction_density --config config.yaml [--n 16 32 64] [--test 24]
-[--c1 1 2 5] [--out DIR] [--jobs 2]`` prints the table and writes ``DIR/direction_density.json``.
+``python -m benchmarks.directions_needed --config config.yaml [--n 16 32 64] [--test 24]
+[--c1 1 2 5] [--out DIR] [--jobs 2]`` prints the table and writes ``DIR/directions_needed.json``.
 """
 
 from __future__ import annotations
@@ -43,9 +43,9 @@ import numpy as np
 import yaml
 
 from fem.sweep import PAPER_PHI_DEG, Case, sphere_directions
-from studies.machine import MachineState, machine_state
 from studies.results import Record, Result
-from studies.surrogate_study.case_errors import CaseErrors, ErrorSpread
+from studies.surrogate_study.errors_against_fe import CaseErrors, ErrorSpread
+from studies.timing_hygiene import MachineState, machine_state
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -87,7 +87,7 @@ class Design(Record):
 
 @dataclass(frozen=True, slots=True)
 class DirectionDensity(Result):
-    """``direction_density.json``: every design against the same test directions."""
+    """``directions_needed.json``: every design against the same test directions."""
 
     C1_kPa: list[float]
     test_directions: list[list[float]]
@@ -255,23 +255,23 @@ def table(result: DirectionDensity) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Command line: see the module's docstring."""
-    parser = argparse.ArgumentParser(prog="python -m benchmarks.direction_density",
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.directions_needed",
                                      description=__doc__.splitlines()[0])
     parser.add_argument("--config", type=Path, default=REPO / "config.yaml")
     parser.add_argument("--n", type=int, nargs="+", default=list(DEFAULT_N),
                         help="directions of each caudal lattice")
     parser.add_argument("--test", type=int, default=DEFAULT_TEST, help="test directions")
     parser.add_argument("--c1", type=float, nargs="+", default=list(DEFAULT_C1), help="kPa")
-    parser.add_argument("--out", type=Path, default=Path("results/benchmarks/direction_density"))
+    parser.add_argument("--out", type=Path, default=Path("results/benchmarks/directions_needed"))
     parser.add_argument("--jobs", type=int, default=2)
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     # killed, exit through the pools' context managers, which terminate their workers
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
     result = run(args.config, tuple(args.n), args.test, tuple(args.c1), args.out, args.jobs)
-    result.write(args.out / "direction_density.json")
+    result.write(args.out / "directions_needed.json")
     print(table(result))
-    print(f"wall {result.wall_s:.0f} s; {args.out / 'direction_density.json'}")
+    print(f"wall {result.wall_s:.0f} s; {args.out / 'directions_needed.json'}")
     return 0
 
 

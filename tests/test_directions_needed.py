@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from benchmarks.direction_density import _batches, designs, random_caudal_directions
+from benchmarks.directions_needed import _batches, designs, random_caudal_directions
 from fem.directions import gravity_direction
 from fem.sweep import PAPER_PHI_DEG, Case
 

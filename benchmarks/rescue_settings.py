@@ -13,9 +13,9 @@ way is the kernel's CPU count of its processes, so the other way's load does not
 case it reports the outcome, Newton iterations and solve CPU both ways, and the largest distance
 between the two answers.
 
-``python -m benchmarks.rescue_cost MESH --direction -90 0 --direction 91.8 -104.2 --c1 1.2 1.0 0.8
-[--against rescue_min_step=0.015625 ...] [--config config.yaml] [--out DIR]`` prints the table
-and writes ``DIR/rescue_cost.json``.
+``python -m benchmarks.rescue_settings MESH --direction -90 0 --direction 91.8 -104.2
+--c1 1.2 1.0 0.8 [--against rescue_min_step=0.015625 ...] [--config config.yaml] [--out DIR]``
+prints the table and writes ``DIR/rescue_settings.json``.
 """
 
 from __future__ import annotations
@@ -35,8 +35,8 @@ from fem.case_files import read_points
 from fem.exceptions import InvalidParameterError
 from fem.parameters import Loading, as_dict
 from fem.sweep import Case
-from studies.machine import MachineState, machine_state, run_pinned
 from studies.results import Record, Result
+from studies.timing_hygiene import MachineState, machine_state, run_pinned
 
 #: The two ways, and the core each runs on.
 WAYS = {"config": 0, "against": 1}
@@ -188,7 +188,7 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point (see the module docstring)."""
     from run.config import ConfigError, read_config_file
 
-    parser = argparse.ArgumentParser(prog="python -m benchmarks.rescue_cost",
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.rescue_settings",
                                      description=__doc__.splitlines()[0])
     parser.add_argument("mesh", type=Path, help="mesh XDMF with facet tags")
     parser.add_argument("--direction", type=float, nargs=2, action="append", required=True,
@@ -199,7 +199,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="fe.loading settings the config's are compared against "
                              "(default: rescue_after_neighbours=true)")
     parser.add_argument("--config", type=Path, default=Path("config.yaml"))
-    parser.add_argument("--out", type=Path, default=Path("results/benchmarks/rescue_cost"))
+    parser.add_argument("--out", type=Path, default=Path("results/benchmarks/rescue_settings"))
     args = parser.parse_args(argv)
     try:
         config = read_config_file(args.config)
@@ -209,7 +209,7 @@ def main(argv: list[str] | None = None) -> int:
     except (InvalidParameterError, ConfigError, RuntimeError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
-    result.write(args.out / "rescue_cost.json")
+    result.write(args.out / "rescue_settings.json")
     print(f"the config's fe.loading against {_describe(result.against)}; "
           f"{result.machine_before.cpu}, load before "
           f"{result.machine_before.load_average_1_5_15min}, after "

@@ -19,8 +19,8 @@ them. ``--propose K`` prints K such directions (:func:`propose`): the midpoints 
 direction triangles' edges whose ends err most, over the C1 values where any direction exceeds
 the limit.
 
-``python -m benchmarks.direction_gaps DATASET [--limit 0.5] [--propose K] [--json OUT]`` prints the
-table.
+``python -m benchmarks.direction_spacing_error DATASET [--limit 0.5] [--propose K] [--json OUT]``
+prints the table.
 """
 
 from __future__ import annotations
@@ -129,7 +129,7 @@ def leave_one_out(ds: Dataset, C1: float, limit_mm: float = DEFAULT_LIMIT_MM) ->
                        int(np.sum(worst > limit_mm)), rows)
 
 
-def direction_gaps(ds: Dataset, C1s: Sequence[float] | None = None,
+def direction_spacing_error(ds: Dataset, C1s: Sequence[float] | None = None,
                    limit_mm: float = DEFAULT_LIMIT_MM) -> DirectionGaps:
     """:func:`leave_one_out` at every C1 value of the dataset (or ``C1s``), softest first."""
     values = np.unique(np.round(ds.C1[ds.converged], 6)) if C1s is None else C1s
@@ -186,7 +186,7 @@ def propose(ds: Dataset, gaps: DirectionGaps, k: int) -> list[tuple[float, float
 
 def main(argv: list[str] | None = None) -> int:
     """Command line: see the module's docstring."""
-    parser = argparse.ArgumentParser(prog="python -m benchmarks.direction_gaps",
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.direction_spacing_error",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("dataset", type=Path)
     parser.add_argument("--c1", type=float, nargs="+", help="these C1 values only (kPa)")
@@ -198,7 +198,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         ds = read_dataset(args.dataset)
-        gaps = direction_gaps(ds, args.c1, args.limit)
+        gaps = direction_spacing_error(ds, args.c1, args.limit)
     except (DatasetError, ValueError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
