@@ -25,9 +25,9 @@ from pathlib import Path
 from typing import Any
 
 from fem.configfile import read_config_file
+from fem.materials import DEFAULT_SKIN_THICKNESS, SkinLayer, Tissues
 from fem.parameters import SolverSettings
 from fem.sweep import Case
-from fem.tissues import DEFAULT_SKIN_THICKNESS, SkinLayer, Tissues
 from meshes.tags import Tissue
 
 #: homogeneous; the skin membrane that wrinkles (the default); the plain membrane.

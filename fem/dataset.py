@@ -49,8 +49,8 @@ Layout (units in attributes; M cases, N material points)::
 
 Root attributes hold a description, the creation time, the provenance (config
 sections, package versions, git commit) and the tissue map the cases were solved with
-(``tissues``: each tissue's C1 over the fat's, :mod:`fem.tissues`) as JSON strings. This
-module imports neither dolfinx nor jax, so any tool can read the format:
+(``tissues``: each tissue's C1 over the fat's, :mod:`fem.materials.tissues`) as JSON strings.
+This module imports neither dolfinx nor jax, so any tool can read the format:
 :func:`fem.aggregate.build_dataset` writes it, :func:`read_dataset` and
 :func:`read_case_columns` read it.
 """

@@ -41,7 +41,7 @@ from mpi4py import MPI
 from fem.io import node_displacement
 from fem.loading import LoadingResult, solve_incrementally
 from fem.parameters import Gravity, Material, SolverSettings
-from fem.problem import GravityProblem, strain_energy
+from fem.problem import GravityProblem
 from fem.solver import NewtonSolver
 from meshes.tags import Boundary
 
@@ -69,7 +69,7 @@ class InverseMotionProblem(GravityProblem):
         j = ufl.det(f)
         self.J = 1.0 / j
         pressure = None if p is None else ufl.variable(p)
-        psi = strain_energy(F, pressure, self.local_C1, self.discretisation, self.kappa)
+        psi = self.material.strain_energy(F, pressure)
         if self.mixed:
             eta, q = ufl.split(self._test)
         else:

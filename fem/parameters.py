@@ -10,8 +10,8 @@ import numpy as np
 
 from fem.contact import Contact, contact_from_mapping, resolve_obstacle
 from fem.exceptions import InvalidParameterError
+from fem.materials.tissues import SkinLayer, Tissues, skin_from_mapping, tissues_from_mapping
 from fem.self_contact import SelfContact, self_contact_from_mapping
-from fem.tissues import SkinLayer, Tissues, skin_from_mapping, tissues_from_mapping
 from meshes.tags import Boundary
 
 STANDARD_GRAVITY = 9.81  # m/s², the paper's |g|
@@ -103,7 +103,7 @@ class Discretisation:
         quadrature_degree: quadrature degree of the nonlinear forms (0: automatic,
             2k for Taylor–Hood and 2 for P1).
         bulk_ratio: κ / C1 of the penalty baseline.
-        isochoric: write W with Ī1 = J^(-2/3) I1 (see :mod:`fem.material`).
+        isochoric: write W with Ī1 = J^(-2/3) I1 (see :mod:`fem.materials.neo_hookean`).
     """
 
     element: str = "taylor-hood"

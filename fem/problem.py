@@ -4,7 +4,8 @@ Unknowns: displacement u (and, for Taylor–Hood, pressure p). Total potential
 
     Π(u, p) = ∫ [C1 (Ī1 - 3) - p (J - 1)] dX - ∫ ρ λ g · u dX  [+ Π_c(u)] [+ Π_sc(u)],
 
-with λ ∈ [0, 1] the load fraction, Π_c the optional contact penalty with the chest
+with λ ∈ [0, 1] the load fraction, the material's terms (the solid's law with each cell's C1,
+the skin's membrane) from :mod:`fem.materials`, Π_c the optional contact penalty with the chest
 (:mod:`fem.contact`) and Π_sc the skin's optional self-contact penalty
 (:mod:`fem.self_contact`, assembled outside UFL by the solver). The residual is Π's first
 variation and the Jacobian its second, so the discrete tangent is symmetric (used by MUMPS LDLᵀ).
@@ -27,13 +28,14 @@ from fem.contact import Contact
 from fem.exceptions import InvalidParameterError, MeshError
 from fem.io import boundary_vertex_nodes, node_to_vertex_dof
 from fem.kinematics import deformation_gradient, jacobian
-from fem.material import Incompressible, Membrane, NeoHookean, Penalty
+from fem.materials import SkinLayer, Tissues
+from fem.materials.mesh_material import MeshMaterial
 from fem.parameters import Discretisation, FixedBoundaries, Gravity, Material
+from fem.pressure_modes import pinned_pressure_bcs
 from fem.self_contact import SelfContact, SelfContactAssembler
 from fem.skin_surface import SkinSurface
-from fem.tissues import SkinLayer, Tissues
 from meshes.io import boundary_facets, geometry_nodes
-from meshes.tags import Boundary, Tissue
+from meshes.tags import Boundary
 
 log = logging.getLogger(__name__)
 
@@ -71,55 +73,6 @@ def check_mesh(mesh: Any, facet_tags: Any, fixed: FixedBoundaries) -> None:
         )
 
 
-def strain_energy(
-    F: ufl.core.expr.Expr,
-    p: ufl.core.expr.Expr | None,
-    C1: ufl.core.expr.Expr,
-    discretisation: Discretisation,
-    kappa_ratio: ufl.core.expr.Expr | float | None = None,
-) -> ufl.core.expr.Expr:
-    """Strain energy density of the chosen discretisation (per reference volume).
-
-    Taylor–Hood: ψ = C1 (Ī1 - 3) - p (J - 1); P1-penalty: ψ = C1 (Ī1 - 3) + κ/2 (J - 1)²
-    with κ = ``kappa_ratio`` · C1 (default ``discretisation.bulk_ratio``).
-    """
-    psi = NeoHookean(C1, isochoric=discretisation.isochoric).strain_energy(F)
-    if discretisation.element == "taylor-hood":
-        if p is None:
-            raise ValueError("the Taylor-Hood strain energy needs the pressure field")
-        return psi + Incompressible().strain_energy(F, p)
-    ratio = discretisation.bulk_ratio if kappa_ratio is None else kappa_ratio
-    return psi + Penalty(ratio * C1).strain_energy(F)
-
-
-def _has_skin_cells(mesh: Any, cell_tags: Any) -> bool:
-    """Whether any cell is tagged skin (on any process)."""
-    local = cell_tags is not None and bool(np.any(np.asarray(cell_tags.values)
-                                                  == int(Tissue.SKIN)))
-    return bool(mesh.comm.allreduce(local, op=MPI.LOR))
-
-
-def _stiffness_ratio(mesh: Any, cell_tags: Any, tissues: Tissues) -> fem.Function | None:
-    """The cells' stiffness ratios as a DG0 field; None where all are 1 (one tissue, fat)."""
-    if cell_tags is None:
-        return None
-    n_local = mesh.topology.index_map(mesh.topology.dim).size_local
-    tags = np.full(n_local, int(Tissue.FAT), dtype=np.int64)
-    indices = np.asarray(cell_tags.indices)
-    owned = indices < n_local
-    tags[indices[owned]] = np.asarray(cell_tags.values)[owned]
-    ratios = tissues.cell_ratios(tags)
-    heterogeneous = mesh.comm.allreduce(bool(np.any(ratios != 1.0)), op=MPI.LOR)
-    if not heterogeneous:
-        return None
-    V = fem.FunctionSpace(mesh, ("DG", 0))
-    field = fem.Function(V, name="stiffness_ratio")
-    dofs = np.asarray(V.dofmap.list.array).reshape(-1)[:n_local]  # one per cell
-    field.x.array[dofs] = ratios
-    field.x.scatter_forward()
-    return field
-
-
 class GravityProblem:
     """Function spaces, forms and boundary conditions of one mesh.
 
@@ -133,7 +86,7 @@ class GravityProblem:
         self_contact: the skin's contact with itself (:mod:`fem.self_contact`; serial
             only). None: the skin may pass through itself.
         cell_tags: cell tags with :class:`meshes.tags.Tissue` values (None: all fat).
-        tissues: each tissue's stiffness over the fat's (:mod:`fem.tissues`; None: the
+        tissues: each tissue's stiffness over the fat's (:mod:`fem.materials.tissues`; None: the
             defaults).
         skin: the skin as a membrane on the skin boundary (None: none); left out, with a
             note in the log, where the cell tags already hold skin cells.
@@ -162,23 +115,12 @@ class GravityProblem:
         cell = mesh.ufl_cell()
 
         scalar = PETSc.ScalarType
-        self.C1 = fem.Constant(mesh, scalar(1.0))
-        tissues = tissues or Tissues()
-        #: Each cell's stiffness over the fat's (a DG0 field), or None where every cell has
-        #: the ratio 1: the homogeneous forms are kept.
-        self.stiffness_ratio = _stiffness_ratio(mesh, cell_tags, tissues)
-        #: The skin membrane in force (None: none, or the mesh's skin cells carry the skin).
-        self.skin = None if skin is None or _has_skin_cells(mesh, cell_tags) else skin
-        if skin is not None and self.skin is None:
-            log.info("the mesh's cells carry the skin: no skin membrane is added")
-        self._skin_ratio = fem.Constant(mesh, scalar(tissues.ratio(Tissue.SKIN) if self.skin
-                                                  else 1.0))
-        self._skin_thickness = fem.Constant(mesh, scalar(self.skin.thickness if self.skin
-                                                         else 0.0))
-        #: The local C1 (Pa) the strain energy and the pressure preconditioner take; the
-        #: contact penalties take the fat's, :attr:`C1` (:mod:`fem.tissues`).
-        self.local_C1 = self.C1 if self.stiffness_ratio is None \
-            else self.C1 * self.stiffness_ratio
+        #: The material laws on this mesh (:mod:`fem.materials`): the weak form's material
+        #: terms, each cell's C1 (:attr:`MeshMaterial.local_C1`) and the skin membrane.
+        self.material = MeshMaterial(mesh, discretisation, cell_tags, tissues, skin)
+        #: The case's C1 (Pa), the fat's; the contact penalties take it
+        #: (:mod:`fem.materials.tissues`).
+        self.C1 = self.material.C1
         self.body_force = fem.Constant(mesh, np.zeros(3, dtype=scalar))
         self.density = 0.0
         self.gravity = np.zeros(3)
@@ -202,7 +144,6 @@ class GravityProblem:
             self.pressure_dofs = np.zeros(0, dtype=np.int64)
         self._u_expr = u
 
-        self.kappa = fem.Constant(mesh, scalar(discretisation.bulk_ratio))
         dx = ufl.Measure(
             "dx", domain=mesh, metadata={"quadrature_degree": discretisation.quadrature}
         )
@@ -243,13 +184,11 @@ class GravityProblem:
         mesh, dx, contact = self.mesh, self.dx, self.contact
         F = deformation_gradient(u)
         self.J = jacobian(F)
-        psi = strain_energy(F, p, self.local_C1, self.discretisation, self.kappa)
+        psi = self.material.strain_energy(F, p)
         potential = psi * dx - ufl.dot(self.body_force, u) * dx
-        if self.skin is not None:
-            membrane = Membrane(self._skin_ratio * self.C1, self._skin_thickness,
-                                self.skin.wrinkles)
-            potential += membrane.strain_energy(F, ufl.FacetNormal(mesh)) \
-                * self.skin_measure()(int(Boundary.SKIN))
+        membrane = self.material.skin_energy(F, ufl.FacetNormal(mesh))
+        if membrane is not None:
+            potential += membrane * self.skin_measure()(int(Boundary.SKIN))
         if contact is not None:
             ds = self.skin_measure()
             x = ufl.SpatialCoordinate(mesh)
@@ -319,7 +258,7 @@ class GravityProblem:
         if self._preconditioner is None:
             dp = ufl.split(self._trial)[1]
             q = ufl.split(self._test)[1]
-            mass = -(0.5 / self.local_C1) * dp * q * self.dx
+            mass = -(0.5 / self.material.local_C1) * dp * q * self.dx
             self._preconditioner = fem.form(self._tangent_ufl + mass)
         return self._preconditioner
 
@@ -336,6 +275,8 @@ class GravityProblem:
                 zero = fem.Function(collapsed)
                 dofs = fem.locate_dofs_topological((sub, collapsed), fdim, facets)
                 bcs.append(fem.dirichletbc(zero, dofs, sub))
+        if self.mixed:  # a pressure no free displacement sees (a clamped cell): pinned
+            bcs += pinned_pressure_bcs(self.W, bcs)
         return bcs
 
     @staticmethod

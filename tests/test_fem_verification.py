@@ -19,9 +19,9 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fem.kinematics import deformation_gradient
-from fem.material import first_piola_kirchhoff
+from fem.materials import first_piola_kirchhoff, strain_energy
 from fem.parameters import Discretisation, FixedBoundaries, Gravity, Loading, Material
-from fem.problem import GravityProblem, strain_energy
+from fem.problem import GravityProblem
 from fem.solver import NewtonSolver
 from meshes.tags import Boundary
 
@@ -34,7 +34,7 @@ TIGHT = {"snes_rtol": 1e-12, "snes_atol": 1e-11, "load_atol": 0.0}
 class UniaxialStretch:
     """A unit cube stretched to λ along x, free laterally (symmetry planes x, y, z = 0).
 
-    Uses the project's strain energy (:func:`fem.problem.strain_energy`) and Newton
+    Uses the project's strain energy (:func:`fem.materials.strain_energy`) and Newton
     solver on a mixed Taylor–Hood space. The exact solution (u linear, p constant)
     lies in the discrete space, so the FE solution is exact to solver tolerance.
     """

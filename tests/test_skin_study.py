@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 import yaml
 
+from fem.materials import SkinLayer
 from fem.sweep import Case
-from fem.tissues import SkinLayer
 from meshes.schema import load_schema
 from run.config import ConfigError, WorkflowConfig
 from studies.fe_study.skin import (

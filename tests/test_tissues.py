@@ -1,4 +1,4 @@
-"""The breast's tissues as their own materials (fem.tissues, meshes.tags.Tissue).
+"""The breast's tissues as their own materials (fem.materials, meshes.tags.Tissue).
 
 * the ratios are parsed by name and refused by name when bad; a tumour needs its own;
 * a column of two tissues hanging under its own weight (fat at the clamp, a tissue four times
@@ -21,8 +21,8 @@ import pytest
 from scipy.optimize import brentq
 
 from fem.exceptions import InvalidParameterError
+from fem.materials import DEFAULT_RATIOS, Tissues, tissues_from_mapping
 from fem.parameters import TISSUE_DENSITY, SolverSettings
-from fem.tissues import DEFAULT_RATIOS, Tissues, tissues_from_mapping
 from meshes.tags import Tissue
 
 TIGHT = {"snes_rtol": 1e-12, "snes_atol": 1e-11, "load_atol": 0.0}
@@ -125,7 +125,7 @@ def test_a_two_tissue_column_hangs_as_the_uniaxial_solution_says() -> None:
         mesh, facets, cells = _column(length, width, 16)
         problem = GravityProblem(mesh, facets, Discretisation(), fixed, None, None, cells,
                                  tissues)
-        assert (problem.stiffness_ratio is None) == (name == "one ratio")
+        assert (problem.material.stiffness_ratio is None) == (name == "one ratio")
         solver = NewtonSolver(problem, TIGHT)
         problem.set_case(Material(C1=C1), Gravity(phi=0.0))  # gravity along +x: hanging
         result = solve_incrementally(problem, solver, Loading())
@@ -238,10 +238,10 @@ def test_the_skin_membrane_carries_what_a_resolved_skin_layer_does() -> None:
     on the all-fat column's sides stretches it as the layer of skin cells does, to 5 %.
     """
     from fem.loading import solve_incrementally
+    from fem.materials import SkinLayer
     from fem.parameters import Discretisation, FixedBoundaries, Gravity, Loading, Material
     from fem.problem import GravityProblem
     from fem.solver import NewtonSolver
-    from fem.tissues import SkinLayer
 
     # the skin as thin against the column as against a breast (1 mm on 50 mm): the fat that
     # the membrane's column holds in the layer's place then counts as little as in a breast
@@ -253,7 +253,7 @@ def test_the_skin_membrane_carries_what_a_resolved_skin_layer_does() -> None:
         mesh, facets, cells = _skinned_column(length, width, skin, resolved)
         problem = GravityProblem(mesh, facets, Discretisation(), fixed, None, None, cells,
                                  Tissues(), layer)
-        assert (problem.skin is not None) == (name == "membrane")
+        assert (problem.material.skin is not None) == (name == "membrane")
         solver = NewtonSolver(problem, TIGHT)
         problem.set_case(Material(C1=C1), Gravity(phi=0.0))
         result = solve_incrementally(problem, solver, Loading())
@@ -269,7 +269,7 @@ def test_the_skin_membrane_carries_what_a_resolved_skin_layer_does() -> None:
     mesh, facets, cells = _skinned_column(length, width, skin, True)
     problem = GravityProblem(mesh, facets, Discretisation(), fixed, None, None, cells,
                              Tissues(), SkinLayer(skin))
-    assert problem.skin is None
+    assert problem.material.skin is None
 
 
 
@@ -287,7 +287,7 @@ def test_the_wrinkling_membrane_is_the_least_energy_of_any_fine_wrinkling(
 
     A sheet's mean stretches (λ1, λ2) can be taken by any finer wrinkling whose true stretches
     are at least as long; the relaxed energy is the least of the plain energy over them,
-    found here by brute force, independent of the closed form of fem.material.Membrane
+    found here by brute force, independent of the closed form of fem.materials.Membrane
     (taut, wrinkled, slack). The plain membrane keeps its compressive energy.
     """
     import ufl
@@ -296,7 +296,7 @@ def test_the_wrinkling_membrane_is_the_least_energy_of_any_fine_wrinkling(
     from mpi4py import MPI
     from scipy.optimize import minimize
 
-    from fem.material import Membrane
+    from fem.materials import Membrane
 
     l1, l2 = stretches
     cube = dmesh.create_unit_cube(MPI.COMM_WORLD, 1, 1, 1, dmesh.CellType.tetrahedron)

@@ -1,11 +1,11 @@
 """What the skin changes: the clinical cases homogeneous and with the skin membrane.
 
-The skin (:class:`fem.tissues.SkinLayer`, a membrane on the ``skin`` boundary) is stiffer than
+The skin (:class:`fem.materials.SkinLayer`, a membrane on the ``skin`` boundary) is stiffer than
 the fat by a ratio and has a thickness, both known only to a range (docs/tissues.md). This
 study solves the config's clinical cases on the workflow's mesh with each setting of
 :func:`skin_settings`: homogeneous (no membrane) first, then the default skin (the ratio of
 ``material.tissues.skin``, the thickness and wrinkling of ``material.skin``, else
-:data:`fem.tissues.DEFAULT_SKIN_THICKNESS`, wrinkling), then each other ratio of
+:data:`fem.materials.DEFAULT_SKIN_THICKNESS`, wrinkling), then each other ratio of
 ``fe_study.skin.ratios`` at the default thickness and each other thickness of
 ``fe_study.skin.thicknesses`` at the default ratio. One :class:`fem.case.CaseRunner` serves
 each setting's cases (its forms compiled once).
@@ -30,9 +30,9 @@ import numpy as np
 
 from fem.case import CaseRunner
 from fem.interpolation import evaluate
+from fem.materials import DEFAULT_SKIN_THICKNESS, SkinLayer, Tissues
 from fem.parameters import SolverSettings
 from fem.sweep import Case
-from fem.tissues import DEFAULT_SKIN_THICKNESS, SkinLayer, Tissues
 from meshes.tags import Tissue
 from studies.config_errors import ConfigError
 from studies.fe_study.config import SkinStudyConfig
@@ -171,7 +171,7 @@ def skin_settings(study: SkinStudyConfig, solver: SolverSettings) -> list[SkinSe
 
     The default skin is the solver's: its ratio ``material.tissues.skin`` (else the literature
     default), its thickness and wrinkling from ``material.skin`` (else
-    :data:`fem.tissues.DEFAULT_SKIN_THICKNESS`, wrinkling).
+    :data:`fem.materials.DEFAULT_SKIN_THICKNESS`, wrinkling).
     """
     ratio = solver.tissues.ratio(Tissue.SKIN)
     layer = solver.skin or SkinLayer(DEFAULT_SKIN_THICKNESS)

@@ -1,11 +1,9 @@
-"""Constitutive laws: the paper's neo-Hookean solid and how incompressibility is imposed.
+"""The skin as a membrane: a neo-Hookean sheet bonded to the body's ``skin`` boundary.
 
-The paper's strain energy is ``W = C1 (I1 - 3)``. In the continuum J = 1 and
-this equals ``C1 (J^(-2/3) I1 - 3)``; in a mixed discretisation J = 1 holds
-only weakly, and the plain-I1 form then leaves a soft volumetric mode (on a
-prototype mesh it gave 37 % pointwise differences against an independent code
-and diverged on refinement). We therefore write the deviatoric part with the
-isochoric invariant, as is standard (Holzapfel 2000, §6.5).
+The skin is 1–2.5 mm thick and the cells 6–25 mm, so a mesh rarely resolves it; where its
+cells carry no skin tag, the skin's law enters the potential per unit area of the skin
+boundary instead (:class:`fem.materials.tissues.SkinLayer` holds its settings, docs/tissues.md
+says why a membrane).
 """
 
 from __future__ import annotations
@@ -13,47 +11,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import ufl
-
-from fem.kinematics import first_invariant, isochoric_first_invariant, jacobian
-
-
-@dataclass(frozen=True, slots=True)
-class NeoHookean:
-    """W = C1 (Ī1 - 3) (isochoric) or C1 (I1 - 3) (plain, the paper's literal form).
-
-    Attributes:
-        C1: the material parameter (Pa), a UFL constant so that one compiled
-            form serves every case of a sweep.
-        isochoric: use Ī1 = J^(-2/3) I1 (recommended; see the module docstring).
-    """
-
-    C1: ufl.core.expr.Expr
-    isochoric: bool = True
-
-    def strain_energy(self, F: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
-        """Strain energy density per unit reference volume."""
-        I1 = isochoric_first_invariant(F) if self.isochoric else first_invariant(F)
-        return self.C1 * (I1 - 3)
-
-
-@dataclass(frozen=True, slots=True)
-class Incompressible:
-    """Incompressibility by a pressure multiplier: ψ = -p (J - 1)."""
-
-    def strain_energy(self, F: ufl.core.expr.Expr, p: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
-        """Lagrange-multiplier term added to the strain energy."""
-        return -p * (jacobian(F) - 1)
-
-
-@dataclass(frozen=True, slots=True)
-class Penalty:
-    """Near incompressibility by a penalty: ψ = κ/2 (J - 1)², κ the bulk modulus (Pa)."""
-
-    kappa: ufl.core.expr.Expr
-
-    def strain_energy(self, F: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
-        """Volumetric penalty energy."""
-        return 0.5 * self.kappa * (jacobian(F) - 1) ** 2
 
 
 @dataclass(frozen=True, slots=True)
@@ -119,8 +76,3 @@ class Membrane:
 _ROOT_FLOOR = 1e-12
 #: The taut test's allowance: the floor lowers b by at most √floor / 2.
 _TAUT_TOLERANCE = 1e-6
-
-
-def first_piola_kirchhoff(psi: ufl.core.expr.Expr, F: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
-    """P = ∂ψ/∂F for a strain energy ψ written in terms of ``ufl.variable`` F."""
-    return ufl.diff(psi, F)

@@ -5,7 +5,8 @@ The sweep varies one stiffness, the fat's C1, so the dataset and the surrogate k
 stiffness parameter; every other tissue is stiffer (or softer) by a fixed ratio
 (``material.tissues``), and its neo-Hookean C1 is the ratio times the case's C1. The ratios
 enter the forms as one cellwise (DG0) field, so one compiled form serves every case and
-every tissue map; a mesh whose cells all have the ratio 1 keeps the homogeneous forms.
+every tissue map (:func:`fem.materials.mesh_material.stiffness_field`); a mesh whose cells all
+have the ratio 1 keeps the homogeneous forms.
 
 What reads C1, and which value it takes:
 
@@ -17,8 +18,8 @@ What reads C1, and which value it takes:
 
 The skin is 1–2.5 mm thick and the cells 6–25 mm: a mesh rarely resolves it. Where its cells
 carry no skin tag, :class:`SkinLayer` carries it as a membrane on the ``skin`` boundary
-(:class:`fem.material.Membrane`: the skin's neo-Hookean law over its thickness, in plane
-stress), its C1 the skin's ratio times the fat's; where a segmentation labelled the skin's
+(:class:`fem.materials.membrane.Membrane`: the skin's neo-Hookean law over its thickness, in
+plane stress), its C1 the skin's ratio times the fat's; where a segmentation labelled the skin's
 cells, they carry it and no membrane is added.
 """
 
@@ -124,7 +125,8 @@ class SkinLayer:
     Attributes:
         thickness: the skin's thickness, m (1–2.5 mm in the breast; docs/tissues.md).
         wrinkles: the membrane carries no compression (its relaxed, tension-field energy:
-            :class:`fem.material.Membrane`); False: it resists compression as a bonded solid.
+            :class:`fem.materials.membrane.Membrane`); False: it resists compression as a bonded
+            solid.
     """
 
     thickness: float = DEFAULT_SKIN_THICKNESS
