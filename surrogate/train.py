@@ -18,7 +18,7 @@ from __future__ import annotations
 import logging
 import time
 from functools import partial
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -37,9 +37,6 @@ from surrogate.epochs import (
 )
 from surrogate.model import Params, pointwise_error
 from surrogate.structures import structure_for
-
-if TYPE_CHECKING:
-    from surrogate.structures.base import Structure
 
 log = logging.getLogger(__name__)
 
@@ -191,10 +188,13 @@ def train_and_evaluate(
 
 
 def train_networks(
-    structure: Structure, ds: Dataset, progress: bool = True,
+    structure: Any, ds: Dataset, progress: bool = True,
     holdout: np.ndarray | None = None, refit_epochs: int | None = None,
 ) -> TrainResult:
     """Train a structure of point networks (:meth:`Structure.train`'s default).
+
+    ``structure`` is a :class:`surrogate.structures.base.Structure` (not imported: the
+    structures build on this loop).
 
     Adam on its epochs (:meth:`Structure.epoch_plan`), early stopping on the validation loss,
     best weights kept; with ``refit_epochs``, that many epochs on the training and validation

@@ -11,7 +11,7 @@ import pytest
 
 pytestmark = pytest.mark.unit
 
-PACKAGES = ("meshes", "fem", "surrogate", "studies", "report", "benchmarks")
+PACKAGES = ("meshes", "fem", "surrogate", "studies", "run", "report", "benchmarks")
 
 
 def test_no_module_imports_itself_back() -> None:

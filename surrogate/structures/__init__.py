@@ -25,11 +25,11 @@ from __future__ import annotations
 import importlib
 from dataclasses import dataclass
 from functools import cache
-from typing import TYPE_CHECKING
+from typing import Any
 
-if TYPE_CHECKING:  # the config reads this registry without importing any structure's code
-    from surrogate.config import SurrogateConfig
-    from surrogate.structures.base import Structure
+# The registry imports no module of the package, not even for its types: the config reads it
+# (surrogate.config), and the structures' code reads the config and the modules that call
+# structure_for (checkpoint, predict, export), so a type import here would close a circle.
 
 
 @dataclass(frozen=True)
@@ -62,8 +62,10 @@ STRUCTURES: dict[str, Entry] = {
 
 
 @cache
-def structure_class(name: str) -> type[Structure]:
+def structure_class(name: str) -> Any:
     """The class of the structure ``name`` (its module imported on first use).
+
+    A subclass of :class:`surrogate.structures.base.Structure`.
 
     Raises:
         ValueError: if no structure has that name.
@@ -77,8 +79,11 @@ def structure_class(name: str) -> type[Structure]:
 
 
 @cache
-def structure_for(config: SurrogateConfig) -> Structure:
+def structure_for(config: Any) -> Any:
     """The structure of a model of ``config``, bound to it (one object per config).
+
+    ``config`` is a :class:`surrogate.config.SurrogateConfig`; the answer a
+    :class:`surrogate.structures.base.Structure`.
 
     Hashable, as the config is: jitted code takes the config as a static argument and asks for
     its structure while it traces, so that the choice is made in Python, once per compilation.
