@@ -43,6 +43,36 @@ STANDS_ALONE = (" (a config file stands alone, nothing is taken from config.yaml
                 "copy of it and change what you need)")
 
 
+#: Keys a config of an earlier version may still hold, with what replaced them: a config
+#: that holds one is told the new name, not only that the key is unexpected.
+RENAMED_KEYS: dict[str, str] = {
+    "fe_study.stability": "renamed fe_study.convergence_map (the map of where Newton fails)",
+    "surrogate_study.variants": "renamed surrogate_study.ablations (one setting undone each)",
+    "sweep.refine": ("removed: the adaptive sweep (sweep.adaptive) adds directions where its "
+                     "estimate of the surrogate's error is largest"),
+}
+
+
+def renamed_keys(config: Mapping[str, Any]) -> list[str]:
+    """``'dotted.key: renamed ...'`` for every key of :data:`RENAMED_KEYS` that ``config`` holds."""
+    found = []
+    for dotted, what in RENAMED_KEYS.items():
+        section, _, key = dotted.partition(".")
+        value = config.get(section)
+        if isinstance(value, Mapping) and key in value:
+            found.append(f"{dotted}: {what}")
+    return found
+
+
+def _only_renamed_keys(error: jsonschema.ValidationError) -> bool:
+    """Whether ``error`` is an unexpected key that :func:`renamed_keys` names better."""
+    if error.validator != "additionalProperties" or not isinstance(error.instance, Mapping):
+        return False
+    where = ".".join(map(str, error.absolute_path))
+    extra = set(error.instance) - set(error.schema.get("properties", {}))
+    return bool(extra) and all(f"{where}.{key}" in RENAMED_KEYS for key in extra)
+
+
 def schema_errors(config: Mapping[str, Any], schema: dict[str, Any]) -> list[str]:
     """Every schema violation of ``config`` as ``'dotted.key: message'``, sorted by key.
 
@@ -50,11 +80,12 @@ def schema_errors(config: Mapping[str, Any], schema: dict[str, Any]) -> list[str
     the minimum of 0``), not the whole list.
     """
     validator = jsonschema.Draft202012Validator(schema)
-    errors = [s for e in validator.iter_errors(config) for s in _specific(e)]
+    errors = [s for e in validator.iter_errors(config) for s in _specific(e)
+              if not _only_renamed_keys(s)]
     errors.sort(key=lambda e: [str(p) for p in e.absolute_path])
     return [f"{'.'.join(map(str, e.absolute_path)) or '<top level>'}: {e.message}"
             + (STANDS_ALONE if e.validator == "required" and not e.absolute_path else "")
-            for e in errors] + sorted(_non_finite(config))
+            for e in errors] + sorted(_non_finite(config)) + renamed_keys(config)
 
 
 def _non_finite(value: Any, where: tuple[str, ...] = ()) -> Iterator[str]:

@@ -362,7 +362,7 @@ def test_every_schema_violation_is_listed_by_key() -> None:
          "sweep.adaptive.max_cases = 5 is fewer than the start design's 6 cases"),
         # the hand-listed directions the adaptive rounds replaced are refused, not ignored
         ({"sweep": {"refine": {"C1_max": 1.2, "directions": [[81.0, -82.5]]}}},
-         "sweep: Additional properties are not allowed ('refine' was unexpected)"),
+         "sweep.refine: removed: the adaptive sweep (sweep.adaptive)"),
         # a sweep too large to plan is refused before it is expanded
         ({"sweep": {"C1_kPa": {"start": 0.8, "stop": 5.0, "step": 1e-5}}},
          "sweep.C1_kPa: 0.8 to 5 in steps of 1e-05 is 420001 values, more than 10000"),
@@ -390,6 +390,25 @@ def test_an_inconsistent_section_is_named(change: dict, message: str) -> None:
     with pytest.raises(ConfigError) as caught:
         WorkflowConfig.from_mapping(raw)
     assert str(caught.value).startswith(message), str(caught.value)
+
+
+@pytest.mark.parametrize(
+    ("section", "key", "value", "words"),
+    [
+        ("fe_study", "stability", {}, "fe_study.stability: renamed fe_study.convergence_map"),
+        ("surrogate_study", "variants", {}, "surrogate_study.variants: renamed "
+                                            "surrogate_study.ablations"),
+        ("sweep", "refine", [], "sweep.refine: removed: the adaptive sweep"),
+    ],
+)
+def test_a_key_of_an_earlier_version_is_told_its_new_name(
+    section: str, key: str, value: object, words: str
+) -> None:
+    raw = read("tests/config.yaml")
+    raw[section][key] = value
+    with pytest.raises(ConfigError) as caught:
+        WorkflowConfig.from_mapping(raw)
+    assert words in str(caught.value), str(caught.value)
 
 
 def test_an_imported_mesh_needs_an_explicit_obstacle() -> None:
