@@ -71,8 +71,8 @@ CHEST_GROUP = "chest_wall"
 
 #: The meshers of ``mesh.image.mesher``.
 MESHERS = ("cgal", "ftetwild")
-#: The default: CGAL's mesh is deterministic but leaves a few cells below the floor, and the
-#: solve of a tissue phantom failed on it (docs/geometry.md); fTetWild's meets the floor.
+#: The default: CGAL's mesh is deterministic but leaves a few cells below the floor and resolves
+#: a thin skin label with many small cells (docs/geometry.md); fTetWild's meets the floor.
 DEFAULT_MESHER = "ftetwild"
 
 
