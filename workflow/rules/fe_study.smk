@@ -38,14 +38,14 @@ rule fe_reference:
     input:
         mesh=fe_study_mesh(CONFIG.fe_study.reference.mesh),
     output:
-        f"{FE_STUDY_DIR}/reference/c1={{c1}}_phi={{phi}}_theta={{theta}}.h5",
+        f"{FE_STUDY_DIR}/reference/{CASE_WILDCARDS}.h5",
     params:
         config=CONFIG.fe_study.base_config,
         reference=CONFIG.section("fe_study", "reference"),
     log:
-        "results/logs/fe_study/reference_c1={c1}_phi={phi}_theta={theta}.log",
+        f"results/logs/fe_study/reference_{CASE_WILDCARDS}.log",
     benchmark:
-        "results/benchmarks/fe_study/reference_c1={c1}_phi={phi}_theta={theta}.tsv"
+        f"results/benchmarks/fe_study/reference_{CASE_WILDCARDS}.tsv"
     # One reference at a time, on every core (multi-threaded BLAS): the default reference's
     # solve peaks at 12-13 GB.
     threads: all_cores()
