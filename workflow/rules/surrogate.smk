@@ -340,9 +340,7 @@ rule surrogate_benchmark:
     params:
         clinical=CONFIG.section("clinical"),
         repeats=CONFIG.surrogate_study.timing_repeats,
-        fe=CONFIG.solve_fe,
-        material=CONFIG.section("material"),
-        fixed=CONFIG.section("mesh", "fixed"),
+        **CONFIG.solver_params,
     log:
         "results/logs/surrogate/surrogate_benchmark.log",
     threads: 2

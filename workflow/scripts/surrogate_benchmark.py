@@ -3,8 +3,8 @@
 import logging
 from pathlib import Path
 
-from fem.parameters import SolverSettings
 from fem.sweep import clinical_cases
+from run.config import solver_settings
 from run.joblog import job_log
 from studies.surrogate_study.architecture import AblationComparison, ArchitectureTable
 from studies.surrogate_study.surrogate_benchmark import (
@@ -16,19 +16,12 @@ from studies.surrogate_study.surrogate_evaluation import ClinicalEvaluation
 
 job_log(snakemake.log[0])
 
-settings = SolverSettings.from_config(
-    {
-        "fe": snakemake.params.fe,
-        "material": snakemake.params.material,
-        "mesh": {"fixed": snakemake.params.fixed},
-    }
-)
 cases = clinical_cases(snakemake.params.clinical)
 bench = run_benchmark(
     Path(snakemake.input.model).parent,
     snakemake.input.mesh,
     cases,
-    settings,
+    solver_settings(snakemake.params),
     ArchitectureTable.read(snakemake.input.table).to_json(),
     ClinicalEvaluation.read(snakemake.input.clinical).to_json(),
     repeats=snakemake.params.repeats,
