@@ -2,6 +2,7 @@
 
 import logging
 
+from fem.sweep import clinical_cases
 from run.joblog import job_log
 from studies.surrogate_study.architecture import (
     ArchitectureTable,
@@ -15,7 +16,7 @@ job_log(snakemake.log[0])
 log = logging.getLogger("architecture_study")
 
 table = architecture_table(read_run(path) for path in snakemake.input.runs)
-queries = [(c["C1"], c["phi"], c.get("theta", 0.0)) for c in snakemake.params.clinical] or [
+queries = [(c.C1, c.phi, c.theta) for c in clinical_cases(snakemake.params.clinical)] or [
     (1.0, 0.0, 0.0)
 ]
 best_runs = {arch: row["best_run"] for arch, row in table["rows"].items()}

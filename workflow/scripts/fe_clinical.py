@@ -6,6 +6,7 @@ Time, factorisation equivalents, the fixed-step baseline, accuracy against the r
 import logging
 
 from fem.parameters import SolverSettings
+from fem.sweep import clinical_list
 from run.joblog import job_log
 from studies.fe_study.fe_clinical import fe_clinical
 from studies.fe_study.fe_reference import load_references
@@ -24,9 +25,6 @@ result = fe_clinical(
     references,
     baseline_steps=snakemake.params.study["baseline_fixed_steps"],
     repeats=snakemake.params.study["repeats"],
-    labels={
-        case.id: c.get("label", case.id)
-        for case, c in zip(cases, snakemake.params.clinical, strict=True)
-    },
+    labels={item.case.id: item.label for item in clinical_list(snakemake.params.clinical)},
 )
 result.write(snakemake.output[0])
