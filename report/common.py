@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from typing import Any
 
-from fem.sweep import Case
 from report.html import finite
 from studies.fe_study.fe_timing import TimedSolve
 from studies.figures import fe as fem_plots
@@ -67,11 +66,6 @@ def variant_label(variant_id: str) -> str:
     if match["q"] != "0":
         label += f", q = {match['q']}"
     return label
-
-
-def case_id(item: Mapping[str, Any]) -> str:
-    """The case folder name of a config ``clinical`` entry."""
-    return Case(float(item["C1"]), float(item["phi"]), float(item.get("theta", 0.0))).id
 
 
 def worst_case(cases: Sequence[TimedSolve], key: str) -> float | None:

@@ -12,7 +12,7 @@ import numpy as np
 
 from fem.dataset import read_case_columns, read_dataset
 from fem.self_contact_at_rest import MeshRestPairs
-from report.common import case_id
+from fem.sweep import ClinicalCase, clinical_list
 from report.html import figure
 from run.run_log import run_time
 from studies.fe_study.convergence_map import ConvergenceMap
@@ -115,7 +115,7 @@ class Context:
     """What every section builder reads: the loaded inputs and where figures go."""
 
     out_dir: Path
-    clinical: list[dict[str, Any]]
+    clinical: list[ClinicalCase]
     paths: dict[str, Path | None]
     clinical_fields: list[Path]
     results: dict[str, Any] = field(default_factory=dict)
@@ -150,10 +150,7 @@ class Context:
 
     def case_label(self, cid: str) -> str:
         """The config's label of a clinical case, or its id."""
-        for item in self.clinical:
-            if case_id(item) == cid:
-                return str(item.get("label", cid))
-        return cid
+        return next((item.label for item in self.clinical if item.case.id == cid), cid)
 
     @classmethod
     def load(
@@ -165,7 +162,7 @@ class Context:
             fields = [fields]
         ctx = cls(
             out_dir=out_dir,
-            clinical=[dict(c) for c in clinical],
+            clinical=clinical_list(clinical),
             paths={name: as_path(inputs.get(name)) for name in INPUT_NAMES
                    if name not in ("clinical_fields", "tracking")},
             clinical_fields=[Path(str(p)) for p in fields],

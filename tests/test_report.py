@@ -360,3 +360,22 @@ def test_the_extrapolation_and_training_tables_say_each_thing_once(tmp_path: Pat
     few = _training_range({"C1_kPa": [1.0, 5.0], "phi_deg": [0.0, 180.0], "theta_deg": [0.0],
                            "directions": [[0.0, 0.0], [180.0, 0.0]]})
     assert few == "C1 [1, 5] kPa; Φ ∈ {0, 180}°; θ ∈ {0}°"
+
+
+def test_the_report_names_a_clinical_case_by_the_configs_label_else_its_folder(
+    tmp_path: Path,
+) -> None:
+    """The report reads the config's clinical list once (fem.sweep.clinical_list).
+
+    A case is found by its folder's name (C1 and the angles at that precision, theta 0 when
+    not given) and named by its label, or by that name where the config gives none.
+    """
+    from report.context import Context
+
+    ctx = Context.load({}, tmp_path, [{"C1": 1, "phi": 180, "label": "prone, soft"},
+                                      {"C1": 5.0, "phi": 0.0, "theta": 0.0}])
+    assert [item.case.id for item in ctx.clinical] == [
+        "c1=1.00_phi=180.0_theta=0.0", "c1=5.00_phi=0.0_theta=0.0"]
+    assert ctx.case_label("c1=1.00_phi=180.0_theta=0.0") == "prone, soft"
+    assert ctx.case_label("c1=5.00_phi=0.0_theta=0.0") == "c1=5.00_phi=0.0_theta=0.0"
+    assert ctx.case_label("c1=2.00_phi=90.0_theta=0.0") == "c1=2.00_phi=90.0_theta=0.0"

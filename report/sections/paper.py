@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from report.common import GOAL_NAMES, case_id, predict_s
+from report.common import GOAL_NAMES, predict_s
 from report.context import Context
 from report.html import finite, fmt, h3, missing, para, pm, seconds, span, table, times, yes
 from studies import paper
@@ -137,11 +137,11 @@ def _table4(ctx: Context) -> str:
     speed = bench.speed
     if not speed:
         return "".join(out) + para("The benchmark holds no timed case.", "note")
-    items = {case_id(c): c for c in ctx.clinical}
+    cases = {item.case.id: item.case for item in ctx.clinical}
     published = []
     for row in speed:
-        item = items.get(row.case)
-        published.append(paper.table4_row(item["C1"], item["phi"]) if item else None)
+        case = cases.get(row.case)
+        published.append(paper.table4_row(case.C1, case.phi) if case else None)
     out.append(para(
         "Wall time of one FE solve (set-up excluded) and one surrogate prediction, both on the "
         "same pinned CPU core in one job, ours beside the paper's (an Intel Core i7 at 2.3 GHz, "
@@ -195,8 +195,7 @@ def _figure5(ctx: Context) -> str:
         "table below gives the largest error beside the paper's Fig. 5 caption.", "caption"))
     figures, table_rows = [], []
     for item in ctx.clinical:
-        cid = case_id(item)
-        label = str(item.get("label", cid))
+        cid, label = item.case.id, item.label
         panels: list[tuple[np.ndarray, str]] = []
         X = None
         for split in ("by_sample", "by_case"):
@@ -216,7 +215,7 @@ def _figure5(ctx: Context) -> str:
                                   surrogate_plots.plot_point_fields(X, panels, p, label),
                                   f"FE displacement and surrogate error, {label}",
                                   f"{label}: FE |u| and surrogate error, seen from the front."))
-        paper_max = paper.fig5_max_error_mm(item["C1"], item["phi"])
+        paper_max = paper.fig5_max_error_mm(item.case.C1, item.case.phi)
         table_rows.append([label] + [
             fmt(rows[s][cid].max_error_mm if cid in rows[s] else None, ".3g")
             for s in ("by_sample", "by_case")
