@@ -27,6 +27,7 @@ import jinja2
 import numpy as np
 
 from fem.dataset import read_dataset
+from fem.sweep import ClinicalCase
 from meshes.quality import exterior_faces
 from surrogate.exceptions import OutsideMeshError
 from surrogate.export import encode_array, export_web
@@ -87,7 +88,7 @@ def surface(model: Surrogate, mesh_xdmf: str | Path) -> tuple[np.ndarray, np.nda
 def fe_cases(
     dataset_path: str | Path,
     vertices: np.ndarray,
-    clinical: Sequence[dict[str, Any]] = (),
+    clinical: Sequence[ClinicalCase] = (),
     limit: int = MAX_FE_CASES,
     material_points: np.ndarray | None = None,
     inner: np.ndarray | None = None,
@@ -111,14 +112,15 @@ def fe_cases(
     good = np.flatnonzero(ds.converged)
     chosen: list[int] = []
     labels: dict[int, str] = {}
-    for case in clinical:
+    for item in clinical:
         try:
-            i = ds.case_index(case["C1"], case["phi"], case.get("theta", 0.0))
+            i = ds.case_index(item.case.C1, item.case.phi, item.case.theta)
         except KeyError:
             continue
         if ds.converged[i] and i not in chosen:
             chosen.append(i)
-            labels[i] = case.get("label", "")
+            # a case the config gave no label is named by its numbers alone
+            labels[i] = item.label if item.label != item.case.id else ""
     spread = good[np.linspace(0, len(good) - 1, min(limit, len(good))).round().astype(int)]
     for i in spread:
         if len(chosen) >= limit:
@@ -187,7 +189,7 @@ def build_viewer(
     mesh_xdmf: str | Path,
     dataset_path: str | Path | None,
     output: str | Path,
-    clinical: Sequence[dict[str, Any]] = (),
+    clinical: Sequence[ClinicalCase] = (),
     postures: Sequence[dict[str, Any]] = (),
     points: Sequence[tuple[str, Sequence[float]]] = (),
     start: Mapping[str, Any] | None = None,
@@ -200,7 +202,8 @@ def build_viewer(
         mesh_xdmf: the mesh the surrogate was trained on.
         dataset_path: the sweep's dataset (the FE cases to compare with); None: no FE cases.
         output: the page to write.
-        clinical: the config's clinical cases (carried first, with their labels).
+        clinical: the config's clinical cases (:func:`fem.sweep.clinical_list`), carried
+            first, with their labels.
         postures: the postures offered as buttons, ``{name, phi, theta, note}`` each
             (``surrogate_study.postures.directions``): g = [cos Φ, sin Φ cos θ,
             sin Φ sin θ] in the body's frame.

@@ -24,6 +24,7 @@ from pathlib import Path
 
 from fem.arguments import output_file, refuse_overwriting
 from fem.exceptions import DatasetError
+from fem.sweep import clinical_list
 from meshes.exceptions import MeshInputError
 from meshes.points import read_points
 from report.viewer import LICENCE, ViewerError, build_viewer
@@ -68,7 +69,7 @@ def main(argv: list[str] | None = None) -> int:
         clinical, postures, start, initial = [], [], None, None
         if args.config:  # checked as a run checks it
             config = _checked(args.config)
-            clinical = config.section("clinical")
+            clinical = clinical_list(config.section("clinical"))
             postures = config.section("surrogate_study", "postures", "directions")
             if config.imaged:  # movement from the image, opened at the tracked posture
                 start, initial = config.imaged.posture(), config.imaged.view_query()

@@ -6,6 +6,7 @@ from surrogate.runtime import configure_cpu
 
 configure_cpu()
 
+from fem.sweep import clinical_list  # noqa: E402
 from report.viewer import build_viewer  # noqa: E402
 from run.joblog import job_log  # noqa: E402
 from studies.reference_state.tracking import TrackingResult  # noqa: E402
@@ -21,7 +22,7 @@ build_viewer(
     snakemake.input.mesh,
     snakemake.input.dataset,
     snakemake.output.html,
-    snakemake.params.clinical,
+    clinical_list(snakemake.params.clinical),
     snakemake.params.postures,
     points,
     snakemake.params.start,
