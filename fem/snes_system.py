@@ -192,6 +192,23 @@ class SnesSystem:
         amg = ("gamg", "ml", "hypre")
         return self.options.get("pc_type") in amg or self.options.get("fieldsplit_u_pc_type") in amg
 
+    def renew_linear_solver(self) -> None:
+        """Give the SNES a fresh KSP in place of one a PETSc error left in the middle of a solve.
+
+        An error raised inside ``KSPSolve`` (a failed MUMPS factorisation met in the solve
+        phase, say) skips PETSc's ``PCPostSolve``, so its pre-solve count stays raised; after two
+        such errors every later solve on that KSP fails with "Cannot embed PCPreSolve() more
+        than twice", whatever its state, and the loader's cut-backs can never succeed. A new KSP
+        with the same options prefix, operators and preconditioner set-up starts clean.
+        """
+        old = self.snes.getKSP()
+        ksp = PETSc.KSP().create(old.getComm())
+        ksp.setOptionsPrefix(old.getOptionsPrefix())
+        self.snes.setKSP(ksp)
+        self.snes.setJacobian(self._jacobian, self.A, self.P if self.P is not None else self.A)
+        self._set_from_options()
+        self._configure_pc(ksp, self.A)
+
     def _configure_pc(self, ksp: PETSc.KSP, A: PETSc.Mat) -> None:
         """Tell the preconditioner the field split and the rigid-body modes."""
         pc = ksp.getPC()

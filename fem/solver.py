@@ -274,6 +274,8 @@ class NewtonSolver(SnesSystem):
             # converged state, which the caller still holds.
             self.timings.snes += time.perf_counter() - start
             log.warning("PETSc error in SNES solve: %s", str(err).splitlines()[-1])
+            self.renew_linear_solver()  # the error left the KSP mid-solve: start a clean one
+            self._reuse_first = self._lagging = False  # nothing is factorised on the new one
             return SolveResult(False, f"petsc_error {err.ierr}", self.snes.getIterationNumber())
         self.timings.snes += time.perf_counter() - start
         reason = self.snes.getConvergedReason()

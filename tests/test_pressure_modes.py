@@ -108,3 +108,35 @@ def test_a_mesh_with_a_clamped_ear_solves_as_the_box_alone() -> None:
     # the ear is clamped on all its outer faces: it holds nothing up and moves nowhere
     assert largest[True] == pytest.approx(largest[False], rel=1e-9)
     assert largest[False] > 1e-4
+
+
+def test_after_a_petsc_error_the_next_attempt_starts_on_a_clean_linear_solver(
+    monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    """Without the pin the ear's tangent is singular: every attempt fails, each for that reason.
+
+    A PETSc error inside the Krylov solve used to leave the KSP mid-solve, and from the third
+    attempt on every solve failed with "Cannot embed PCPreSolve() more than twice" instead,
+    so no cut-back could ever succeed on a state where a fresh solve would.
+    """
+    import logging
+
+    import fem.problem
+    from fem.loading import solve_incrementally
+    from fem.parameters import Gravity, Loading, Material
+    from fem.problem import GravityProblem
+    from fem.solver import NewtonSolver
+
+    monkeypatch.setattr(fem.problem, "pinned_pressure_bcs", lambda W, bcs: [])
+    mesh, facets = _box_with_ear(True)
+    problem = GravityProblem(mesh, facets)
+    solver = NewtonSolver(problem, {})
+    problem.set_case(Material(C1=1000.0), Gravity(phi=90.0))
+    with caplog.at_level(logging.WARNING, logger="fem.solver"):
+        result = solve_incrementally(problem, solver, Loading())
+    solver.destroy()
+    assert not result.converged
+    errors = [r.getMessage() for r in caplog.records if "PETSc error" in r.getMessage()]
+    assert len(errors) >= 3, errors
+    assert not any("Cannot embed" in e for e in errors), errors
+    assert all("MUMPS" in e for e in errors), errors
