@@ -42,6 +42,7 @@ import numpy as np
 
 from fem.case_files import read_summary
 from fem.dataset import Dataset, read_dataset
+from fem.sweep import Case
 from studies.surrogate_study.errors_against_fe import CaseErrors, Centroids, ErrorSpread
 from studies.surrogate_study.surrogate_evaluation import fe_in_model_order
 from surrogate.config import SurrogateConfig
@@ -97,19 +98,17 @@ def outside_cases(
     found = []
     for summary_path in sorted(folder.glob("*/summary.json")):
         summary = read_summary(summary_path)
-        C1 = float(summary["C1"])
-        if summary["status"] != "converged" or not lo - 1e-9 <= C1 <= hi + 1e-9:
+        case = Case.from_summary(summary)
+        if summary["status"] != "converged" or not lo - 1e-9 <= case.C1 <= hi + 1e-9:
             continue
         if cells is not None:
             read = Centroids.of_fields(summary_path.parent / "fields.h5")
             if read is None or not np.array_equal(read[0].cells, cells):
                 raise ValueError(f"{summary_path.parent}: another mesh than the dataset's")
-            found.append((str(summary["case"]), C1, float(summary["phi"]),
-                          float(summary["theta"]), read[1]))
+            found.append((str(summary["case"]), case.C1, case.phi, case.theta, read[1]))
             continue
         fe, _ = fe_in_model_order(model, summary_path.parent / "points.h5")
-        found.append((str(summary["case"]), C1, float(summary["phi"]), float(summary["theta"]),
-                      fe))
+        found.append((str(summary["case"]), case.C1, case.phi, case.theta, fe))
     return found
 
 

@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from fem.sweep import Case
 from studies.results import Record, Result
 from studies.surrogate_study.errors_against_fe import CaseErrors, Centroids
 from studies.surrogate_study.surrogate_evaluation import extrapolation_kind, fe_in_model_order
@@ -106,7 +107,8 @@ def evaluate_postures(
     cached: _CentroidModel | None = None  # the model at the centroids, kept between cases
     for name, in_sweep, summary_path, points_path, fields_path in postures:
         summary = read_summary(summary_path)
-        C1, phi, theta = float(summary["C1"]), float(summary["phi"]), float(summary["theta"])
+        case = Case.from_summary(summary)
+        C1, phi, theta = case.C1, case.phi, case.theta
         errors = between = None
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", ExtrapolationWarning)

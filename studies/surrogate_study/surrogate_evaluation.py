@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from fem.dataset import Dataset
-from fem.sweep import ClinicalCase
+from fem.sweep import Case, ClinicalCase
 from studies import paper
 from studies.results import Record, Result
 from surrogate.exceptions import ExtrapolationWarning
@@ -372,7 +372,8 @@ def evaluate_extrapolation(
     out: dict[str, Any] = {name: {"rows": [], "failed_fe": []} for name in models}
     for summary_path, points_path in cases:
         summary = read_summary(summary_path)
-        C1, phi, theta = float(summary["C1"]), float(summary["phi"]), float(summary["theta"])
+        case = Case.from_summary(summary)
+        C1, phi, theta = case.C1, case.phi, case.theta
         for name, model in models.items():
             if summary["status"] != "converged":
                 out[name]["failed_fe"].append(
