@@ -1,12 +1,12 @@
 """Snakemake adapter: the paper's Table 3 for the clinical cases, and their error fields as XDMF."""
 
-import json
 from pathlib import Path
 
 from surrogate.runtime import configure_cpu
 
 configure_cpu()
 
+from fem.case_files import read_summary  # noqa: E402
 from fem.dataset import read_dataset  # noqa: E402
 from fem.sweep import clinical_list  # noqa: E402
 from run.joblog import job_log  # noqa: E402
@@ -22,7 +22,7 @@ models = {
 }
 fe_wall = {}
 for path in snakemake.input.summaries:
-    summary = json.loads(Path(path).read_text())
+    summary = read_summary(path)
     fe_wall[summary["case"]] = summary["wall_s"]["solve"]
 fields = {
     (Path(p).parent.name, Path(p).stem): p for p in snakemake.output.fields if p.endswith(".xdmf")

@@ -7,7 +7,6 @@ Either way the dataset's failed cases, and those whose FE state is unstable, are
 it so that it warns where no FE solution backs it.
 """
 
-import json
 import logging
 from pathlib import Path
 
@@ -18,25 +17,29 @@ configure_cpu(single_thread=snakemake.threads == 1)  # before JAX starts: one co
 from fem.dataset import read_dataset  # noqa: E402
 from run.joblog import job_log  # noqa: E402
 from studies.fe_study.stability_audit import without_unstable  # noqa: E402
-from studies.surrogate_study.architecture import copy_model, refit_model  # noqa: E402
+from studies.surrogate_study.architecture import (  # noqa: E402
+    ArchitectureTable,
+    copy_model,
+    refit_model,
+)
+from surrogate.checkpoint import read_model_card  # noqa: E402
 from surrogate.config import SurrogateConfig  # noqa: E402
 from surrogate.structures import structure_for  # noqa: E402
 
 job_log(snakemake.log[0])
 log = logging.getLogger("select_model")
 
-table = json.loads(Path(snakemake.input.table).read_text())
-run, folder = table["selected_run"], Path(snakemake.output.model).parent
+table = ArchitectureTable.read(snakemake.input.table)
+run, folder = table.selected_run, Path(snakemake.output.model).parent
 if snakemake.params.refit:
-    card = json.loads((Path(run) / "model.json").read_text())
-    config = SurrogateConfig.from_mapping(card["config"])
+    config = SurrogateConfig.from_mapping(read_model_card(run)["config"])
     dataset = read_dataset(snakemake.input.dataset, nodes=structure_for(config).reads_nodes)
     result = refit_model(run, without_unstable(dataset, snakemake.input.audit), folder)
     log.info("selected %s: %s, trained again on %d cases for %d epochs in %.0f s",
-             table["selected_architecture"], run, result.train_cases.size, result.best_epoch,
+             table.selected_architecture, run, result.train_cases.size, result.best_epoch,
              result.train_s)
 else:
     copy_model(run, folder,
                dataset=without_unstable(read_dataset(snakemake.input.dataset),
                                         snakemake.input.audit))
-    log.info("selected %s: %s", table["selected_architecture"], run)
+    log.info("selected %s: %s", table.selected_architecture, run)
