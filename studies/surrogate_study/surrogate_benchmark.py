@@ -24,6 +24,8 @@ import numpy as np
 
 from studies import paper
 from studies.results import Record, Result
+from studies.surrogate_study.architecture import ArchitectureTable
+from studies.surrogate_study.surrogate_evaluation import ClinicalEvaluation
 from studies.surrogate_study.timing import time_on_one_core
 from studies.timing_hygiene import MachineState, machine_state
 
@@ -108,8 +110,8 @@ def run_benchmark(
     mesh: str | Path,
     clinical_cases: Sequence[Any],
     settings: Any,
-    table: dict[str, Any],
-    clinical: dict[str, Any],
+    table: ArchitectureTable,
+    clinical: ClinicalEvaluation,
     repeats: int = 2000,
     core: int | None = None,
 ) -> dict[str, Any]:
@@ -120,10 +122,8 @@ def run_benchmark(
         mesh: the FE mesh.
         clinical_cases: :class:`fem.sweep.Case` objects of the clinical cases.
         settings: FE solver settings (:class:`fem.parameters.SolverSettings`).
-        table: the architecture study
-        (:func:`studies.surrogate_study.architecture.architecture_table`).
-        clinical: the clinical evaluation
-        (:func:`studies.surrogate_study.surrogate_evaluation.evaluate_clinical`).
+        table: the architecture study (its file, ``results/surrogate/study/table2.json``).
+        clinical: the clinical evaluation (``results/surrogate/clinical.json``).
         repeats: timed surrogate predictions.
         core: CPU to pin to (default: the lowest this process may use).
     """
@@ -142,10 +142,10 @@ def run_benchmark(
     predict_ms = timing["api"]["median_ms"]
     ratios = {cid: v["solve_s"] / (predict_ms * 1e-3) for cid, v in fe.items()}
 
-    selected = table["rows"][table["selected_architecture"]]
-    by_sample = clinical.get("by_sample", {}).get("worst") or {}
-    by_case = clinical.get("by_case", {}).get("worst") or {}
-    train_3x32 = table["rows"].get("3x32", {}).get("train_s", {}).get("mean")
+    selected = table.rows[table.selected_architecture]
+    by_sample = (clinical.by_sample.worst if clinical.by_sample else None) or {}
+    by_case = (clinical.by_case.worst if clinical.by_case else None) or {}
+    row_3x32 = table.rows.get("3x32")
     rows = []
     for c in clinical_cases:
         published = paper.table4_row(c.C1, c.phi)
@@ -158,11 +158,11 @@ def run_benchmark(
         })
     return {
         "machine": machine_state(pinned_core=core).to_json(),
-        "selected_architecture": table["selected_architecture"],
+        "selected_architecture": table.selected_architecture,
         "validation_error_mm": {
-            "selected_mean": selected["validation_error_mm"]["mean"],
-            "selected_sd": selected["validation_error_mm"]["sd"],
-            "selected_run": selected["best_validation_error_mm"],
+            "selected_mean": selected.validation_error_mm.mean,
+            "selected_sd": selected.validation_error_mm.sd,
+            "selected_run": selected.best_validation_error_mm,
         },
         "clinical_worst": {"by_sample": by_sample, "by_case": by_case},
         "predict_one_core": timing,
@@ -170,10 +170,10 @@ def run_benchmark(
         "timing_process": {k: v for k, v in surrogate.items() if k != "models"},
         "fe": fe,
         "speed": rows,
-        "train_3x32_s": table["rows"].get("3x32", {}).get("train_s"),
+        "train_3x32_s": None if row_3x32 is None else row_3x32.train_s.to_json(),
         "goals": {
             "validation_error_mm": _goal(
-                selected["best_validation_error_mm"], GOALS["validation_error_mm"]
+                selected.best_validation_error_mm, GOALS["validation_error_mm"]
             ),
             "worst_clinical_rmse_mm": _goal(
                 by_sample.get("rmse_mm"), GOALS["worst_clinical_rmse_mm"]
@@ -182,7 +182,8 @@ def run_benchmark(
                 by_sample.get("relative_rmse"), GOALS["worst_clinical_relative_rmse"]
             ),
             "predict_one_core_ms": _goal(predict_ms, GOALS["predict_one_core_ms"]),
-            "train_3x32_s": _goal(train_3x32, GOALS["train_3x32_s"]),
+            "train_3x32_s": _goal(None if row_3x32 is None else row_3x32.train_s.mean,
+                                  GOALS["train_3x32_s"]),
         },
         "paper": {
             "validation_error_mm": paper.TABLE2["3x32"]["validation_error_mm"],

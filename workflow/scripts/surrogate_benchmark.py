@@ -22,8 +22,8 @@ bench = run_benchmark(
     snakemake.input.mesh,
     cases,
     solver_settings(snakemake.params),
-    ArchitectureTable.read(snakemake.input.table).to_json(),
-    ClinicalEvaluation.read(snakemake.input.clinical).to_json(),
+    ArchitectureTable.read(snakemake.input.table),
+    ClinicalEvaluation.read(snakemake.input.clinical),
     repeats=snakemake.params.repeats,
 )
 bench["ablations"] = AblationComparison.read(snakemake.input.ablations).to_json()
