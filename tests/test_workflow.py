@@ -614,7 +614,7 @@ def test_fe_study_rules_run_end_to_end(small_run: Path) -> None:
     config = yaml.safe_load((REPO / "tests" / "config.yaml").read_text())
     study = small_run / "results" / "fe_study"
 
-    clinical = json.loads((study / "clinical.json").read_text())
+    clinical = json.loads((study / "fe_clinical.json").read_text())
     assert len(clinical["cases"]) == len(config["clinical"])
     for row in clinical["cases"]:
         # measured and positive; its size is a timing ratio, the benchmark's to judge (it fell
