@@ -12,8 +12,10 @@ fresh process (the workflow's ``make_mesh``), and prints each process's wall tim
 resident memory, the mesh's cells, worst dihedral angle and cells below the floor, the volume
 kept (and each tissue's, meshed over labelled), and whether the two runs wrote byte-identical
 ``mesh.h5`` files. Then it solves the config's four clinical cases on
-the mesh with ``python -m fem.cli`` (default solver) and prints each one's status and largest
-displacement.
+the first mesher's mesh with ``python -m fem.cli`` (default solver; the tumour ``--tumour``
+times the fat's stiffness, the other tissues at their defaults) and prints each one's status,
+largest displacement, Newton iterations, wall time and peak memory; beside each, the same case
+on the same image meshed by the same mesher as one tissue (every breast label fat).
 """
 
 from __future__ import annotations
@@ -58,6 +60,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--mesher", nargs="+", default=["cgal", "ftetwild"],
                         choices=["cgal", "ftetwild"], help="mesh.image.mesher, in turn")
     parser.add_argument("--no-solve", action="store_true", help="mesh only")
+    parser.add_argument("--tumour", type=float, default=5.0,
+                        help="material.tissues.tumour: the tumour's C1 over the fat's")
     args = parser.parse_args(argv)
     load_before = os.getloadavg()[0]
     with tempfile.TemporaryDirectory(prefix="image_mesh_") as tmp:
@@ -100,17 +104,30 @@ def main(argv: list[str] | None = None) -> int:
             same = (runs[0] / "mesh.h5").read_bytes() == (runs[1] / "mesh.h5").read_bytes()
             print(f"{mesher}: the two runs' mesh.h5 {'are' if same else 'are not'} "
                   "byte-identical")
-        run_dir = folder / args.mesher[0] / "a"
         if not args.no_solve:
+            meshes = {"tissues": folder / args.mesher[0] / "a"}
+            one = folder / args.mesher[0] / "one_tissue"
+            one.mkdir()
+            section["image"] = {**section["image"], "tissues": {}, "mesher": args.mesher[0]}
+            run_measured([sys.executable, "-c", MESH_SCRIPT, json.dumps(section), str(one)],
+                         one / "mesh.log")
+            meshes["one tissue"] = one
+            config = folder / "material.yaml"
+            config.write_text(json.dumps({"material": {"tissues": {"tumour": args.tumour}}}))
             for c1, phi in CLINICAL:
-                out = folder / f"case_{c1:g}_{phi:g}"
-                wall, rss = run_measured([sys.executable, "-m", "fem.cli",
-                                          str(run_dir / "mesh.xdmf"), "--c1", str(c1), "--phi",
-                                          str(phi), "--out", str(out)], folder / f"{out.name}.log")
-                summary = json.loads((out / "summary.json").read_text())
-                print(f"C1 = {c1:g} kPa, Φ = {phi:g}°: {summary['status']}, "
-                      f"max |u| {summary['max_disp_mm']:.1f} mm, Newton "
-                      f"{summary['total_newton_iterations']}, {wall:.1f} s, {rss:.2f} GB")
+                line = [f"C1 = {c1:g} kPa, Φ = {phi:g}°:"]
+                for name, mesh_dir in meshes.items():
+                    out = folder / f"case_{c1:g}_{phi:g}_{name.replace(' ', '_')}"
+                    wall, rss = run_measured(
+                        [sys.executable, "-m", "fem.cli", str(mesh_dir / "mesh.xdmf"), "--c1",
+                         str(c1), "--phi", str(phi), "--out", str(out), "--config", str(config)],
+                        folder / f"{out.name}.log")
+                    summary = json.loads((out / "summary.json").read_text())
+                    line.append(f"{name} ({summary['dofs']} unknowns) {summary['status']}, "
+                                f"max |u| {summary['max_disp_mm']:.1f} mm, Newton "
+                                f"{summary['total_newton_iterations']}, {wall:.1f} s, "
+                                f"{rss:.2f} GB;")
+                print(" ".join(line))
     print(f"{os.cpu_count()} cores; load average before {load_before:.2f}, after "
           f"{os.getloadavg()[0]:.2f}")
     return 0
