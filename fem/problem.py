@@ -275,8 +275,13 @@ class GravityProblem:
                 zero = fem.Function(collapsed)
                 dofs = fem.locate_dofs_topological((sub, collapsed), fdim, facets)
                 bcs.append(fem.dirichletbc(zero, dofs, sub))
+        #: Pressure unknowns pinned (over the processes): no free displacement sees them.
+        self.pinned_pressure_dofs = 0
         if self.mixed:  # a pressure no free displacement sees (a clamped cell): pinned
-            bcs += pinned_pressure_bcs(self.W, bcs)
+            pinned = pinned_pressure_bcs(self.W, bcs)
+            self.pinned_pressure_dofs = self.mesh.comm.allreduce(
+                sum(int(bc.dof_indices()[1]) for bc in pinned), op=MPI.SUM)
+            bcs += pinned
         return bcs
 
     @staticmethod

@@ -127,10 +127,12 @@ class InertiaCounter:
         factor = pc.getFactorMatrix()
         factor.setMumpsIcntl(24, 1)  # null-pivot detection: PETSc's inertia needs it
         factor.setMumpsIcntl(13, 1)  # and, in parallel, the root front on one process
-        #: the pressure unknowns, counted over the processes, each shared unknown once
+        #: the pressure unknowns, counted over the processes, each shared unknown once; a
+        #: pinned one (fem.pressure_modes: a unit diagonal, like a Dirichlet row) is not one
         self.pressure_dofs = 0
         if problem.mixed:
             self.pressure_dofs = int(problem.W.sub(1).collapse()[0].dofmap.index_map.size_global)
+            self.pressure_dofs -= int(getattr(problem, "pinned_pressure_dofs", 0))
 
     def __call__(self) -> Inertia:
         """The inertia of the tangent at the problem's current state."""

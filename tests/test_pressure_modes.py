@@ -140,3 +140,24 @@ def test_after_a_petsc_error_the_next_attempt_starts_on_a_clean_linear_solver(
     assert len(errors) >= 3, errors
     assert not any("Cannot embed" in e for e in errors), errors
     assert all("MUMPS" in e for e in errors), errors
+
+
+def test_a_pinned_pressure_is_not_counted_as_one_in_the_stability_audit() -> None:
+    """The ear's state at rest is a stable equilibrium: no unstable mode, none missing.
+
+    The pinned pressure's row is a unit diagonal, like a clamped displacement's: it adds a
+    positive eigenvalue, not the negative one a pressure unknown adds. Counted as a pressure
+    unknown, every state of such a mesh read as unstable (-1 modes), and the stability audit
+    set aside every case of a patient's CGAL mesh.
+    """
+    from fem.parameters import Gravity, Material
+    from fem.problem import GravityProblem
+    from fem.stability import tangent_inertia
+
+    mesh, facets = _box_with_ear(True)
+    problem = GravityProblem(mesh, facets)
+    assert problem.pinned_pressure_dofs == 1
+    problem.set_case(Material(C1=1000.0), Gravity(phi=90.0))
+    problem.set_load_fraction(0.0)
+    inertia = tangent_inertia(problem)
+    assert inertia.unstable_modes == 0 and inertia.zero == 0 and inertia.stable, inertia
