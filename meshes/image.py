@@ -71,9 +71,10 @@ CHEST_GROUP = "chest_wall"
 
 #: The meshers of ``mesh.image.mesher``.
 MESHERS = ("cgal", "ftetwild")
-#: The default: CGAL's mesh is deterministic but leaves a few cells below the floor and resolves
-#: a thin skin label with many small cells (docs/geometry.md); fTetWild's meets the floor.
-DEFAULT_MESHER = "ftetwild"
+#: The default: CGAL's mesh is the same file on every run and keeps every tissue's volume; it
+#: may leave a few cells below the floor (a warning) and resolves a thin skin label with many
+#: small cells. fTetWild's meets the floor but differs between runs (docs/geometry.md).
+DEFAULT_MESHER = "cgal"
 
 
 def image_suffix(path: str | Path) -> str:

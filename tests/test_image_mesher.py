@@ -75,5 +75,5 @@ def test_an_unknown_mesher_is_refused_by_name(tmp_path: Path) -> None:
     section = image_section(tmp_path / "labels.nii.gz", side="left")["image"]
     with pytest.raises(GeometryError, match=r"mesh\.image\.mesher must be one of cgal, ftetwild"):
         ImageSpec.from_mapping({**section, "mesher": "tetgen"})
-    assert ImageSpec.from_mapping(section).mesher == "ftetwild"  # the default
+    assert ImageSpec.from_mapping(section).mesher == "cgal"  # the default
     assert ImageSpec.from_mapping({**section, "mesher": "cgal"}).mesher == "cgal"
