@@ -9,17 +9,17 @@ where the error is.
 
 **The estimate** (:class:`LoadSpaceInterpolant`, :func:`committee`): the solved fields are
 interpolated in x by a cubic radial basis function with a linear tail (exact for a field linear
-in x, the small-deformation limit), as :mod:`benchmarks.direction_gaps` does in direction alone
-at one C1, and by a linear one (φ(r) = r, the same tail). Both pass through every solved case;
-between the cases they part where the field bends faster than the cases are spaced, and the
-*committee* estimate is the largest point distance between them. It vanishes at a solved case
-and grows in the holes between cases. Two other estimates are kept beside it for the check:
-each case's leave-one-out error (the largest point error of the cubic interpolant built
-without it, for every case at once from one inverse by Rippa's formula, e_k = c_k / (A⁻¹)ₖₖ)
-and the *jackknife* J(x) = maxₖ |L_k(x)|·‖e_k‖ (removing case k changes the interpolant at x by
-e_k·L_k(x), its cardinal function). Measured at FE cases left out, the committee ranked the true
-error best at the soft end, where the rounds add their cases (docs/sweep.md); the workflow
-checks it again at every run against the surrogate's true error
+in x, the small-deformation limit), as :mod:`benchmarks.direction_spacing_error` does in
+direction alone at one C1, and by a linear one (φ(r) = r, the same tail). Both pass through
+every solved case; between the cases they part where the field bends faster than the cases are
+spaced, and the *committee* estimate is the largest point distance between them. It vanishes at
+a solved case and grows in the holes between cases. Two other estimates are kept beside it for
+the check: each case's leave-one-out error (the largest point error of the cubic interpolant
+built without it, for every case at once from one inverse by Rippa's formula, e_k = c_k /
+(A⁻¹)ₖₖ) and the *jackknife* J(x) = maxₖ |L_k(x)|·‖e_k‖ (removing case k changes the interpolant
+at x by e_k·L_k(x), its cardinal function). Measured at FE cases left out, the committee ranked
+the true error best at the soft end, where the rounds add their cases (docs/sweep.md); the
+workflow checks it again at every run against the surrogate's true error
 (:mod:`studies.sweep.sweep_estimate`).
 
 **A round** (:func:`plan_round`): the estimate over a pool of candidate directions (a lattice
