@@ -880,11 +880,12 @@ def main(argv: list[str] | None = None) -> int:
     def run(kind: str, name: str, probe: Callable[..., Outcome], *extra: Path) -> tuple:
         workdir = root / re.sub(r"\W+", "-", f"{kind}-{name}").strip("-")
         workdir.mkdir()
+        began = time.perf_counter()
         try:
             outcome = probe(workdir, *extra)
         except Exception as err:  # a probe that crashes has failed, with its error
             outcome = Outcome(False, f"{type(err).__name__}: {err}")
-        return kind, name, outcome
+        return kind, name, outcome, time.perf_counter() - began
 
     selected = [
         (kind, name, probe)
@@ -902,17 +903,21 @@ def main(argv: list[str] | None = None) -> int:
         pending = [pool.submit(run, *item) for item in selected]
         if cases or commands:
             solved.mkdir()
+            began = time.perf_counter()
             solved_sweep(solved)
+            print(f"the three-case sweep solved in {time.perf_counter() - began:.1f} s", flush=True)
             pending += [pool.submit(run, "case", name, probe, solved) for name, probe in cases]
         if commands:
+            began = time.perf_counter()
             train_model(solved)
+            print(f"its models trained in {time.perf_counter() - began:.1f} s", flush=True)
             pending += [pool.submit(run, "command", name, probe, solved)
                         for name, probe in commands]
         for future in pending:
-            kind, name, outcome = future.result()
+            kind, name, outcome, seconds = future.result()
             results.append(outcome.passed)
-            print(f"{'PASS' if outcome.passed else 'FAIL'} {kind}: {name}: {outcome.detail}",
-                  flush=True)
+            print(f"{'PASS' if outcome.passed else 'FAIL'} {kind}: {name} ({seconds:.1f} s): "
+                  f"{outcome.detail}", flush=True)
     leaked = list(root.rglob(f"{SENTINEL}*"))  # where the viewer options pointed PETSc
     if leaked:
         print(f"FAIL a file was written outside a working directory: {leaked}")
