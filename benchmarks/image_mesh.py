@@ -76,11 +76,16 @@ def main(argv: list[str] | None = None) -> int:
         labels = list(BREAST_LABELS) + ([SKIN] if args.skin > 0 else [])
         tissues = {name: values for name, values in TISSUE_LABELS.items()
                    if args.skin > 0 or name != "skin"}
+
+        def mesh_section(mesher: str, tissues: dict) -> dict:
+            """The ``mesh`` section of the phantom meshed by ``mesher`` with ``tissues``."""
+            return {"source": "image", "size": {"global_size": args.size},
+                    "image": {"path": str(image), "breast_labels": labels,
+                              "chest_label": PECTORAL, "side": "left", "tissues": tissues,
+                              "mesher": mesher}}
+
         for mesher in args.mesher:
-            section = {"source": "image", "size": {"global_size": args.size},
-                       "image": {"path": str(image), "breast_labels": labels,
-                                 "chest_label": PECTORAL, "side": "left", "tissues": tissues,
-                                 "mesher": mesher}}
+            section = mesh_section(mesher, tissues)
             runs = [folder / mesher / run for run in ("a", "b")]
             for run in runs:
                 run.mkdir(parents=True)
@@ -108,8 +113,8 @@ def main(argv: list[str] | None = None) -> int:
             meshes = {"tissues": folder / args.mesher[0] / "a"}
             one = folder / args.mesher[0] / "one_tissue"
             one.mkdir()
-            section["image"] = {**section["image"], "tissues": {}, "mesher": args.mesher[0]}
-            run_measured([sys.executable, "-c", MESH_SCRIPT, json.dumps(section), str(one)],
+            one_tissue = mesh_section(args.mesher[0], {})  # every breast label fat
+            run_measured([sys.executable, "-c", MESH_SCRIPT, json.dumps(one_tissue), str(one)],
                          one / "mesh.log")
             meshes["one tissue"] = one
             config = folder / "material.yaml"

@@ -132,7 +132,7 @@ class InertiaCounter:
         self.pressure_dofs = 0
         if problem.mixed:
             self.pressure_dofs = int(problem.W.sub(1).collapse()[0].dofmap.index_map.size_global)
-            self.pressure_dofs -= int(getattr(problem, "pinned_pressure_dofs", 0))
+            self.pressure_dofs -= problem.pinned_pressure_dofs
 
     def __call__(self) -> Inertia:
         """The inertia of the tangent at the problem's current state."""
