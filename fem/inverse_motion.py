@@ -8,12 +8,19 @@ unknown, finds the reference in one nonlinear solve:
     f = ∂X/∂x = I − ∇ₓU,   F = f⁻¹,   j = det f = dX/dx,
 
     ∫_ω j [ P(F) : (∇ₓη F) − b · η ] dx + ∫_ω j (∂ψ/∂p) q dx
+        + ∫_skin ∂W/∂F(F, N) : (∇ₓη F)  j |Fᵀn| da
         − ∫_skin κ⟨−g(x)⟩ zone(X) ∇g(x) · η  j |Fᵀn| da = 0   for all (η, q),
 
-which is the forward weak form ∫_Ω [P : ∇_X η − b · η] dX (and its pressure and contact
-terms) pulled to the loaded configuration: dX = j dx, ∇_X η = ∇ₓη F, N dA = j Fᵀ n da
-(Nanson). The contact gap of a skin point is known (it sits at its loaded position x); its
-zone is decided at its reference position X = x − U, as in the forward problem.
+which is the forward weak form ∫_Ω [P : ∇_X η − b · η] dX (and its pressure, skin membrane
+and contact terms) pulled to the loaded configuration: dX = j dx, ∇_X η = ∇ₓη F,
+N dA = j Fᵀ n da (Nanson). The solid's law takes each cell's C1 (the tissue field) and the
+skin membrane's energy W (:mod:`fem.materials.membrane`, where ``material.skin`` is set) is the
+forward problem's, from the same :class:`fem.materials.mesh_material.MeshMaterial`: written on
+the reference, it is evaluated with F = f⁻¹ and the reference normal N = Fᵀn / |Fᵀn|, its
+derivative taken in F with N held (a reference quantity, as in the forward variation), and
+integrated over the loaded skin with dA = j |Fᵀn| da. The contact gap of a skin point is known
+(it sits at its loaded position x); its zone is decided at its reference position X = x − U,
+as in the forward problem.
 
 On a mesh whose geometry has the displacement's nodes (the curved, order-2 mesh with P2
 displacements), the discrete equations are the forward ones exactly: in the element's own
@@ -67,6 +74,8 @@ class InverseMotionProblem(GravityProblem):
         f = ufl.Identity(mesh.geometry.dim) - ufl.grad(U)
         F = ufl.variable(ufl.inv(f))
         j = ufl.det(f)
+        n = ufl.FacetNormal(mesh)
+        reference_area = j * ufl.sqrt(ufl.dot(F.T * n, F.T * n))  # dA/da (Nanson)
         self.J = 1.0 / j
         pressure = None if p is None else ufl.variable(p)
         psi = self.material.strain_energy(F, pressure)
@@ -79,17 +88,35 @@ class InverseMotionProblem(GravityProblem):
         ) * dx
         if q is not None:
             residual += j * ufl.diff(psi, pressure) * q * dx
+        membrane = self._skin_residual(F, f, n, eta)
+        if membrane is not None:
+            residual += membrane * reference_area * self.skin_measure()(int(Boundary.SKIN))
         if contact is not None:
             ds = self.skin_measure()(int(Boundary.SKIN))
             x = ufl.SpatialCoordinate(mesh)
             at = ufl.variable(x)
             gap_gradient = ufl.diff(contact.obstacle.gap(at), at)
-            n = ufl.FacetNormal(mesh)
-            reference_area = j * ufl.sqrt(ufl.dot(F.T * n, F.T * n))  # dA/da
             contact_pressure = contact.pressure(x - U, U, self.C1)  # zone at X, gap at x
             residual -= contact_pressure * ufl.dot(gap_gradient, eta) * reference_area * ds
             self._contact_force = fem.form(contact_pressure * reference_area * ds)
         return residual
+
+    def _skin_residual(self, F: ufl.core.expr.Expr, f: ufl.core.expr.Expr,
+                       n: ufl.core.expr.Expr, eta: ufl.core.expr.Expr) -> ufl.core.expr.Expr | None:
+        """The skin membrane's virtual work per unit *reference* area; None without a membrane.
+
+        ∂W/∂F : ∇_X η with ∇_X η = ∇ₓη F, W the forward problem's membrane energy
+        (:meth:`fem.materials.mesh_material.MeshMaterial.skin_energy`) at the reference normal
+        N = Fᵀn / |Fᵀn| (Nanson, n the loaded normal). ``F`` is the UFL variable that W is
+        differentiated in; N is built from ``f`` (F = f⁻¹ written out again, not the variable),
+        so the derivative holds it, as the forward variation holds the reference's normal.
+        """
+        held = ufl.inv(f).T * n
+        normal = held / ufl.sqrt(ufl.dot(held, held))
+        energy = self.material.skin_energy(F, normal)
+        if energy is None:
+            return None
+        return ufl.inner(ufl.diff(energy, F), ufl.grad(eta) * F)
 
     def contact_status(self) -> dict[str, Any] | None:
         """The contact force on the reference skin; the loaded skin's vertices never move here.
@@ -140,15 +167,18 @@ def solve_inverse_motion(
     Args:
         mesh: the loaded shape (its geometry is read, not moved).
         facet_tags: its boundary tags.
-        settings: the forward problem's element, clamped boundaries, contact, loading and
-            Newton settings.
+        settings: the forward problem's element, clamped boundaries, contact, tissue ratios
+            (``settings.tissues``), skin membrane (``settings.skin``), loading and Newton
+            settings: the model of :class:`fem.case.CaseRunner`'s forward problem (its
+            self-contact aside).
         material: C1 and density of the observation.
         gravity: the gravity the shape was under.
         cell_tags: its tissues' tags (None: all fat); their ratios are ``settings.tissues``.
     """
     start = time.perf_counter()
     problem = InverseMotionProblem(mesh, facet_tags, settings.discretisation, settings.fixed,
-                                   settings.contact, None, cell_tags, settings.tissues)
+                                   settings.contact, None, cell_tags, settings.tissues,
+                                   settings.skin)
     solver = NewtonSolver(problem, settings.petsc_options, settings.solver)
     try:
         problem.set_case(material, gravity)

@@ -99,6 +99,19 @@ def coarse_mesh(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return built_once(tmp_path_factory, "mesh", build) / "mesh.xdmf"
 
 
+@pytest.fixture(scope="session")
+def curved_coarse_mesh(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The default geometry on the coarse mesh with curved (order-2) cells (built once)."""
+    from meshes.build import MeshSize, write_parametric_mesh
+    from meshes.parametric import BreastGeometry
+
+    def build(folder: Path) -> None:
+        write_parametric_mesh(BreastGeometry(), MeshSize(**{**COARSE, "order": 2}),
+                              folder / "mesh.xdmf")
+
+    return built_once(tmp_path_factory, "curved_mesh", build) / "mesh.xdmf"
+
+
 def snakemake(
     workdir: Path,
     *args: str,

@@ -81,19 +81,15 @@ def test_the_reference_of_a_loaded_shape_is_found_and_predicts_supine(
 
 
 @pytest.fixture(scope="module")
-def curved_runner(tmp_path_factory: pytest.TempPathFactory) -> Iterator[CaseRunner]:
+def curved_runner(curved_coarse_mesh: Path) -> Iterator[CaseRunner]:
     """The coarse default breast with curved (order-2) cells, with contact with the chest."""
     from dataclasses import replace
 
     from fem.contact import Contact, chest_obstacle
-    from meshes.build import MeshSize, write_parametric_mesh
     from meshes.parametric import BreastGeometry
-    from tests.conftest import COARSE
 
-    path = tmp_path_factory.mktemp("curved") / "mesh.xdmf"
-    write_parametric_mesh(BreastGeometry(), MeshSize(**{**COARSE, "order": 2}), path)
     settings = replace(SolverSettings(), contact=Contact(chest_obstacle(BreastGeometry())))
-    with CaseRunner(path, settings) as runner:
+    with CaseRunner(curved_coarse_mesh, settings) as runner:
         yield runner
 
 
