@@ -11,7 +11,6 @@ from fem.sweep import (ANGLE_PATTERN, C1_PATTERN, CASE_WILDCARDS, DIRECTION_WILD
 from run.config import ConfigError, WorkflowConfig
 from run.workdir import age_refused
 from studies.fe_study.fe_variants import MESH_ID_PATTERN, FE_VARIANT_ID_PATTERN, FEVariant
-from studies.surrogate_study.architecture import RepeatPlan
 
 # Every job's software under --use-conda (the env file says how it relates to `make setup`).
 ENV = "../envs/fenicsx-jax.yaml"
@@ -226,6 +225,9 @@ def study_runs(name="model.json"):
                       repeat=range(study.repeats))
 
     def planned(wildcards):
+        # imported here: the study's module loads JAX, which planning a run never needs
+        from studies.surrogate_study.architecture import RepeatPlan
+
         plan = RepeatPlan.read(checkpoints.study_repeats.get().output[0])
         return plan.folders(STUDY_DIR, name)
 
