@@ -275,13 +275,18 @@ def add_elliptic_cylinder(
     return next(tag for dim, tag in occ.extrude([(2, disk)], 0, 0, height) if dim == 3)
 
 
-def add_mound_ellipsoid(model: Any, geometry: BreastGeometry) -> int:
-    """Add the mound ellipsoid, aligned with the local normal at the mound base; returns its tag."""
+def add_mound_ellipsoid(model: Any, geometry: BreastGeometry, inset: float = 0.0) -> int:
+    """Add the mound ellipsoid, aligned with the local normal at the mound base; returns its tag.
+
+    ``inset`` > 0 shrinks its three semi-axes by that much about the same centre (the body
+    under a skin layer of that thickness: :func:`build_occ_model`).
+    """
     occ, g = model.occ, geometry
     base, axis = g.mound_frame()
     sphere = occ.addSphere(0.0, 0.0, 0.0, 1.0)
     occ.dilate(
-        [(3, sphere)], 0, 0, 0, g.mound_length, g.mound_radius_lateral, g.mound_radius_cranial
+        [(3, sphere)], 0, 0, 0, g.mound_length - inset, g.mound_radius_lateral - inset,
+        g.mound_radius_cranial - inset,
     )
     # Rotate the ellipsoid's x axis onto the mound axis (rotation about z).
     occ.rotate([(3, sphere)], 0, 0, 0, 0, 0, 1, math.atan2(axis[1], axis[0]))
@@ -295,35 +300,40 @@ def curve_points(model: Any, curve: int, n: int) -> np.ndarray:
     return np.reshape(model.getValue(1, abs(curve), list(np.linspace(lo[0], hi[0], n))), (-1, 3))
 
 
-def fold_curves(model: Any, geometry: BreastGeometry, volume: int) -> list[int]:
+def fold_curves(model: Any, geometry: BreastGeometry, volume: int,
+                inset: float = 0.0) -> list[int]:
     """The crease of the inframammary fold: curves of ``volume`` on mound and skin layer.
 
     The curves of the (synchronised) volume that lie on both the mound ellipsoid and the
-    skin layer's outer cylinder.
+    skin layer's outer cylinder (each shrunk by ``inset``: :func:`build_occ_model`).
     """
     g = geometry
     base, axis = g.mound_frame()
     centre = base + g.mound_offset * axis
     across = np.array([-axis[1], axis[0], 0.0])
-    a, b = g.rib_depth + g.layer_thickness, g.rib_half_width + g.layer_thickness
+    offset = g.layer_thickness - inset
+    a, b = g.rib_depth + offset, g.rib_half_width + offset
+    length, lateral, cranial = (g.mound_length - inset, g.mound_radius_lateral - inset,
+                                g.mound_radius_cranial - inset)
     tol = 1e-6
     found = set()
     for _, face in model.getBoundary([(3, volume)], oriented=False):
         for _, curve in model.getBoundary([(2, face)], oriented=False):
             x = curve_points(model, curve, 9)
             rel = x - centre
-            q = (rel @ axis / g.mound_length) ** 2 + (rel @ across / g.mound_radius_lateral) ** 2
-            q += (rel[:, 2] / g.mound_radius_cranial) ** 2
+            q = (rel @ axis / length) ** 2 + (rel @ across / lateral) ** 2
+            q += (rel[:, 2] / cranial) ** 2
             layer = ((x[:, 0] - g.rib_depth) / a) ** 2 + (x[:, 1] / b) ** 2
             if np.all(np.abs(q - 1) < tol) and np.all(np.abs(layer - 1) < tol):
                 found.add(abs(curve))
     return sorted(found)
 
 
-def round_fold(model: Any, geometry: BreastGeometry, volume: int) -> int:
+def round_fold(model: Any, geometry: BreastGeometry, volume: int, inset: float = 0.0) -> int:
     """Fillet the crease between the mound and the skin layer; return the new volume's tag.
 
-    The fillet radius is ``geometry.fold_radius`` (nothing to do at 0).
+    The fillet radius is ``geometry.fold_radius`` (nothing to do at 0), plus ``inset`` for
+    the body shrunk by it (:func:`build_occ_model`): the fold's fillet offset into the body.
 
     Raises:
         GeometryError: if the crease is not found or OpenCASCADE cannot round it.
@@ -331,11 +341,12 @@ def round_fold(model: Any, geometry: BreastGeometry, volume: int) -> int:
     if geometry.fold_radius == 0:
         return volume
     model.occ.synchronize()
-    curves = fold_curves(model, geometry, volume)
+    curves = fold_curves(model, geometry, volume, inset)
     if not curves:
         raise GeometryError("the crease between the mound and the skin layer was not found")
     try:
-        out = model.occ.fillet([volume], curves, [geometry.fold_radius], removeVolume=True)
+        out = model.occ.fillet([volume], curves, [geometry.fold_radius + inset],
+                               removeVolume=True)
     except Exception as err:  # gmsh raises a bare Exception with OpenCASCADE's message
         raise GeometryError(
             f"geometry.fold_radius = {geometry.fold_radius} m cannot round the mound's base: {err}"
@@ -346,22 +357,33 @@ def round_fold(model: Any, geometry: BreastGeometry, volume: int) -> int:
     return volumes[0]
 
 
-def build_occ_model(model: Any, geometry: BreastGeometry) -> int:
+def build_occ_model(model: Any, geometry: BreastGeometry, inset: float = 0.0) -> int:
     """Add the breast volume to a gmsh model with the OpenCASCADE kernel.
 
     Args:
         model: ``gmsh.model`` (initialised, with a current model).
         geometry: shape parameters.
+        inset: > 0: the body under a skin layer of this thickness (m), bounded by the same
+            rib and cut planes: the layer's outer cylinder and the mound's semi-axes shrunk
+            by it (the mound's centre kept), the fold's fillet radius grown by it. Each
+            surface is then the skin's offset into the body, to about 2 % of ``inset`` on
+            the default mound (an ellipsoid's offset is not an ellipsoid).
+            :mod:`meshes.skin_layer` meshes the layer over it.
 
     Returns:
         The tag of the single resulting volume.
     """
     occ = model.occ
     g = geometry
+    if not 0.0 <= inset < 0.5 * min(g.layer_thickness, g.mound_length - g.mound_offset):
+        raise GeometryError(
+            f"a skin layer {inset!r} m thick does not fit the breast: it must be under half "
+            "of geometry.layer_thickness and of mound_length - mound_offset")
     z0, z1 = g.z_caudal, g.z_cranial
     pad = 0.05 * (z1 - z0)
     inner = add_elliptic_cylinder(model, g, 0.0, z0 - pad, (z1 - z0) + 2 * pad)
-    outer = add_elliptic_cylinder(model, g, g.layer_thickness, z0 - pad, (z1 - z0) + 2 * pad)
+    outer = add_elliptic_cylinder(model, g, g.layer_thickness - inset, z0 - pad,
+                                  (z1 - z0) + 2 * pad)
 
     # Wedge between the sternal (ψ = 0) and axilla (ψ = axilla_angle) planes through the axis.
     far = 4.0 * (g.rib_depth + g.rib_half_width + g.layer_thickness + g.mound_projection)
@@ -374,8 +396,8 @@ def build_occ_model(model: Any, geometry: BreastGeometry) -> int:
     wedge_face = occ.addPlaneSurface([occ.addCurveLoop(lines)])
     wedge = next(tag for dim, tag in occ.extrude([(2, wedge_face)], 0, 0, z1 - z0) if dim == 3)
 
-    body, _ = occ.fuse([(3, outer)], [(3, add_mound_ellipsoid(model, g))])
-    body = [(3, round_fold(model, g, body[0][1]))] if len(body) == 1 else body
+    body, _ = occ.fuse([(3, outer)], [(3, add_mound_ellipsoid(model, g, inset))])
+    body = [(3, round_fold(model, g, body[0][1], inset))] if len(body) == 1 else body
     body, _ = occ.intersect(body, [(3, wedge)])
     body, _ = occ.cut(body, [(3, inner)])
     occ.synchronize()
