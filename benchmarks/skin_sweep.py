@@ -135,7 +135,7 @@ def _max_u_mm(summary: dict | None) -> float | None:
 
 
 def _ratio(a: float, b: float) -> float:
-    """a / b, NaN where a path solved nothing (its run stopped: see its run.log)."""
+    """The quotient a / b, NaN where a path solved nothing (its run stopped: see its run.log)."""
     return a / b if b > 0 else float("nan")
 
 
