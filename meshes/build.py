@@ -33,6 +33,7 @@ __all__ = [
     "mesh_arrays",
     "mesh_parametric",
     "mound_volume",
+    "set_meshing_options",
     "surface_predicates",
     "write_parametric_mesh",
     "write_parametric_surface",
@@ -93,7 +94,8 @@ def classify_surfaces(
     return groups
 
 
-def _set_meshing_options(size: MeshSize) -> None:
+def set_meshing_options(size: MeshSize) -> None:
+    """Set the options of every gmsh mesh this project makes: sizes from its field, one seed."""
     import gmsh
 
     # Sizes come from the background field only; gmsh's defaults (sizes from CAD
@@ -119,7 +121,7 @@ def mesh_parametric(
     """
     volume = build_occ_model(model, geometry)
     add_size_field(model, geometry, size)
-    _set_meshing_options(size)
+    set_meshing_options(size)
     model.mesh.generate(3)
     if size.order == 2:
         # Curved tetrahedra: the mid-edge nodes are put on the CAD surfaces, so the
@@ -342,7 +344,7 @@ def write_parametric_surface(geometry: BreastGeometry, size: MeshSize, path: str
     with gmsh_session() as model:
         build_occ_model(model, geometry)
         add_size_field(model, geometry, size)
-        _set_meshing_options(size)
+        set_meshing_options(size)
         model.mesh.generate(2)
         groups = {Boundary.SKIN: [tag for _, tag in model.getEntities(2)]}
         x, tris = _surface_triangles(model, groups[Boundary.SKIN])

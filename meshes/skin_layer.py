@@ -35,10 +35,10 @@ from typing import Any
 import numpy as np
 
 from meshes.build import (
-    _set_meshing_options,
     classify_surfaces,
     gmsh_session,
     mesh_arrays,
+    set_meshing_options,
     surface_predicates,
 )
 from meshes.exceptions import GeometryError
@@ -214,7 +214,7 @@ def mesh_skin_layer(
     if layer.in_plane_size is not None:
         faces = _cad_skin_faces(model, volume, predicates)
         _add_skin_size(model, faces, layer.in_plane_size, size.grading, background)
-    _set_meshing_options(size)
+    set_meshing_options(size)
     model.mesh.generate(3)
     groups = classify_surfaces(model, predicates)
     x, tets, facets = mesh_arrays(model, groups)
