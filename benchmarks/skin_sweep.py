@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import copy
-import json
 import logging
 import statistics
 import sys
@@ -34,6 +33,7 @@ from pathlib import Path
 
 import yaml
 
+from benchmarks.sweep_speed import case_summaries
 from fem.materials import DEFAULT_SKIN_THICKNESS
 from fem.sweep import Case
 from studies.results import Record, Result
@@ -97,15 +97,6 @@ class SkinSweep(Result):
     failed: tuple[str, ...]
     machine_before: MachineState
     machine_after: MachineState
-
-
-def _summaries(workdir: Path, cases: list[Case]) -> dict[Case, dict]:
-    out = {}
-    for case in cases:
-        path = workdir / "results" / "cases" / case.id / "summary.json"
-        if path.exists():
-            out[case] = json.loads(path.read_text())
-    return out
 
 
 def _cost(name: str, run: tuple[float, float, int], summaries: dict[Case, dict],
@@ -178,7 +169,7 @@ def run(config: dict, c1_values: list[float], directions: list[tuple[float, floa
     for t in threads:
         t.join()
     after = machine_state()
-    done = {name: _summaries(folders[name], cases) for name in PATHS}
+    done = {name: case_summaries(folders[name], cases) for name in PATHS}
     costs = {name: _cost(name, runs[name], done[name], len(cases)) for name in PATHS}
     ratios = []
     for case in cases:

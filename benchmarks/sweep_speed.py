@@ -84,7 +84,8 @@ class SweepSpeed(Result):
     machine_after: MachineState
 
 
-def _summaries(workdir: Path, cases: list[Case]) -> dict[Case, dict]:
+def case_summaries(workdir: Path, cases: list[Case]) -> dict[Case, dict]:
+    """The ``summary.json`` of each of ``cases`` a run in ``workdir`` wrote, by case."""
     out = {}
     for case in cases:
         path = workdir / "results" / "cases" / case.id / "summary.json"
@@ -135,7 +136,7 @@ def run(config: dict, c1_values: list[float], directions: list[float], out: Path
     for t in threads:
         t.join()
     after = machine_state()
-    old_cases, new_cases = (_summaries(folders[c], cases) for c in (False, True))
+    old_cases, new_cases = (case_summaries(folders[c], cases) for c in (False, True))
     old_cost = _cost(False, runs[False], old_cases, len(cases))
     new_cost = _cost(True, runs[True], new_cases, len(cases))
     diff, rel, compared = 0.0, 0.0, 0
