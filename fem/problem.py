@@ -159,6 +159,12 @@ class GravityProblem:
         self.tangent = fem.form(tangent)
         self._preconditioner: fem.FormMetaClass | None = None
         self.bcs = self._dirichlet_bcs()
+        # a pressure no free displacement sees (a cell with every node clamped): pinned
+        pinned = pinned_pressure_bcs(self.W, self.bcs) if self.mixed else []
+        #: Pressure unknowns pinned (over the processes): no free displacement sees them.
+        self.pinned_pressure_dofs = mesh.comm.allreduce(
+            sum(int(bc.dof_indices()[1]) for bc in pinned), op=MPI.SUM)
+        self.bcs += pinned
         #: The clamped entries of the state's local array.
         self.fixed_mask = np.zeros(self.w.x.array.size, dtype=bool)
         for bc in self.bcs:
@@ -275,13 +281,6 @@ class GravityProblem:
                 zero = fem.Function(collapsed)
                 dofs = fem.locate_dofs_topological((sub, collapsed), fdim, facets)
                 bcs.append(fem.dirichletbc(zero, dofs, sub))
-        #: Pressure unknowns pinned (over the processes): no free displacement sees them.
-        self.pinned_pressure_dofs = 0
-        if self.mixed:  # a pressure no free displacement sees (a clamped cell): pinned
-            pinned = pinned_pressure_bcs(self.W, bcs)
-            self.pinned_pressure_dofs = self.mesh.comm.allreduce(
-                sum(int(bc.dof_indices()[1]) for bc in pinned), op=MPI.SUM)
-            bcs += pinned
         return bcs
 
     @staticmethod
