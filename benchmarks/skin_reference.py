@@ -47,6 +47,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.skin import parse_case
 from fem.configfile import read_config_file
 from fem.materials import DEFAULT_SKIN_THICKNESS, SkinLayer, Tissues
 from fem.parameters import SolverSettings
@@ -68,11 +69,6 @@ SETTINGS: dict[str, tuple[str, str | None]] = {
 DEFAULT_SETTINGS = ("resolved", "membrane", "default-membrane", "default-none", "resolved-2")
 #: how close the membrane is asked to be to the resolved layer (issue 69): 5 % of max |u|
 TOLERANCE = 0.05
-
-
-def parse_case(text: str) -> Case:
-    """``C1:PHI[:THETA]`` as a case."""
-    return Case(*(float(v) for v in text.split(":")))
 
 
 def reference_of(setting: str) -> str:
